@@ -1,0 +1,59 @@
+#!/usr/bin/env bash
+# Creates (or refreshes) the project's isolated environment in .venv and installs warpgs into it.
+# Sourced by scripts/run.sh and scripts/test.sh; safe to run again (it only reinstalls when
+# pyproject.toml or this file changed). Overrides:
+#   WARPGS_VENV=path        where the environment lives (default: <repo>/.venv)
+#   PYTHON=python3.12       interpreter used to create it
+#   WARPGS_TORCH="torch==X" torch requirement (default: CUDA build if an NVIDIA GPU is visible, else CPU build)
+set -euo pipefail
+WARPGS_ROOT=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
+WARPGS_VENV=${WARPGS_VENV:-$WARPGS_ROOT/.venv}
+_py=${PYTHON:-python3}
+
+_say() { printf 'warpgs setup: %s\n' "$*" >&2; }
+
+# open3d's wheel links against libusb-1.0 (a system library, not a Python package).
+if ! ldconfig -p 2>/dev/null | grep -q 'libusb-1.0.so.0'; then
+  if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then
+    _say "installing libusb-1.0-0 (needed by open3d)"
+    DEBIAN_FRONTEND=noninteractive apt-get install -y -qq libusb-1.0-0 >/dev/null 2>&1 || {
+      apt-get update -qq >/dev/null 2>&1 && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq libusb-1.0-0 >/dev/null; }
+  else
+    _say "open3d needs the system library libusb-1.0, which is missing. Install it with:"
+    _say "    sudo apt-get install -y libusb-1.0-0"
+    _say "then run this command again."
+    exit 1
+  fi
+fi
+
+if ! command -v "$_py" >/dev/null 2>&1; then
+  _say "no '$_py' interpreter found; install Python >= 3.10 or set PYTHON=/path/to/python3"; exit 1
+fi
+
+_stamp="$WARPGS_VENV/.warpgs-setup"
+_want=$(cat "$WARPGS_ROOT/pyproject.toml" "$WARPGS_ROOT/scripts/env.sh" | cksum | cut -d' ' -f1)
+if [ ! -x "$WARPGS_VENV/bin/python" ] || [ "$(cat "$_stamp" 2>/dev/null)" != "$_want" ]; then
+  _say "creating the environment in $WARPGS_VENV (first run takes a few minutes)"
+  [ -x "$WARPGS_VENV/bin/python" ] || "$_py" -m venv "$WARPGS_VENV"
+  _pip=("$WARPGS_VENV/bin/python" -m pip install -q --disable-pip-version-check)
+  if ! "$WARPGS_VENV/bin/python" -c 'import torch' >/dev/null 2>&1; then
+    if [ -n "${WARPGS_TORCH:-}" ]; then
+      "${_pip[@]}" "$WARPGS_TORCH"
+    elif command -v nvidia-smi >/dev/null 2>&1 && nvidia-smi -L >/dev/null 2>&1; then
+      _say "NVIDIA GPU found: installing the CUDA build of torch"
+      "${_pip[@]}" torch
+    else
+      # No GPU: the CPU build (a local wheel where one is provided, else PyTorch's CPU index);
+      # an unpinned 'torch' from PyPI would pull several GB of CUDA libraries for nothing.
+      _say "no NVIDIA GPU: installing the CPU build of torch"
+      "${_pip[@]}" "torch==2.13.0" --extra-index-url https://download.pytorch.org/whl/cpu 2>&1 \
+        | grep -v -e '^WARNING: Location' -e '^WARNING: Retrying' >&2 || true
+      "$WARPGS_VENV/bin/python" -c 'import torch' 2>/dev/null || "${_pip[@]}" torch --index-url https://download.pytorch.org/whl/cpu
+    fi
+  fi
+  "${_pip[@]}" -e "$WARPGS_ROOT[test]" 2>&1 | grep -v -e '^WARNING: Location' >&2 || true
+  "$WARPGS_VENV/bin/python" -c 'import warpgs, warp, torch, open3d, kornia, trimesh' \
+    || { _say "installation incomplete (see the messages above)"; exit 1; }
+  echo "$_want" > "$_stamp"
+fi
+export WARPGS_ROOT WARPGS_VENV

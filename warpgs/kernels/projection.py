@@ -1,0 +1,308 @@
+"""Projection of 3D Gaussians to the image plane (EWA splatting), forward and hand-written backward.
+
+Per Gaussian: world mean -> camera (OpenCV axes), covariance R S S^T R^T -> camera -> 2D through the
+perspective Jacobian (with gsplat's clamping of the view direction to 1.3x the field of view), 0.3 px
+dilation, optional antialiasing compensation sqrt(det S2 / det(S2 + eps I)), conic = inverse 2D
+covariance, and an opacity-aware screen box: extent = min(3.33, sqrt(2 ln(255 o))) sigmas per axis
+(gsplat 1.5's tight box; a pixel outside it has alpha < 1/255, the compositing cut-off).
+
+Only Warp code lives here; the launches are in ``warpgs/render.py``.
+"""
+
+import warp as wp
+
+wp.set_module_options({"enable_backward": False})
+
+ALPHA_MIN = wp.constant(1.0 / 255.0)
+MAX_EXTENT = wp.constant(3.33)
+mat23 = wp.types.matrix(shape=(2, 3), dtype=wp.float32)
+
+
+@wp.func
+def quat_to_rotmat(q: wp.vec4) -> wp.mat33:
+    """Rotation matrix of a unit quaternion q = (w, x, y, z)."""
+    w = q[0]
+    x = q[1]
+    y = q[2]
+    z = q[3]
+    return wp.mat33(
+        1.0 - 2.0 * (y * y + z * z), 2.0 * (x * y - w * z), 2.0 * (x * z + w * y),
+        2.0 * (x * y + w * z), 1.0 - 2.0 * (x * x + z * z), 2.0 * (y * z - w * x),
+        2.0 * (x * z - w * y), 2.0 * (y * z + w * x), 1.0 - 2.0 * (x * x + y * y),
+    )
+
+
+@wp.func
+def quat_to_rotmat_vjp(q: wp.vec4, g: wp.mat33) -> wp.vec4:
+    """Gradient w.r.t. the unit quaternion q = (w, x, y, z) given dL/dR = g."""
+    w = q[0]
+    x = q[1]
+    y = q[2]
+    z = q[3]
+    dw = 2.0 * (-z * g[0, 1] + y * g[0, 2] + z * g[1, 0] - x * g[1, 2] - y * g[2, 0] + x * g[2, 1])
+    dx = 2.0 * (
+        y * g[0, 1] + z * g[0, 2] + y * g[1, 0] - 2.0 * x * g[1, 1] - w * g[1, 2]
+        + z * g[2, 0] + w * g[2, 1] - 2.0 * x * g[2, 2]
+    )
+    dy = 2.0 * (
+        -2.0 * y * g[0, 0] + x * g[0, 1] + w * g[0, 2] + x * g[1, 0] + z * g[1, 2]
+        - w * g[2, 0] + z * g[2, 1] - 2.0 * y * g[2, 2]
+    )
+    dz = 2.0 * (
+        -2.0 * z * g[0, 0] - w * g[0, 1] + x * g[0, 2] + w * g[1, 0] - 2.0 * z * g[1, 1]
+        + y * g[1, 2] + x * g[2, 0] + y * g[2, 1]
+    )
+    return wp.vec4(dw, dx, dy, dz)
+
+
+@wp.func
+def view_rotation(V: wp.mat44) -> wp.mat33:
+    return wp.mat33(V[0, 0], V[0, 1], V[0, 2], V[1, 0], V[1, 1], V[1, 2], V[2, 0], V[2, 1], V[2, 2])
+
+
+@wp.func
+def covariance_3d(q: wp.vec4, s: wp.vec3) -> wp.mat33:
+    qn = wp.normalize(q)
+    M = quat_to_rotmat(qn) * wp.diag(s)
+    return M * wp.transpose(M)
+
+
+@wp.func
+def clamped_tan(v: float, lim_pos: float, lim_neg: float) -> float:
+    return wp.min(lim_pos, wp.max(-lim_neg, v))
+
+
+@wp.func
+def persp_jacobian(p: wp.vec3, fx: float, fy: float, cx: float, cy: float, width: float, height: float):
+    """Jacobian of the pinhole projection at camera-space point p, its view direction clamped to
+    1.3x the field of view (gsplat; keeps the footprint of far off-screen Gaussians bounded)."""
+    tan_fovx = 0.5 * width / fx
+    tan_fovy = 0.5 * height / fy
+    lim_x_pos = (width - cx) / fx + 0.3 * tan_fovx
+    lim_x_neg = cx / fx + 0.3 * tan_fovx
+    lim_y_pos = (height - cy) / fy + 0.3 * tan_fovy
+    lim_y_neg = cy / fy + 0.3 * tan_fovy
+    rz = 1.0 / p[2]
+    tx = p[2] * clamped_tan(p[0] * rz, lim_x_pos, lim_x_neg)
+    ty = p[2] * clamped_tan(p[1] * rz, lim_y_pos, lim_y_neg)
+    J = mat23(fx * rz, 0.0, -fx * tx * rz * rz, 0.0, fy * rz, -fy * ty * rz * rz)
+    return J
+
+
+@wp.kernel
+def project_gaussians_fwd(
+    means: wp.array(dtype=wp.vec3),
+    quats: wp.array(dtype=wp.vec4),
+    scales: wp.array(dtype=wp.vec3),
+    opacities: wp.array(dtype=float),
+    viewmat: wp.array(dtype=wp.mat44),
+    intrinsics: wp.array(dtype=wp.mat33),
+    width: int,
+    height: int,
+    eps2d: float,
+    near: float,
+    far: float,
+    antialiased: int,
+    tile_size: int,
+    tiles_x: int,
+    tiles_y: int,
+    # outputs
+    means2d: wp.array(dtype=wp.vec2),
+    conics: wp.array(dtype=wp.vec3),
+    depths: wp.array(dtype=float),
+    radii: wp.array(dtype=wp.vec2i),
+    opac_eff: wp.array(dtype=float),
+    tiles_touched: wp.array(dtype=wp.int32),
+):
+    i = wp.tid()
+    radii[i] = wp.vec2i(0, 0)
+    tiles_touched[i] = 0
+    means2d[i] = wp.vec2(0.0, 0.0)
+    conics[i] = wp.vec3(0.0, 0.0, 0.0)
+    depths[i] = 0.0
+    opac_eff[i] = 0.0
+
+    V = viewmat[0]
+    R = view_rotation(V)
+    p = R * means[i] + wp.vec3(V[0, 3], V[1, 3], V[2, 3])
+    if p[2] < near or p[2] > far:
+        return
+
+    Kc = intrinsics[0]
+    fx = Kc[0, 0]
+    fy = Kc[1, 1]
+    cx = Kc[0, 2]
+    cy = Kc[1, 2]
+    W = float(width)
+    H = float(height)
+
+    cov_c = R * covariance_3d(quats[i], scales[i]) * wp.transpose(R)
+    J = persp_jacobian(p, fx, fy, cx, cy, W, H)
+    cov2 = J * cov_c * wp.transpose(J)
+    det_orig = cov2[0, 0] * cov2[1, 1] - cov2[0, 1] * cov2[1, 0]
+    a = cov2[0, 0] + eps2d
+    b = cov2[0, 1]
+    c = cov2[1, 1] + eps2d
+    det = a * c - b * b
+    if det <= 0.0:
+        return
+    o = opacities[i]
+    if antialiased != 0:
+        o = o * wp.sqrt(wp.max(0.0, det_orig / det))
+    if o < ALPHA_MIN:
+        return
+    extent = wp.min(MAX_EXTENT, wp.sqrt(2.0 * wp.log(o / ALPHA_MIN)))
+    rx = wp.ceil(extent * wp.sqrt(a))
+    ry = wp.ceil(extent * wp.sqrt(c))
+    if rx <= 0.0 and ry <= 0.0:
+        return
+
+    rz = 1.0 / p[2]
+    m2 = wp.vec2(fx * p[0] * rz + cx, fy * p[1] * rz + cy)
+    if m2[0] + rx <= 0.0 or m2[0] - rx >= W or m2[1] + ry <= 0.0 or m2[1] - ry >= H:
+        return
+
+    # Tile rectangle [tx0, tx1) x [ty0, ty1), as gsplat's intersect_tile.
+    ts = float(tile_size)
+    tx0 = wp.clamp(int(wp.floor((m2[0] - rx) / ts)), 0, tiles_x)
+    ty0 = wp.clamp(int(wp.floor((m2[1] - ry) / ts)), 0, tiles_y)
+    tx1 = wp.clamp(int(wp.ceil((m2[0] + rx) / ts)), 0, tiles_x)
+    ty1 = wp.clamp(int(wp.ceil((m2[1] + ry) / ts)), 0, tiles_y)
+
+    inv_det = 1.0 / det
+    means2d[i] = m2
+    conics[i] = wp.vec3(c * inv_det, -b * inv_det, a * inv_det)
+    depths[i] = p[2]
+    radii[i] = wp.vec2i(int(rx), int(ry))
+    opac_eff[i] = o
+    tiles_touched[i] = (tx1 - tx0) * (ty1 - ty0)
+
+
+@wp.kernel
+def project_gaussians_bwd(
+    means: wp.array(dtype=wp.vec3),
+    quats: wp.array(dtype=wp.vec4),
+    scales: wp.array(dtype=wp.vec3),
+    opacities: wp.array(dtype=float),
+    viewmat: wp.array(dtype=wp.mat44),
+    intrinsics: wp.array(dtype=wp.mat33),
+    width: int,
+    height: int,
+    eps2d: float,
+    antialiased: int,
+    radii: wp.array(dtype=wp.vec2i),
+    conics: wp.array(dtype=wp.vec3),
+    # gradients of the outputs
+    v_means2d: wp.array(dtype=wp.vec2),
+    v_conics: wp.array(dtype=wp.vec3),
+    v_depths: wp.array(dtype=float),
+    v_opac_eff: wp.array(dtype=float),
+    # gradients of the inputs
+    v_means: wp.array(dtype=wp.vec3),
+    v_quats: wp.array(dtype=wp.vec4),
+    v_scales: wp.array(dtype=wp.vec3),
+    v_opacities: wp.array(dtype=float),
+):
+    i = wp.tid()
+    r = radii[i]
+    if r[0] <= 0 and r[1] <= 0:
+        v_means[i] = wp.vec3(0.0)
+        v_quats[i] = wp.vec4(0.0)
+        v_scales[i] = wp.vec3(0.0)
+        v_opacities[i] = 0.0
+        return
+
+    V = viewmat[0]
+    R = view_rotation(V)
+    p = R * means[i] + wp.vec3(V[0, 3], V[1, 3], V[2, 3])
+    Kc = intrinsics[0]
+    fx = Kc[0, 0]
+    fy = Kc[1, 1]
+    cx = Kc[0, 2]
+    cy = Kc[1, 2]
+    W = float(width)
+    H = float(height)
+
+    q = quats[i]
+    qlen = wp.length(q)
+    qn = q / qlen
+    s = scales[i]
+    Rq = quat_to_rotmat(qn)
+    M = Rq * wp.diag(s)
+    cov = M * wp.transpose(M)
+    cov_c = R * cov * wp.transpose(R)
+    J = persp_jacobian(p, fx, fy, cx, cy, W, H)
+    cov2 = J * cov_c * wp.transpose(J)
+
+    # conic = inverse(cov2 + eps I): dL/dX = -Y^T G Y^T with G split symmetrically.
+    cn = conics[i]
+    Y = wp.mat22(cn[0], cn[1], cn[1], cn[2])
+    vc = v_conics[i]
+    G = wp.mat22(vc[0], 0.5 * vc[1], 0.5 * vc[1], vc[2])
+    v_cov2 = -(Y * G * Y)
+
+    o = opacities[i]
+    v_oe = v_opac_eff[i]
+    if antialiased != 0:
+        # comp = sqrt(det(S) / det(S + eps I)); d comp^2/dS = (adj S - comp^2 adj(S + eps I)) / det(S + eps I)
+        det_orig = cov2[0, 0] * cov2[1, 1] - cov2[0, 1] * cov2[1, 0]
+        a = cov2[0, 0] + eps2d
+        c = cov2[1, 1] + eps2d
+        det_b = a * c - cov2[0, 1] * cov2[1, 0]
+        comp2 = wp.max(0.0, det_orig / det_b)
+        comp = wp.sqrt(comp2)
+        v_opacities[i] = v_oe * comp
+        if comp > 0.0:
+            v_comp = v_oe * o
+            adj = wp.mat22(cov2[1, 1], -cov2[0, 1], -cov2[1, 0], cov2[0, 0])
+            adj_b = wp.mat22(c, -cov2[0, 1], -cov2[1, 0], a)
+            v_cov2 = v_cov2 + (v_comp * 0.5 / comp) * (adj - comp2 * adj_b) / det_b
+    else:
+        v_opacities[i] = v_oe
+
+    # cov2 = J cov_c J^T
+    v_cov_c = wp.transpose(J) * v_cov2 * J
+    v_J = (v_cov2 + wp.transpose(v_cov2)) * J * cov_c
+
+    # mean2d = (fx x/z + cx, fy y/z + cy), depth = z, and J's dependence on p.
+    vm2 = v_means2d[i]
+    rz = 1.0 / p[2]
+    rz2 = rz * rz
+    rz3 = rz2 * rz
+    vp = wp.vec3(fx * rz * vm2[0], fy * rz * vm2[1], -(fx * p[0] * vm2[0] + fy * p[1] * vm2[1]) * rz2)
+    vp = vp + wp.vec3(0.0, 0.0, v_depths[i])
+    tan_fovx = 0.5 * W / fx
+    tan_fovy = 0.5 * H / fy
+    lim_x_pos = (W - cx) / fx + 0.3 * tan_fovx
+    lim_x_neg = cx / fx + 0.3 * tan_fovx
+    lim_y_pos = (H - cy) / fy + 0.3 * tan_fovy
+    lim_y_neg = cy / fy + 0.3 * tan_fovy
+    tx = p[2] * clamped_tan(p[0] * rz, lim_x_pos, lim_x_neg)
+    ty = p[2] * clamped_tan(p[1] * rz, lim_y_pos, lim_y_neg)
+    vx = vp[0]
+    vy = vp[1]
+    vz = vp[2]
+    if p[0] * rz <= lim_x_pos and p[0] * rz >= -lim_x_neg:
+        vx = vx - fx * rz2 * v_J[0, 2]
+    else:
+        vz = vz - fx * rz3 * v_J[0, 2] * tx
+    if p[1] * rz <= lim_y_pos and p[1] * rz >= -lim_y_neg:
+        vy = vy - fy * rz2 * v_J[1, 2]
+    else:
+        vz = vz - fy * rz3 * v_J[1, 2] * ty
+    vz = vz - fx * rz2 * v_J[0, 0] - fy * rz2 * v_J[1, 1] + 2.0 * fx * tx * rz3 * v_J[0, 2] + 2.0 * fy * ty * rz3 * v_J[1, 2]
+
+    # p = R mean + t; cov_c = R cov R^T
+    v_means[i] = wp.transpose(R) * wp.vec3(vx, vy, vz)
+    v_cov = wp.transpose(R) * v_cov_c * R
+
+    # cov = M M^T, M = Rq diag(s)
+    v_M = (v_cov + wp.transpose(v_cov)) * M
+    v_Rq = v_M * wp.diag(s)
+    v_scales[i] = wp.vec3(
+        v_M[0, 0] * Rq[0, 0] + v_M[1, 0] * Rq[1, 0] + v_M[2, 0] * Rq[2, 0],
+        v_M[0, 1] * Rq[0, 1] + v_M[1, 1] * Rq[1, 1] + v_M[2, 1] * Rq[2, 1],
+        v_M[0, 2] * Rq[0, 2] + v_M[1, 2] * Rq[1, 2] + v_M[2, 2] * Rq[2, 2],
+    )
+    v_qn = quat_to_rotmat_vjp(qn, v_Rq)
+    v_quats[i] = (v_qn - qn * wp.dot(qn, v_qn)) / qlen

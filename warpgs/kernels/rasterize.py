@@ -1,0 +1,238 @@
+"""Front-to-back alpha compositing of depth-sorted Gaussians per 16x16 tile, and its hand-written backward.
+
+One thread per pixel; threads are numbered tile-major (256 consecutive threads = one tile), so a CUDA
+block of 256 threads is one image tile and every 32-lane warp shares one tile's Gaussian list. The
+backward pass sums each Gaussian's gradient over a warp with shuffles before one atomic add (as gsplat
+does); on the CPU (one thread per kernel) the same helpers are identities.
+
+Constants (3D-GS / gsplat): a Gaussian is skipped where alpha < 1/255; alpha is clamped at ``alpha_max``
+(0.99 in 3D-GS, 0.999 in gsplat); a pixel stops before the Gaussian that would bring its transmittance
+to <= 1e-4. Outputs: colour over the background, accumulated depth sum(w_i z_i), accumulated alpha.
+Only Warp code lives here.
+"""
+
+import warp as wp
+
+wp.set_module_options({"enable_backward": False})
+
+TILE_SIZE = 16
+BLOCK = TILE_SIZE * TILE_SIZE
+ALPHA_MIN = wp.constant(1.0 / 255.0)
+T_MIN = wp.constant(1.0e-4)
+
+
+@wp.func_native(
+    """
+#if defined(__CUDA_ARCH__)
+    float r = v;
+    for (int o = 16; o > 0; o >>= 1) r += __shfl_xor_sync(0xffffffff, r, o);
+    return r;
+#else
+    return v;
+#endif
+"""
+)
+def warp_sum(v: float) -> float: ...
+
+
+@wp.func_native(
+    """
+#if defined(__CUDA_ARCH__)
+    int r = v;
+    for (int o = 16; o > 0; o >>= 1) r = max(r, __shfl_xor_sync(0xffffffff, r, o));
+    return r;
+#else
+    return v;
+#endif
+"""
+)
+def warp_max(v: int) -> int: ...
+
+
+@wp.func_native(
+    """
+#if defined(__CUDA_ARCH__)
+    return __any_sync(0xffffffff, v != 0) ? 1 : 0;
+#else
+    return v;
+#endif
+"""
+)
+def warp_any(v: int) -> int: ...
+
+
+@wp.func_native(
+    """
+#if defined(__CUDA_ARCH__)
+    return (threadIdx.x & 31) == 0 ? 1 : 0;
+#else
+    return 1;
+#endif
+"""
+)
+def warp_leader() -> int: ...
+
+
+@wp.func
+def pixel_of_thread(tid: int, tiles_x: int):
+    tile = tid / BLOCK
+    local = tid - tile * BLOCK
+    ty = tile / tiles_x
+    tx = tile - ty * tiles_x
+    return tile, tx * TILE_SIZE + local % TILE_SIZE, ty * TILE_SIZE + local / TILE_SIZE
+
+
+@wp.kernel
+def rasterize_fwd(
+    ranges: wp.array2d(dtype=wp.int32),
+    gauss_ids: wp.array(dtype=wp.int32),
+    means2d: wp.array(dtype=wp.vec2),
+    conics: wp.array(dtype=wp.vec3),
+    opacities: wp.array(dtype=float),
+    colors: wp.array(dtype=wp.vec3),
+    depths: wp.array(dtype=float),
+    background: wp.array(dtype=wp.vec3),
+    width: int,
+    height: int,
+    tiles_x: int,
+    alpha_max: float,
+    out_color: wp.array(dtype=wp.vec3),
+    out_depth: wp.array(dtype=float),
+    out_alpha: wp.array(dtype=float),
+    last_count: wp.array(dtype=wp.int32),
+):
+    tile, x, y = pixel_of_thread(wp.tid(), tiles_x)
+    if x >= width or y >= height:
+        return
+    px = float(x) + 0.5
+    py = float(y) + 0.5
+    start = ranges[tile, 0]
+    end = ranges[tile, 1]
+    T = float(1.0)
+    C = wp.vec3(0.0)
+    D = float(0.0)
+    n = start
+    for k in range(start, end):
+        g = gauss_ids[k]
+        m = means2d[g]
+        cn = conics[g]
+        dx = m[0] - px
+        dy = m[1] - py
+        sigma = 0.5 * (cn[0] * dx * dx + cn[2] * dy * dy) + cn[1] * dx * dy
+        alpha = wp.min(alpha_max, opacities[g] * wp.exp(-sigma))
+        if sigma < 0.0 or alpha < ALPHA_MIN:
+            continue
+        next_T = T * (1.0 - alpha)
+        if next_T <= T_MIN:
+            break
+        w = alpha * T
+        C = C + w * colors[g]
+        D = D + w * depths[g]
+        T = next_T
+        n = k + 1
+    pix = y * width + x
+    out_color[pix] = C + T * background[0]
+    out_depth[pix] = D
+    out_alpha[pix] = 1.0 - T
+    last_count[pix] = n
+
+
+@wp.kernel
+def rasterize_bwd(
+    ranges: wp.array2d(dtype=wp.int32),
+    gauss_ids: wp.array(dtype=wp.int32),
+    means2d: wp.array(dtype=wp.vec2),
+    conics: wp.array(dtype=wp.vec3),
+    opacities: wp.array(dtype=float),
+    colors: wp.array(dtype=wp.vec3),
+    depths: wp.array(dtype=float),
+    background: wp.array(dtype=wp.vec3),
+    width: int,
+    height: int,
+    tiles_x: int,
+    alpha_max: float,
+    out_alpha: wp.array(dtype=float),
+    last_count: wp.array(dtype=wp.int32),
+    v_out_color: wp.array(dtype=wp.vec3),
+    v_out_depth: wp.array(dtype=float),
+    v_out_alpha: wp.array(dtype=float),
+    # gradients, accumulated with atomics (zero-initialised by the caller)
+    v_means2d: wp.array(dtype=wp.vec2),
+    v_conics: wp.array(dtype=wp.vec3),
+    v_opacities: wp.array(dtype=float),
+    v_colors: wp.array(dtype=wp.vec3),
+    v_depths: wp.array(dtype=float),
+):
+    # No early return: every lane of a warp must reach the shuffles below.
+    tile, x, y = pixel_of_thread(wp.tid(), tiles_x)
+    inside = x < width and y < height
+    start = ranges[tile, 0]
+    pix = wp.min(y, height - 1) * width + wp.min(x, width - 1)
+    px = float(x) + 0.5
+    py = float(y) + 0.5
+
+    last = start
+    T_final = float(1.0)
+    vC = wp.vec3(0.0)
+    vD = float(0.0)
+    vA = float(0.0)
+    if inside:
+        last = last_count[pix]
+        T_final = 1.0 - out_alpha[pix]
+        vC = v_out_color[pix]
+        vD = v_out_depth[pix]
+        vA = v_out_alpha[pix]
+    bg_dot = wp.dot(background[0], vC)
+    T = T_final
+    S_c = wp.vec3(0.0)  # sum over Gaussians behind of w_j c_j
+    S_d = float(0.0)  # sum over Gaussians behind of w_j z_j
+
+    bound = warp_max(last)
+    for j in range(bound - start):
+        k = bound - 1 - j
+        g = gauss_ids[k]
+        valid = int(0)
+        vm2 = wp.vec2(0.0)
+        vcon = wp.vec3(0.0)
+        vcol = wp.vec3(0.0)
+        vop = float(0.0)
+        vdep = float(0.0)
+        if inside and k < last:
+            m = means2d[g]
+            cn = conics[g]
+            o = opacities[g]
+            dx = m[0] - px
+            dy = m[1] - py
+            sigma = 0.5 * (cn[0] * dx * dx + cn[2] * dy * dy) + cn[1] * dx * dy
+            vis = wp.exp(-sigma)
+            alpha = wp.min(alpha_max, o * vis)
+            if sigma >= 0.0 and alpha >= ALPHA_MIN:
+                valid = 1
+                ra = 1.0 / (1.0 - alpha)
+                T = T * ra
+                fac = alpha * T
+                c = colors[g]
+                z = depths[g]
+                vcol = fac * vC
+                vdep = fac * vD
+                v_alpha = (wp.dot(c, vC) * T - wp.dot(S_c, vC) * ra) + (z * T - S_d * ra) * vD
+                v_alpha = v_alpha + T_final * ra * (vA - bg_dot)
+                S_c = S_c + fac * c
+                S_d = S_d + fac * z
+                if o * vis <= alpha_max:
+                    v_sigma = -o * vis * v_alpha
+                    vcon = wp.vec3(0.5 * v_sigma * dx * dx, v_sigma * dx * dy, 0.5 * v_sigma * dy * dy)
+                    vm2 = v_sigma * wp.vec2(cn[0] * dx + cn[1] * dy, cn[1] * dx + cn[2] * dy)
+                    vop = vis * v_alpha
+        if warp_any(valid) != 0:
+            vm2 = wp.vec2(warp_sum(vm2[0]), warp_sum(vm2[1]))
+            vcon = wp.vec3(warp_sum(vcon[0]), warp_sum(vcon[1]), warp_sum(vcon[2]))
+            vcol = wp.vec3(warp_sum(vcol[0]), warp_sum(vcol[1]), warp_sum(vcol[2]))
+            vop = warp_sum(vop)
+            vdep = warp_sum(vdep)
+            if warp_leader() != 0:
+                wp.atomic_add(v_means2d, g, vm2)
+                wp.atomic_add(v_conics, g, vcon)
+                wp.atomic_add(v_colors, g, vcol)
+                wp.atomic_add(v_opacities, g, vop)
+                wp.atomic_add(v_depths, g, vdep)

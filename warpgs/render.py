@@ -1,0 +1,357 @@
+"""The torch-facing Gaussian rasterizer: plain tensors in, image / depth / alpha out, differentiable.
+
+    out = rasterize(means, quats, scales, opacities, colors, viewmat, K, width, height)
+    out.image  [H, W, 3]   colour composited over ``background``
+    out.depth  [H, W]      expected depth sum(w_i z_i) / alpha (0 where nothing was hit)
+    out.alpha  [H, W]      accumulated opacity 1 - T
+
+Tensors stay on their device (cpu or cuda) and are handed to the Warp kernels without copies; Warp runs
+on torch's current CUDA stream. Gradients flow to means, quats, scales, opacities and colors (RGB or
+SH coefficients) through image, depth and alpha. ``out.means2d`` is the projected centre tensor in
+the graph: call ``out.means2d.retain_grad()`` before backward to read the 2D positional gradient that
+densification uses (``means2d_grad_norm``).
+
+Conventions: see ``warpgs/__init__.py`` (OpenCV camera, world-to-camera ``viewmat``, K in pixels,
+quaternions (w, x, y, z), scales as standard deviations, opacities in [0, 1]).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import torch
+import warp as wp
+
+from warpgs._warp import device_of, launch, stream_of, to_wp
+from warpgs.kernels import binning as kb
+from warpgs.kernels import projection as kp
+from warpgs.kernels import rasterize as kr
+from warpgs.kernels import sh as ksh
+
+TILE_SIZE = kr.TILE_SIZE
+
+
+class RenderOutput(NamedTuple):
+    image: torch.Tensor
+    depth: torch.Tensor
+    alpha: torch.Tensor
+    means2d: torch.Tensor
+    radii: torch.Tensor
+    depths: torch.Tensor
+    n_intersections: int
+
+
+def _zeros_like_or(g: torch.Tensor | None, like: torch.Tensor) -> torch.Tensor:
+    return torch.zeros_like(like) if g is None else g.contiguous()
+
+
+class _Project(torch.autograd.Function):
+    @staticmethod
+    def forward(ctx, means, quats, scales, opacities, viewmat, K, width, height, eps2d, near, far, antialiased):
+        dev = device_of(means)
+        stream = stream_of(dev)
+        n = means.shape[0]
+        tiles_x = (width + TILE_SIZE - 1) // TILE_SIZE
+        tiles_y = (height + TILE_SIZE - 1) // TILE_SIZE
+        f = dict(device=means.device, dtype=torch.float32)
+        means2d = torch.empty(n, 2, **f)
+        conics = torch.empty(n, 3, **f)
+        depths = torch.empty(n, **f)
+        opac_eff = torch.empty(n, **f)
+        radii = torch.empty(n, 2, device=means.device, dtype=torch.int32)
+        tiles_touched = torch.empty(n, device=means.device, dtype=torch.int32)
+        launch(
+            kp.project_gaussians_fwd, n,
+            [to_wp(means, wp.vec3), to_wp(quats, wp.vec4), to_wp(scales, wp.vec3), to_wp(opacities),
+             to_wp(viewmat.reshape(1, 4, 4), wp.mat44), to_wp(K.reshape(1, 3, 3), wp.mat33),
+             width, height, eps2d, near, far, int(antialiased), TILE_SIZE, tiles_x, tiles_y,
+             to_wp(means2d, wp.vec2), to_wp(conics, wp.vec3), to_wp(depths), to_wp(radii, wp.vec2i),
+             to_wp(opac_eff), to_wp(tiles_touched)],
+            dev, stream,
+        )
+        ctx.save_for_backward(means, quats, scales, opacities, viewmat, K, radii, conics)
+        ctx.cfg = (width, height, eps2d, antialiased)
+        ctx.mark_non_differentiable(radii, tiles_touched)
+        return means2d, conics, depths, opac_eff, radii, tiles_touched
+
+    @staticmethod
+    def backward(ctx, v_means2d, v_conics, v_depths, v_opac_eff, _r, _t):
+        means, quats, scales, opacities, viewmat, K, radii, conics = ctx.saved_tensors
+        width, height, eps2d, antialiased = ctx.cfg
+        dev = device_of(means)
+        n = means.shape[0]
+        v_means = torch.empty_like(means)
+        v_quats = torch.empty_like(quats)
+        v_scales = torch.empty_like(scales)
+        v_opacities = torch.empty_like(opacities)
+        launch(
+            kp.project_gaussians_bwd, n,
+            [to_wp(means, wp.vec3), to_wp(quats, wp.vec4), to_wp(scales, wp.vec3), to_wp(opacities),
+             to_wp(viewmat.reshape(1, 4, 4), wp.mat44), to_wp(K.reshape(1, 3, 3), wp.mat33),
+             width, height, eps2d, int(antialiased), to_wp(radii, wp.vec2i), to_wp(conics, wp.vec3),
+             to_wp(_zeros_like_or(v_means2d, means[:, :2]), wp.vec2),
+             to_wp(_zeros_like_or(v_conics, conics), wp.vec3),
+             to_wp(_zeros_like_or(v_depths, opacities)), to_wp(_zeros_like_or(v_opac_eff, opacities)),
+             to_wp(v_means, wp.vec3), to_wp(v_quats, wp.vec4), to_wp(v_scales, wp.vec3), to_wp(v_opacities)],
+            dev, stream_of(dev),
+        )
+        return v_means, v_quats, v_scales, v_opacities, None, None, None, None, None, None, None, None
+
+
+class _SHColors(torch.autograd.Function):
+    @staticmethod
+    def forward(ctx, coeffs, means, campos, radii, degree):
+        dev = device_of(means)
+        colors = torch.empty(means.shape[0], 3, device=means.device, dtype=torch.float32)
+        launch(
+            ksh.sh_to_color_fwd, means.shape[0],
+            [to_wp(means, wp.vec3), to_wp(campos.reshape(1, 3), wp.vec3), to_wp(coeffs, wp.vec3), degree,
+             to_wp(radii, wp.vec2i), to_wp(colors, wp.vec3)],
+            dev, stream_of(dev),
+        )
+        ctx.save_for_backward(coeffs, means, campos, radii)
+        ctx.degree = degree
+        return colors
+
+    @staticmethod
+    def backward(ctx, v_colors):
+        coeffs, means, campos, radii = ctx.saved_tensors
+        dev = device_of(means)
+        v_coeffs = torch.empty_like(coeffs)
+        v_means = torch.empty_like(means)
+        launch(
+            ksh.sh_to_color_bwd, means.shape[0],
+            [to_wp(means, wp.vec3), to_wp(campos.reshape(1, 3), wp.vec3), to_wp(coeffs, wp.vec3), ctx.degree,
+             to_wp(radii, wp.vec2i), to_wp(v_colors.contiguous(), wp.vec3), to_wp(v_coeffs, wp.vec3),
+             to_wp(v_means, wp.vec3)],
+            dev, stream_of(dev),
+        )
+        return v_coeffs, v_means, None, None, None
+
+
+def _bin_gaussians(means2d, radii, depths, tiles_touched, total, tiles_x, tiles_y):
+    """Sorted Gaussian ids per tile: returns (ranges [tiles, 2] int32, gauss_ids [total] int32)."""
+    dev = device_of(means2d)
+    stream = stream_of(dev)
+    n_tiles = tiles_x * tiles_y
+    ranges = torch.zeros(n_tiles, 2, device=means2d.device, dtype=torch.int32)
+    if total == 0:
+        return ranges, torch.empty(0, device=means2d.device, dtype=torch.int32)
+    offsets = torch.cumsum(tiles_touched, 0, dtype=torch.int32)
+    keys = torch.empty(2 * total, device=means2d.device, dtype=torch.int64)
+    values = torch.empty(2 * total, device=means2d.device, dtype=torch.int32)
+    wp_keys, wp_values = to_wp(keys), to_wp(values)
+    launch(
+        kb.emit_intersections, means2d.shape[0],
+        [to_wp(means2d, wp.vec2), to_wp(radii, wp.vec2i), to_wp(depths.view(torch.int32)), to_wp(offsets),
+         TILE_SIZE, tiles_x, tiles_y, wp_keys, wp_values],
+        dev, stream,
+    )
+    tile_bits = int(math.floor(math.log2(n_tiles))) + 1
+    with wp.ScopedStream(stream) if stream is not None else _nullcontext():
+        wp.utils.radix_sort_pairs(wp_keys, wp_values, total, 0, 32 + tile_bits)
+    launch(kb.tile_ranges_from_keys, total, [wp_keys, total, to_wp(ranges)], dev, stream)
+    return ranges, values[:total]
+
+
+class _nullcontext:
+    def __enter__(self):
+        return None
+
+    def __exit__(self, *exc):
+        return False
+
+
+class _Composite(torch.autograd.Function):
+    @staticmethod
+    def forward(ctx, means2d, conics, opac_eff, colors, depths, background, ranges, gauss_ids,
+                width, height, alpha_max):
+        dev = device_of(means2d)
+        tiles_x = (width + TILE_SIZE - 1) // TILE_SIZE
+        n_threads = ranges.shape[0] * kr.BLOCK
+        f = dict(device=means2d.device, dtype=torch.float32)
+        color = torch.empty(height, width, 3, **f)
+        depth = torch.empty(height, width, **f)
+        alpha = torch.empty(height, width, **f)
+        last = torch.empty(height, width, device=means2d.device, dtype=torch.int32)
+        launch(
+            kr.rasterize_fwd, n_threads,
+            [to_wp(ranges), to_wp(gauss_ids), to_wp(means2d, wp.vec2), to_wp(conics, wp.vec3), to_wp(opac_eff),
+             to_wp(colors, wp.vec3), to_wp(depths), to_wp(background.reshape(1, 3), wp.vec3),
+             width, height, tiles_x, alpha_max,
+             to_wp(color.view(-1, 3), wp.vec3), to_wp(depth.view(-1)), to_wp(alpha.view(-1)), to_wp(last.view(-1))],
+            dev, stream_of(dev),
+        )
+        ctx.save_for_backward(means2d, conics, opac_eff, colors, depths, background, ranges, gauss_ids, alpha, last)
+        ctx.cfg = (width, height, alpha_max)
+        return color, depth, alpha
+
+    @staticmethod
+    def backward(ctx, v_color, v_depth, v_alpha):
+        means2d, conics, opac_eff, colors, depths, background, ranges, gauss_ids, alpha, last = ctx.saved_tensors
+        width, height, alpha_max = ctx.cfg
+        dev = device_of(means2d)
+        tiles_x = (width + TILE_SIZE - 1) // TILE_SIZE
+        v_means2d = torch.zeros_like(means2d)
+        v_conics = torch.zeros_like(conics)
+        v_opac = torch.zeros_like(opac_eff)
+        v_colors = torch.zeros_like(colors)
+        v_depths = torch.zeros_like(depths)
+        launch(
+            kr.rasterize_bwd, ranges.shape[0] * kr.BLOCK,
+            [to_wp(ranges), to_wp(gauss_ids), to_wp(means2d, wp.vec2), to_wp(conics, wp.vec3), to_wp(opac_eff),
+             to_wp(colors, wp.vec3), to_wp(depths), to_wp(background.reshape(1, 3), wp.vec3),
+             width, height, tiles_x, alpha_max, to_wp(alpha.view(-1)), to_wp(last.view(-1)),
+             to_wp(_zeros_like_or(v_color, alpha.new_empty(height, width, 3)).view(-1, 3), wp.vec3),
+             to_wp(_zeros_like_or(v_depth, alpha).view(-1)), to_wp(_zeros_like_or(v_alpha, alpha).view(-1)),
+             to_wp(v_means2d, wp.vec2), to_wp(v_conics, wp.vec3), to_wp(v_opac), to_wp(v_colors, wp.vec3),
+             to_wp(v_depths)],
+            dev, stream_of(dev),
+        )
+        return v_means2d, v_conics, v_opac, v_colors, v_depths, None, None, None, None, None, None
+
+
+# ----------------------------------------------------------------------------------------------------
+# input checks
+
+
+def _fail(name: str, problem: str):
+    raise ValueError(f"rasterize: argument '{name}' {problem}")
+
+
+def _check_tensor(name, t, shape, device):
+    if not isinstance(t, torch.Tensor):
+        _fail(name, f"must be a torch.Tensor, got {type(t).__name__}")
+    if t.dim() != len(shape) or any(s is not None and s != d for s, d in zip(shape, t.shape)):
+        want = "[" + ", ".join("*" if s is None else str(s) for s in shape) + "]"
+        _fail(name, f"must have shape {want}, got {list(t.shape)}")
+    if not t.is_floating_point():
+        _fail(name, f"must be a floating-point tensor, got {t.dtype}")
+    if t.device != device:
+        _fail(name, f"is on {t.device} but means is on {device}")
+
+
+def _check_finite(named: dict[str, torch.Tensor]):
+    for name, t in named.items():
+        if not bool(torch.isfinite(t).all()):
+            _fail(name, "contains NaN or Inf values")
+
+
+def rasterize(
+    means: torch.Tensor,
+    quats: torch.Tensor,
+    scales: torch.Tensor,
+    opacities: torch.Tensor,
+    colors: torch.Tensor,
+    viewmat: torch.Tensor,
+    K: torch.Tensor,
+    width: int,
+    height: int,
+    *,
+    sh_degree: int | None = None,
+    background: torch.Tensor | None = None,
+    near_plane: float = 0.01,
+    far_plane: float = 1e10,
+    eps2d: float = 0.3,
+    antialiased: bool = False,
+    alpha_max: float = 0.99,
+    check_finite: bool = True,
+) -> RenderOutput:
+    """Render N 3D Gaussians from one pinhole camera.
+
+    Args:
+        means [N, 3], quats [N, 4] (w, x, y, z; need not be normalised), scales [N, 3] (>= 0),
+        opacities [N] in [0, 1].
+        colors: [N, 3] RGB, or [N, K, 3] SH coefficients with ``sh_degree`` in 0..3 and K >= (d+1)^2
+            (colour = max(0, SH + 0.5), 3D-GS convention).
+        viewmat [4, 4] world-to-camera (OpenCV axes), K [3, 3] intrinsics in pixels, width, height.
+        background [3]: colour behind the Gaussians (default black).
+        near_plane / far_plane: camera-z range kept (gsplat's 0.01 default; 3D-GS uses 0.2).
+        eps2d: screen-space dilation added to the 2D covariance (0.3 px).
+        antialiased: scale opacity by sqrt(det S / det(S + eps2d I)) (gsplat's antialiased mode).
+        alpha_max: per-Gaussian alpha clamp (0.99 in 3D-GS, 0.999 in gsplat).
+        check_finite: raise a ValueError naming the argument that holds NaN or Inf.
+    """
+    if not isinstance(means, torch.Tensor):
+        _fail("means", f"must be a torch.Tensor, got {type(means).__name__}")
+    device = means.device
+    _check_tensor("means", means, (None, 3), device)
+    n = means.shape[0]
+    _check_tensor("quats", quats, (n, 4), device)
+    _check_tensor("scales", scales, (n, 3), device)
+    _check_tensor("opacities", opacities, (n,), device)
+    if sh_degree is None:
+        _check_tensor("colors", colors, (n, 3), device)
+    else:
+        if sh_degree not in (0, 1, 2, 3):
+            _fail("sh_degree", f"must be 0, 1, 2 or 3, got {sh_degree}")
+        _check_tensor("colors", colors, (n, None, 3), device)
+        if colors.shape[1] < (sh_degree + 1) ** 2:
+            _fail("colors", f"needs at least {(sh_degree + 1) ** 2} SH coefficients for degree {sh_degree}, "
+                            f"got {colors.shape[1]}")
+    _check_tensor("viewmat", viewmat, (4, 4), device)
+    _check_tensor("K", K, (3, 3), device)
+    if background is None:
+        background = torch.zeros(3, device=device)
+    _check_tensor("background", background, (3,), device)
+    for name, v in (("width", width), ("height", height)):
+        if not isinstance(v, int) or v <= 0:
+            _fail(name, f"must be a positive int, got {v!r}")
+    if not (0.0 < alpha_max < 1.0):
+        _fail("alpha_max", f"must lie in (0, 1), got {alpha_max}")
+    if not (0.0 < near_plane < far_plane):
+        _fail("near_plane", f"must satisfy 0 < near_plane < far_plane, got {near_plane}, {far_plane}")
+
+    means, quats, scales, opacities, colors = (t.float().contiguous() for t in (means, quats, scales, opacities, colors))
+    viewmat, K, background = (t.detach().float().contiguous() for t in (viewmat, K, background))
+    if check_finite:
+        _check_finite(dict(means=means, quats=quats, scales=scales, opacities=opacities, colors=colors,
+                           viewmat=viewmat, K=K, background=background))
+        if n and bool((scales < 0).any()):
+            _fail("scales", "must be >= 0 (they are standard deviations, not log-scales)")
+        if n and bool((quats.detach().norm(dim=-1) == 0).any()):
+            _fail("quats", "contains a zero quaternion, which has no rotation")
+
+    tiles_x = (width + TILE_SIZE - 1) // TILE_SIZE
+    tiles_y = (height + TILE_SIZE - 1) // TILE_SIZE
+    means2d, conics, depths, opac_eff, radii, tiles_touched = _Project.apply(
+        means, quats, scales, opacities, viewmat, K, width, height, eps2d, near_plane, far_plane, antialiased
+    )
+    if means2d.requires_grad:
+        means2d.retain_grad()
+    if sh_degree is not None:
+        R, t = viewmat[:3, :3], viewmat[:3, 3]
+        campos = -(R.T @ t)
+        rgb = _SHColors.apply(colors, means, campos.contiguous(), radii, sh_degree)
+    else:
+        rgb = colors
+    total = int(tiles_touched.sum()) if n else 0
+    ranges, gauss_ids = _bin_gaussians(means2d.detach(), radii, depths.detach(), tiles_touched, total,
+                                       tiles_x, tiles_y)
+    image, depth_acc, alpha = _Composite.apply(
+        means2d, conics, opac_eff, rgb, depths, background, ranges, gauss_ids, width, height, alpha_max
+    )
+    depth = torch.where(alpha > 1e-6, depth_acc / alpha.clamp_min(1e-6), torch.zeros_like(depth_acc))
+    return RenderOutput(image, depth, alpha, means2d, radii, depths, total)
+
+
+def means2d_grad_norm(out: RenderOutput, width: int, height: int) -> torch.Tensor:
+    """Per-Gaussian norm of dL/d(means2d) in normalised device units (gsplat's densification statistic).
+    Needs ``out.means2d.grad`` (set after backward; ``rasterize`` retains it)."""
+    g = out.means2d.grad
+    if g is None:
+        raise RuntimeError("means2d has no gradient: call backward() on a loss of this render first")
+    scale = torch.tensor([width / 2.0, height / 2.0], device=g.device)
+    return (g * scale).norm(dim=-1)
+
+
+def eval_sh(coeffs: torch.Tensor, dirs: torch.Tensor, degree: int) -> torch.Tensor:
+    """Colour max(0, SH(dirs) + 0.5) of [N, K, 3] coefficients along [N, 3] directions (differentiable)."""
+    if coeffs.dim() != 3 or coeffs.shape[-1] != 3 or coeffs.shape[1] < (degree + 1) ** 2:
+        raise ValueError(f"eval_sh: argument 'coeffs' must be [N, >= {(degree + 1) ** 2}, 3], got {list(coeffs.shape)}")
+    if dirs.shape != (coeffs.shape[0], 3):
+        raise ValueError(f"eval_sh: argument 'dirs' must be [{coeffs.shape[0]}, 3], got {list(dirs.shape)}")
+    radii = torch.ones(dirs.shape[0], 2, device=dirs.device, dtype=torch.int32)
+    origin = torch.zeros(3, device=dirs.device)
+    return _SHColors.apply(coeffs.float().contiguous(), dirs.float().contiguous(), origin, radii, degree)
