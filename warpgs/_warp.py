@@ -7,6 +7,11 @@ import functools
 import torch
 import warp as wp
 
+try:  # the ctypes descriptor Warp passes to kernels; private, so fall back to the public route
+    from warp._src.types import array_t
+except ImportError:  # pragma: no cover - other Warp versions
+    array_t = None
+
 # Warp's start-up banner and per-module load lines are noise for users; keep warnings (errors only on
 # machines without CUDA, where Warp warns that no driver was found).
 wp.config.log_level = wp.LOG_WARNING if torch.cuda.is_available() else wp.LOG_ERROR
@@ -40,10 +45,28 @@ def _stream(device: str, handle: int):
 
 
 def to_wp(t: torch.Tensor, dtype=None) -> wp.array:
-    """A Warp view of a contiguous torch tensor (no copy). ``dtype`` groups trailing dims (e.g. wp.vec3)."""
+    """A Warp array viewing a contiguous torch tensor (no copy). ``dtype`` groups trailing dims (wp.vec3...)."""
     if not t.is_contiguous():
-        t = t.contiguous()
+        raise ValueError("to_wp needs a contiguous tensor")
     return wp.from_torch(t, dtype=dtype, requires_grad=False)
+
+
+# Trailing tensor dims that one element of each Warp dtype spans.
+_INNER_DIMS = {None: 0, wp.vec2: 1, wp.vec3: 1, wp.vec4: 1, wp.vec2i: 1, wp.mat33: 2, wp.mat44: 2}
+
+
+def arg(t: torch.Tensor, dtype=None):
+    """A kernel-argument descriptor of a contiguous torch tensor: the same zero-copy view as ``to_wp``,
+    built directly (about 10x cheaper per launch argument). The tensor must outlive the launch's
+    enqueueing, which holds for every call site here (tensors are referenced by the caller)."""
+    if not t.is_contiguous():
+        raise ValueError("kernel arguments must be contiguous tensors")
+    if array_t is None:  # pragma: no cover
+        return wp.from_torch(t, dtype=dtype, requires_grad=False, return_ctype=True)
+    k = _INNER_DIMS[dtype]
+    nd = t.dim() - k
+    es = t.element_size()
+    return array_t(t.data_ptr(), 0, nd, t.shape[:nd], [s * es for s in t.stride()[:nd]])
 
 
 def launch(kernel, dim, inputs, device: str, stream=None) -> None:

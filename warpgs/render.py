@@ -23,7 +23,7 @@ from typing import NamedTuple
 import torch
 import warp as wp
 
-from warpgs._warp import device_of, launch, stream_of, to_wp
+from warpgs._warp import arg, device_of, launch, stream_of, to_wp
 from warpgs.kernels import binning as kb
 from warpgs.kernels import projection as kp
 from warpgs.kernels import rasterize as kr
@@ -63,11 +63,11 @@ class _Project(torch.autograd.Function):
         tiles_touched = torch.empty(n, device=means.device, dtype=torch.int32)
         launch(
             kp.project_gaussians_fwd, n,
-            [to_wp(means, wp.vec3), to_wp(quats, wp.vec4), to_wp(scales, wp.vec3), to_wp(opacities),
-             to_wp(viewmat.reshape(1, 4, 4), wp.mat44), to_wp(K.reshape(1, 3, 3), wp.mat33),
+            [arg(means, wp.vec3), arg(quats, wp.vec4), arg(scales, wp.vec3), arg(opacities),
+             arg(viewmat.reshape(1, 4, 4), wp.mat44), arg(K.reshape(1, 3, 3), wp.mat33),
              width, height, eps2d, near, far, int(antialiased), TILE_SIZE, tiles_x, tiles_y,
-             to_wp(means2d, wp.vec2), to_wp(conics, wp.vec3), to_wp(depths), to_wp(radii, wp.vec2i),
-             to_wp(opac_eff), to_wp(tiles_touched)],
+             arg(means2d, wp.vec2), arg(conics, wp.vec3), arg(depths), arg(radii, wp.vec2i),
+             arg(opac_eff), arg(tiles_touched)],
             dev, stream,
         )
         ctx.save_for_backward(means, quats, scales, opacities, viewmat, K, radii, conics)
@@ -87,13 +87,13 @@ class _Project(torch.autograd.Function):
         v_opacities = torch.empty_like(opacities)
         launch(
             kp.project_gaussians_bwd, n,
-            [to_wp(means, wp.vec3), to_wp(quats, wp.vec4), to_wp(scales, wp.vec3), to_wp(opacities),
-             to_wp(viewmat.reshape(1, 4, 4), wp.mat44), to_wp(K.reshape(1, 3, 3), wp.mat33),
-             width, height, eps2d, int(antialiased), to_wp(radii, wp.vec2i), to_wp(conics, wp.vec3),
-             to_wp(_zeros_like_or(v_means2d, means[:, :2]), wp.vec2),
-             to_wp(_zeros_like_or(v_conics, conics), wp.vec3),
-             to_wp(_zeros_like_or(v_depths, opacities)), to_wp(_zeros_like_or(v_opac_eff, opacities)),
-             to_wp(v_means, wp.vec3), to_wp(v_quats, wp.vec4), to_wp(v_scales, wp.vec3), to_wp(v_opacities)],
+            [arg(means, wp.vec3), arg(quats, wp.vec4), arg(scales, wp.vec3), arg(opacities),
+             arg(viewmat.reshape(1, 4, 4), wp.mat44), arg(K.reshape(1, 3, 3), wp.mat33),
+             width, height, eps2d, int(antialiased), arg(radii, wp.vec2i), arg(conics, wp.vec3),
+             arg(_zeros_like_or(v_means2d, means[:, :2]), wp.vec2),
+             arg(_zeros_like_or(v_conics, conics), wp.vec3),
+             arg(_zeros_like_or(v_depths, opacities)), arg(_zeros_like_or(v_opac_eff, opacities)),
+             arg(v_means, wp.vec3), arg(v_quats, wp.vec4), arg(v_scales, wp.vec3), arg(v_opacities)],
             dev, stream_of(dev),
         )
         return v_means, v_quats, v_scales, v_opacities, None, None, None, None, None, None, None, None
@@ -106,8 +106,8 @@ class _SHColors(torch.autograd.Function):
         colors = torch.empty(means.shape[0], 3, device=means.device, dtype=torch.float32)
         launch(
             ksh.sh_to_color_fwd, means.shape[0],
-            [to_wp(means, wp.vec3), to_wp(campos.reshape(1, 3), wp.vec3), to_wp(coeffs, wp.vec3), degree,
-             to_wp(radii, wp.vec2i), to_wp(colors, wp.vec3)],
+            [arg(means, wp.vec3), arg(campos.reshape(1, 3), wp.vec3), arg(coeffs, wp.vec3), degree,
+             arg(radii, wp.vec2i), arg(colors, wp.vec3)],
             dev, stream_of(dev),
         )
         ctx.save_for_backward(coeffs, means, campos, radii)
@@ -122,37 +122,38 @@ class _SHColors(torch.autograd.Function):
         v_means = torch.empty_like(means)
         launch(
             ksh.sh_to_color_bwd, means.shape[0],
-            [to_wp(means, wp.vec3), to_wp(campos.reshape(1, 3), wp.vec3), to_wp(coeffs, wp.vec3), ctx.degree,
-             to_wp(radii, wp.vec2i), to_wp(v_colors.contiguous(), wp.vec3), to_wp(v_coeffs, wp.vec3),
-             to_wp(v_means, wp.vec3)],
+            [arg(means, wp.vec3), arg(campos.reshape(1, 3), wp.vec3), arg(coeffs, wp.vec3), ctx.degree,
+             arg(radii, wp.vec2i), arg(v_colors.contiguous(), wp.vec3), arg(v_coeffs, wp.vec3),
+             arg(v_means, wp.vec3)],
             dev, stream_of(dev),
         )
         return v_coeffs, v_means, None, None, None
 
 
-def _bin_gaussians(means2d, radii, depths, tiles_touched, total, tiles_x, tiles_y):
-    """Sorted Gaussian ids per tile: returns (ranges [tiles, 2] int32, gauss_ids [total] int32)."""
+def _bin_gaussians(means2d, radii, depths, tiles_touched, tiles_x, tiles_y):
+    """Sorted Gaussian ids per tile: returns (ranges [tiles, 2] int32, gauss_ids [total] int32, total)."""
     dev = device_of(means2d)
     stream = stream_of(dev)
     n_tiles = tiles_x * tiles_y
     ranges = torch.zeros(n_tiles, 2, device=means2d.device, dtype=torch.int32)
-    if total == 0:
-        return ranges, torch.empty(0, device=means2d.device, dtype=torch.int32)
+    n = means2d.shape[0]
     offsets = torch.cumsum(tiles_touched, 0, dtype=torch.int32)
+    total = int(offsets[-1]) if n else 0  # the one host sync of a render: sizes the key buffers
+    if total == 0:
+        return ranges, torch.empty(0, device=means2d.device, dtype=torch.int32), 0
     keys = torch.empty(2 * total, device=means2d.device, dtype=torch.int64)
     values = torch.empty(2 * total, device=means2d.device, dtype=torch.int32)
-    wp_keys, wp_values = to_wp(keys), to_wp(values)
     launch(
-        kb.emit_intersections, means2d.shape[0],
-        [to_wp(means2d, wp.vec2), to_wp(radii, wp.vec2i), to_wp(depths.view(torch.int32)), to_wp(offsets),
-         TILE_SIZE, tiles_x, tiles_y, wp_keys, wp_values],
+        kb.emit_intersections, n,
+        [arg(means2d, wp.vec2), arg(radii, wp.vec2i), arg(depths.view(torch.int32)), arg(offsets),
+         TILE_SIZE, tiles_x, tiles_y, arg(keys), arg(values)],
         dev, stream,
     )
     tile_bits = int(math.floor(math.log2(n_tiles))) + 1
     with wp.ScopedStream(stream) if stream is not None else _nullcontext():
-        wp.utils.radix_sort_pairs(wp_keys, wp_values, total, 0, 32 + tile_bits)
-    launch(kb.tile_ranges_from_keys, total, [wp_keys, total, to_wp(ranges)], dev, stream)
-    return ranges, values[:total]
+        wp.utils.radix_sort_pairs(to_wp(keys), to_wp(values), total, 0, 32 + tile_bits)
+    launch(kb.tile_ranges_from_keys, total, [arg(keys), total, arg(ranges)], dev, stream)
+    return ranges, values[:total], total
 
 
 class _nullcontext:
@@ -177,19 +178,20 @@ class _Composite(torch.autograd.Function):
         last = torch.empty(height, width, device=means2d.device, dtype=torch.int32)
         launch(
             kr.rasterize_fwd, n_threads,
-            [to_wp(ranges), to_wp(gauss_ids), to_wp(means2d, wp.vec2), to_wp(conics, wp.vec3), to_wp(opac_eff),
-             to_wp(colors, wp.vec3), to_wp(depths), to_wp(background.reshape(1, 3), wp.vec3),
+            [arg(ranges), arg(gauss_ids), arg(means2d, wp.vec2), arg(conics, wp.vec3), arg(opac_eff),
+             arg(colors, wp.vec3), arg(depths), arg(background.reshape(1, 3), wp.vec3),
              width, height, tiles_x, alpha_max,
-             to_wp(color.view(-1, 3), wp.vec3), to_wp(depth.view(-1)), to_wp(alpha.view(-1)), to_wp(last.view(-1))],
+             arg(color.view(-1, 3), wp.vec3), arg(depth.view(-1)), arg(alpha.view(-1)), arg(last.view(-1))],
             dev, stream_of(dev),
         )
-        ctx.save_for_backward(means2d, conics, opac_eff, colors, depths, background, ranges, gauss_ids, alpha, last)
+        ctx.save_for_backward(means2d, conics, opac_eff, colors, depths, background, ranges, gauss_ids, depth,
+                              alpha, last)
         ctx.cfg = (width, height, alpha_max)
         return color, depth, alpha
 
     @staticmethod
     def backward(ctx, v_color, v_depth, v_alpha):
-        means2d, conics, opac_eff, colors, depths, background, ranges, gauss_ids, alpha, last = ctx.saved_tensors
+        means2d, conics, opac_eff, colors, depths, background, ranges, gauss_ids, depth, alpha, last = ctx.saved_tensors
         width, height, alpha_max = ctx.cfg
         dev = device_of(means2d)
         tiles_x = (width + TILE_SIZE - 1) // TILE_SIZE
@@ -200,13 +202,13 @@ class _Composite(torch.autograd.Function):
         v_depths = torch.zeros_like(depths)
         launch(
             kr.rasterize_bwd, ranges.shape[0] * kr.BLOCK,
-            [to_wp(ranges), to_wp(gauss_ids), to_wp(means2d, wp.vec2), to_wp(conics, wp.vec3), to_wp(opac_eff),
-             to_wp(colors, wp.vec3), to_wp(depths), to_wp(background.reshape(1, 3), wp.vec3),
-             width, height, tiles_x, alpha_max, to_wp(alpha.view(-1)), to_wp(last.view(-1)),
-             to_wp(_zeros_like_or(v_color, alpha.new_empty(height, width, 3)).view(-1, 3), wp.vec3),
-             to_wp(_zeros_like_or(v_depth, alpha).view(-1)), to_wp(_zeros_like_or(v_alpha, alpha).view(-1)),
-             to_wp(v_means2d, wp.vec2), to_wp(v_conics, wp.vec3), to_wp(v_opac), to_wp(v_colors, wp.vec3),
-             to_wp(v_depths)],
+            [arg(ranges), arg(gauss_ids), arg(means2d, wp.vec2), arg(conics, wp.vec3), arg(opac_eff),
+             arg(colors, wp.vec3), arg(depths), arg(background.reshape(1, 3), wp.vec3),
+             width, height, tiles_x, alpha_max, arg(depth.view(-1)), arg(alpha.view(-1)), arg(last.view(-1)),
+             arg(_zeros_like_or(v_color, alpha.new_empty(height, width, 3)).view(-1, 3), wp.vec3),
+             arg(_zeros_like_or(v_depth, alpha).view(-1)), arg(_zeros_like_or(v_alpha, alpha).view(-1)),
+             arg(v_means2d, wp.vec2), arg(v_conics, wp.vec3), arg(v_opac), arg(v_colors, wp.vec3),
+             arg(v_depths)],
             dev, stream_of(dev),
         )
         return v_means2d, v_conics, v_opac, v_colors, v_depths, None, None, None, None, None, None
@@ -326,13 +328,11 @@ def rasterize(
         rgb = _SHColors.apply(colors, means, campos.contiguous(), radii, sh_degree)
     else:
         rgb = colors
-    total = int(tiles_touched.sum()) if n else 0
-    ranges, gauss_ids = _bin_gaussians(means2d.detach(), radii, depths.detach(), tiles_touched, total,
-                                       tiles_x, tiles_y)
-    image, depth_acc, alpha = _Composite.apply(
+    ranges, gauss_ids, total = _bin_gaussians(means2d.detach(), radii, depths.detach(), tiles_touched,
+                                              tiles_x, tiles_y)
+    image, depth, alpha = _Composite.apply(
         means2d, conics, opac_eff, rgb, depths, background, ranges, gauss_ids, width, height, alpha_max
     )
-    depth = torch.where(alpha > 1e-6, depth_acc / alpha.clamp_min(1e-6), torch.zeros_like(depth_acc))
     return RenderOutput(image, depth, alpha, means2d, radii, depths, total)
 
 

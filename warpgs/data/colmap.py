@@ -165,7 +165,7 @@ class _Reader:
     def read_cstring(self) -> str:
         end = self.buf.find(b"\x00", self.pos)
         if end < 0:
-            raise SceneError(f"{self.path}: unterminated image name (truncated file)")
+            raise SceneError(f"{self.path}: file ends early inside an image name (truncated)")
         s = self.buf[self.pos : end].decode("utf-8")
         self.pos = end + 1
         return s
@@ -396,6 +396,6 @@ def write_model(
         with open(folder / "points3D.txt", "w") as f:
             f.write("# POINT3D_ID, X, Y, Z, R, G, B, ERROR, TRACK[] as (IMAGE_ID, POINT2D_IDX)\n")
             for k in range(len(points.ids)):
-                x, y, z = points.xyz[k]
+                x, y, z = (float(c) for c in points.xyz[k])
                 r, g, b = (int(c) for c in points.rgb[k])
                 f.write(f"{int(points.ids[k])} {x!r} {y!r} {z!r} {r} {g} {b} {float(points.error[k])!r}\n")

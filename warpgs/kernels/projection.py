@@ -11,7 +11,7 @@ Only Warp code lives here; the launches are in ``warpgs/render.py``.
 
 import warp as wp
 
-wp.set_module_options({"enable_backward": False})
+wp.set_module_options({"enable_backward": False, "fast_math": True})
 
 ALPHA_MIN = wp.constant(1.0 / 255.0)
 MAX_EXTENT = wp.constant(3.33)
@@ -62,7 +62,8 @@ def view_rotation(V: wp.mat44) -> wp.mat33:
 
 @wp.func
 def covariance_3d(q: wp.vec4, s: wp.vec3) -> wp.mat33:
-    qn = wp.normalize(q)
+    # normalise as gsplat does (x*rsqrt(|q|^2)), so both round the same way
+    qn = q * (1.0 / wp.sqrt(q[1] * q[1] + q[2] * q[2] + q[3] * q[3] + q[0] * q[0]))
     M = quat_to_rotmat(qn) * wp.diag(s)
     return M * wp.transpose(M)
 

@@ -7,18 +7,21 @@ does); on the CPU (one thread per kernel) the same helpers are identities.
 
 Constants (3D-GS / gsplat): a Gaussian is skipped where alpha < 1/255; alpha is clamped at ``alpha_max``
 (0.99 in 3D-GS, 0.999 in gsplat); a pixel stops before the Gaussian that would bring its transmittance
-to <= 1e-4. Outputs: colour over the background, accumulated depth sum(w_i z_i), accumulated alpha.
+to <= 1e-4. Outputs: colour over the background, expected depth sum(w_i z_i) / A (0 where A <= 1e-6),
+accumulated alpha A = 1 - T.
 Only Warp code lives here.
 """
 
 import warp as wp
 
-wp.set_module_options({"enable_backward": False})
+# fast_math: CUDA fast intrinsics (__expf, approximate division), as gsplat builds with -use_fast_math.
+wp.set_module_options({"enable_backward": False, "fast_math": True})
 
 TILE_SIZE = 16
 BLOCK = TILE_SIZE * TILE_SIZE
 ALPHA_MIN = wp.constant(1.0 / 255.0)
 T_MIN = wp.constant(1.0e-4)
+DEPTH_ALPHA_MIN = wp.constant(1.0e-6)  # below this accumulated alpha the expected depth is reported as 0
 
 
 @wp.func_native(
@@ -131,9 +134,10 @@ def rasterize_fwd(
         T = next_T
         n = k + 1
     pix = y * width + x
+    A = 1.0 - T
     out_color[pix] = C + T * background[0]
-    out_depth[pix] = D
-    out_alpha[pix] = 1.0 - T
+    out_depth[pix] = wp.where(A > DEPTH_ALPHA_MIN, D / A, 0.0)
+    out_alpha[pix] = A
     last_count[pix] = n
 
 
@@ -151,6 +155,7 @@ def rasterize_bwd(
     height: int,
     tiles_x: int,
     alpha_max: float,
+    out_depth: wp.array(dtype=float),
     out_alpha: wp.array(dtype=float),
     last_count: wp.array(dtype=wp.int32),
     v_out_color: wp.array(dtype=wp.vec3),
@@ -178,14 +183,20 @@ def rasterize_bwd(
     vA = float(0.0)
     if inside:
         last = last_count[pix]
-        T_final = 1.0 - out_alpha[pix]
+        A = out_alpha[pix]
+        T_final = 1.0 - A
         vC = v_out_color[pix]
-        vD = v_out_depth[pix]
         vA = v_out_alpha[pix]
+        if A > DEPTH_ALPHA_MIN:
+            # expected depth E = D / A: dL/dD = v_E / A, dL/dA += -v_E E / A
+            vE = v_out_depth[pix]
+            vD = vE / A
+            vA = vA - vE * out_depth[pix] / A
     bg_dot = wp.dot(background[0], vC)
     T = T_final
     S_c = wp.vec3(0.0)  # sum over Gaussians behind of w_j c_j
     S_d = float(0.0)  # sum over Gaussians behind of w_j z_j
+    # (vD is now the gradient of the accumulated depth D = sum w_i z_i)
 
     bound = warp_max(last)
     for j in range(bound - start):

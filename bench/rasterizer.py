@@ -1,0 +1,228 @@
+"""Rasterizer benchmark: warpgs against gsplat 1.5.3 on CUDA, against the torch oracle on the CPU.
+
+    python bench/rasterizer.py                 # CUDA if available (needs `pip install gsplat==1.5.3`), else CPU
+    python bench/rasterizer.py --device cpu
+    python bench/rasterizer.py --out bench/results/rasterizer_cuda.json
+
+Identical inputs for both rasterizers in the same run: N random Gaussians (means uniform in a box
+in front of the camera, random rotations, scales uniform up to 0.02, opacities uniform in [0, 1], RGB
+colours), one pinhole camera (focal = image width). Times are means over --iters runs after warm-up,
+measured with CUDA events; forward+backward backpropagates a fixed random weighting of the image to
+means, quats, scales, opacities and colours. Peak memory is torch's allocator peak above the inputs
+plus Warp's memory-pool high-water mark (Warp's radix-sort scratch). The RGB agreement uses gsplat's
+alpha clamp (0.999) in warpgs so that the two compute the same function.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import platform
+import sys
+import time
+from pathlib import Path
+
+import torch
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "tests"))
+
+from warpgs.render import rasterize  # noqa: E402
+
+CUDA_CONFIGS = [(138_766, 648, 420), (256_000, 1280, 720), (1_000_000, 1920, 1080)]
+CPU_CONFIGS = [(64, 48, 32), (256, 96, 64)]
+
+
+def make_inputs(n, width, height, device, seed=0):
+    g = torch.Generator(device="cpu").manual_seed(seed)
+    box_lo = torch.tensor([-1.2, -0.8, 1.5])
+    box_hi = torch.tensor([1.2, 0.8, 4.0])
+    means = box_lo + (box_hi - box_lo) * torch.rand(n, 3, generator=g)
+    quats = torch.randn(n, 4, generator=g)
+    quats = quats / quats.norm(dim=-1, keepdim=True)
+    scales = 0.02 * torch.rand(n, 3, generator=g)
+    opacities = torch.rand(n, generator=g)
+    colors = torch.rand(n, 3, generator=g)
+    viewmat = torch.eye(4)
+    f = float(width)
+    K = torch.tensor([[f, 0.0, width / 2], [0.0, f, height / 2], [0.0, 0.0, 1.0]])
+    w_img = torch.rand(height, width, 3, generator=g)
+    t = [x.to(device) for x in (means, quats, scales, opacities, colors, viewmat, K, w_img)]
+    return dict(zip(["means", "quats", "scales", "opacities", "colors", "viewmat", "K", "w_img"], t))
+
+
+def grad_inputs(inp):
+    return {k: inp[k].clone().requires_grad_(True) for k in ("means", "quats", "scales", "opacities", "colors")}
+
+
+def warpgs_fn(inp, width, height, alpha_max):
+    def fwd(p):
+        out = rasterize(p["means"], p["quats"], p["scales"], p["opacities"], p["colors"], inp["viewmat"], inp["K"],
+                        width, height, alpha_max=alpha_max, check_finite=False)
+        return out.image
+    return fwd
+
+
+def gsplat_fn(inp, width, height, mode="RGB"):
+    import gsplat
+
+    def fwd(p):
+        img, alpha, _ = gsplat.rasterization(
+            p["means"], p["quats"], p["scales"], p["opacities"], p["colors"], inp["viewmat"][None], inp["K"][None],
+            width, height, packed=False, render_mode=mode)
+        return img[0, ..., :3]
+    return fwd
+
+
+def reference_fn(inp, width, height, alpha_max):
+    import reference as ref
+
+    def fwd(p):
+        img, _, _, _ = ref.render(p["means"], p["quats"], p["scales"], p["opacities"], p["colors"], inp["viewmat"],
+                                  inp["K"], width, height, alpha_max=alpha_max)
+        return img
+    return fwd
+
+
+def time_it(fn, iters, warmup, device):
+    for _ in range(warmup):
+        fn()
+    if device == "cuda":
+        torch.cuda.synchronize()
+        start, end = torch.cuda.Event(enable_timing=True), torch.cuda.Event(enable_timing=True)
+        start.record()
+        for _ in range(iters):
+            fn()
+        end.record()
+        torch.cuda.synchronize()
+        return start.elapsed_time(end) / iters
+    t0 = time.perf_counter()
+    for _ in range(iters):
+        fn()
+    return (time.perf_counter() - t0) * 1000 / iters
+
+
+def peak_mem_mb(fn, device):
+    if device != "cuda":
+        return None
+    import warp as wp
+
+    torch.cuda.synchronize()
+    base = torch.cuda.memory_allocated()
+    torch.cuda.reset_peak_memory_stats()
+    try:
+        wp.set_mempool_used_mem_high("cuda:0", 0) if hasattr(wp, "set_mempool_used_mem_high") else None
+    except Exception:  # noqa: BLE001 - optional Warp API
+        pass
+    fn()
+    torch.cuda.synchronize()
+    peak = torch.cuda.max_memory_allocated() - base
+    warp_peak = 0
+    for name in ("get_mempool_used_mem_high",):
+        if hasattr(wp, name):
+            try:
+                warp_peak = getattr(wp, name)("cuda:0")
+            except Exception:  # noqa: BLE001
+                warp_peak = 0
+    return (peak + warp_peak) / 2**20
+
+
+def measure(name, make_fwd, inp, iters, warmup, device):
+    p = grad_inputs(inp)
+    fwd = make_fwd
+    w = inp["w_img"]
+
+    def f_only():
+        with torch.no_grad():
+            fwd(p)
+
+    def f_b():
+        img = fwd(p)
+        (img * w).sum().backward()
+
+    res = {"forward_ms": time_it(f_only, iters, warmup, device), "forward_backward_ms": time_it(f_b, iters, warmup, device)}
+    res["peak_mem_mb"] = peak_mem_mb(f_b, device)
+    with torch.no_grad():
+        res_img = fwd(p).float()
+    print(f"  {name:<14} fwd {res['forward_ms']:9.3f} ms   fwd+bwd {res['forward_backward_ms']:9.3f} ms"
+          + (f"   peak {res['peak_mem_mb']:.1f} MB" if res["peak_mem_mb"] is not None else ""), flush=True)
+    return res, res_img
+
+
+def profile(make_fwd, inp):
+    """Kernel-level breakdown of one warpgs forward+backward (CUDA)."""
+    from torch.profiler import ProfilerActivity
+    from torch.profiler import profile as torch_profile
+
+    p = grad_inputs(inp)
+    for _ in range(3):
+        (make_fwd(p) * inp["w_img"]).sum().backward()
+    torch.cuda.synchronize()
+    with torch_profile(activities=[ProfilerActivity.CPU, ProfilerActivity.CUDA]) as prof:
+        for _ in range(5):
+            (make_fwd(p) * inp["w_img"]).sum().backward()
+        torch.cuda.synchronize()
+    print(prof.key_averages().table(sort_by="cuda_time_total", row_limit=25, max_name_column_width=60))
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--device", choices=["cuda", "cpu"], default="cuda" if torch.cuda.is_available() else "cpu")
+    ap.add_argument("--iters", type=int, default=None)
+    ap.add_argument("--warmup", type=int, default=None)
+    ap.add_argument("--out", type=Path, default=None)
+    ap.add_argument("--configs", type=str, default=None, help="e.g. '138766x648x420,256000x1280x720'")
+    ap.add_argument("--profile", action="store_true", help="print a per-kernel CUDA time table of warpgs")
+    args = ap.parse_args(argv)
+    device = args.device
+    configs = CUDA_CONFIGS if device == "cuda" else CPU_CONFIGS
+    if args.configs:
+        configs = [tuple(int(v) for v in c.split("x")) for c in args.configs.split(",")]
+    iters = args.iters or (20 if device == "cuda" else 3)
+    warmup = args.warmup or (5 if device == "cuda" else 1)
+    out_path = args.out or ROOT / "bench" / "results" / f"rasterizer_{device}.json"
+
+    result = {"device": torch.cuda.get_device_name() if device == "cuda" else platform.processor() or "cpu",
+              "torch": torch.__version__, "iters": iters, "configs": []}
+    if device == "cuda":
+        import gsplat
+
+        result["gsplat"] = gsplat.__version__
+    import warp as wp
+
+    result["warp"] = wp.__version__
+    for n, width, height in configs:
+        print(f"{n} Gaussians, {width}x{height}", flush=True)
+        inp = make_inputs(n, width, height, device)
+        row = {"gaussians": n, "width": width, "height": height}
+        if device == "cuda":
+            row["warpgs"], img_w = measure("warpgs", warpgs_fn(inp, width, height, 0.999), inp, iters, warmup, device)
+            row["gsplat"], img_g = measure("gsplat", gsplat_fn(inp, width, height), inp, iters, warmup, device)
+            row["gsplat_rgb_ed"], _ = measure("gsplat RGB+ED", gsplat_fn(inp, width, height, "RGB+ED"), inp, iters,
+                                              warmup, device)
+            row["max_abs_rgb_diff"] = float((img_w - img_g).abs().max())
+            if args.profile:
+                profile(warpgs_fn(inp, width, height, 0.999), inp)
+            row["ratio_fwd"] = row["warpgs"]["forward_ms"] / row["gsplat"]["forward_ms"]
+            row["ratio_fwd_bwd"] = row["warpgs"]["forward_backward_ms"] / row["gsplat"]["forward_backward_ms"]
+            row["ratio_fwd_bwd_vs_rgb_ed"] = (row["warpgs"]["forward_backward_ms"]
+                                              / row["gsplat_rgb_ed"]["forward_backward_ms"])
+            print(f"  ratio warpgs/gsplat: fwd {row['ratio_fwd']:.2f}  fwd+bwd {row['ratio_fwd_bwd']:.2f} "
+                  f"(vs RGB+ED {row['ratio_fwd_bwd_vs_rgb_ed']:.2f})  max|RGB diff| {row['max_abs_rgb_diff']:.2e}")
+        else:
+            row["warpgs"], img_w = measure("warpgs", warpgs_fn(inp, width, height, 0.99), inp, iters, warmup, device)
+            row["reference"], img_r = measure("torch oracle", reference_fn(inp, width, height, 0.99), inp, 1, 0, device)
+            row["max_abs_rgb_diff"] = float((img_w - img_r).abs().max())
+            row["speedup_fwd_bwd"] = row["reference"]["forward_backward_ms"] / row["warpgs"]["forward_backward_ms"]
+            print(f"  speed-up over the oracle (fwd+bwd) {row['speedup_fwd_bwd']:.1f}x  "
+                  f"max|RGB diff| {row['max_abs_rgb_diff']:.2e}")
+        result["configs"].append(row)
+    out_path.parent.mkdir(parents=True, exist_ok=True)
+    out_path.write_text(json.dumps(result, indent=2))
+    print(f"wrote {out_path}")
+    return result
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,240 @@
+"""Run configuration: dataclasses with the published defaults, read from ``configs/*.yaml``, overridable.
+
+A run's config is built in layers, later ones winning:
+
+1. the dataclass defaults below (3D-GS / gsplat numbers);
+2. the method's file ``configs/<method>.yaml`` (e.g. ``baseline.yaml``);
+3. the dataset's file ``configs/<dataset>.yaml`` if there is one (``blender``, ``llff``, ``dtu``, ``synthetic``);
+4. files given with ``--config`` (a file may name another with ``base: other.yaml``, read first);
+5. ``--set section.key=value`` overrides (values parsed as YAML: ``--set strategy.max_gaussians=20000``);
+6. explicit flags (``--iterations``, ``--views``, ``--device``, ...).
+
+Unknown keys are errors that list the valid ones. The config used is written to the output folder.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import types
+import typing
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from warpgs.strategy import DefaultStrategy
+
+REPO_ROOT = Path(__file__).resolve().parents[1]
+CONFIG_DIR = REPO_ROOT / "configs"
+
+
+class ConfigError(ValueError):
+    pass
+
+
+@dataclass
+class DataConfig:
+    name: str = "synthetic"  # dataset name (configs/data/<name>.yaml) or a scene folder
+    scene: str | None = None  # scene of a named dataset (fern, scan65, lego, ...); None = its default
+    views: int | str | None = None  # training views; None = the dataset's default; "all"
+    downscale: int | None = None  # images_N; None = the dataset's default
+    root: str | None = None  # dataset root (replaces the dataset config's roots)
+    options: dict = field(default_factory=dict)  # loader keyword arguments
+
+
+@dataclass
+class ModelConfig:
+    sh_degree: int = 3
+    init: str = "frustum"  # box | frustum | points | ply
+    init_num: int = 100_000  # random Gaussians for box / frustum
+    init_box: list | None = None  # [xmin, ymin, zmin, xmax, ymax, zmax]; None: the training frusta's bounding box
+    init_depth: list | None = None  # [near, far] for frustum / the automatic box; None: the scene's bounds
+    init_ply: str | None = None  # point cloud (any vertex PLY) for init: ply
+    init_opacity: float = 0.1
+    init_scale: float = 1.0  # x the 3-nearest-neighbour distance
+
+
+@dataclass
+class OptimConfig:
+    means_lr: float = 1.6e-4  # x scene scale, decays exponentially to means_lr_final
+    means_lr_final: float = 1.6e-6
+    means_lr_decay_steps: int | None = None  # None = the run's iterations
+    scales_lr: float = 5e-3
+    quats_lr: float = 1e-3
+    opacities_lr: float = 5e-2
+    sh0_lr: float = 2.5e-3
+    shN_lr: float = 2.5e-3 / 20
+    eps: float = 1e-15
+    scene_scale: float | None = None  # None: 1.1 x the training cameras' largest distance from their centre
+
+
+@dataclass
+class LossConfig:
+    l1_weight: float = 0.8
+    ssim_weight: float = 0.2  # D-SSIM = 1 - SSIM
+    depth_weight: float = 0.0  # Pearson depth term against the views' depth prior (0 = off)
+    depth_prior: str = "scene"  # scene: Camera.depth from the loader
+
+
+@dataclass
+class TrainConfig:
+    iterations: int = 7000
+    seed: int = 0
+    device: str = "auto"  # auto | cpu | cuda | cuda:N
+    sh_degree_interval: int = 1000  # raise the rendered SH degree every this many steps
+    checkpoint_every: int = 1000  # 0 = only at the end (and on Ctrl-C)
+    background: list | None = None  # [r, g, b]; None: white if the scene says so, else black
+    compact: bool = True  # drop Gaussians the training views do not need, before evaluation and export
+    max_nan_steps: int = 20  # give up after this many consecutive non-finite steps
+    progress: bool = True
+
+
+@dataclass
+class EvalConfig:
+    lpips_weights: str | None = None  # AlexNet weights; None: $WARPGS_LPIPS_WEIGHTS or the default location
+    save_images: bool = True
+    fps_repeats: int = 3
+
+
+@dataclass
+class Config:
+    method: str = "baseline"
+    out: str = "outputs/sparse"
+    data: DataConfig = field(default_factory=DataConfig)
+    model: ModelConfig = field(default_factory=ModelConfig)
+    optim: OptimConfig = field(default_factory=OptimConfig)
+    loss: LossConfig = field(default_factory=LossConfig)
+    strategy: DefaultStrategy = field(default_factory=DefaultStrategy)
+    train: TrainConfig = field(default_factory=TrainConfig)
+    eval: EvalConfig = field(default_factory=EvalConfig)
+
+
+# ----------------------------------------------------------------------------------------------
+
+
+def to_dict(cfg) -> dict:
+    return dataclasses.asdict(cfg)
+
+
+def _type_ok(value, tp) -> tuple[bool, Any]:
+    """(accepted, coerced value) of ``value`` for the annotation ``tp``."""
+    origin = typing.get_origin(tp)
+    if origin in (typing.Union, types.UnionType):
+        for arg in typing.get_args(tp):
+            ok, v = _type_ok(value, arg)
+            if ok:
+                return True, v
+        return False, value
+    if tp is type(None):
+        return value is None, value
+    if tp is Any:
+        return True, value
+    base = origin or tp
+    if base is bool:
+        return isinstance(value, bool), value
+    if base is int:
+        return isinstance(value, int) and not isinstance(value, bool), value
+    if base is float:
+        if isinstance(value, (int, float)) and not isinstance(value, bool):
+            return True, float(value)
+        return False, value
+    if base is str:
+        return isinstance(value, str), value
+    if base is list:
+        if isinstance(value, (list, tuple)):
+            return True, list(value)
+        return False, value
+    if base is dict:
+        return isinstance(value, dict), value
+    return isinstance(value, base), value
+
+
+def _apply(obj, values: dict, where: str) -> None:
+    hints = typing.get_type_hints(type(obj))
+    names = [f.name for f in dataclasses.fields(obj)]
+    for key, value in values.items():
+        if key not in names:
+            raise ConfigError(f"{where}: unknown key {key!r}; valid keys: {', '.join(names)}")
+        cur = getattr(obj, key)
+        if dataclasses.is_dataclass(cur):
+            if not isinstance(value, dict):
+                raise ConfigError(f"{where}.{key}: expected a mapping of {type(cur).__name__} fields, got {value!r}")
+            _apply(cur, value, f"{where}.{key}")
+            continue
+        ok, v = _type_ok(value, hints[key])
+        if not ok:
+            raise ConfigError(f"{where}.{key}: {value!r} is not a valid {hints[key]}")
+        setattr(obj, key, v)
+
+
+def read_yaml(path: str | Path, _seen=None) -> dict:
+    """A config file as a dict, with its ``base:`` file (relative to it) merged underneath."""
+    path = Path(path)
+    if not path.is_file():
+        raise ConfigError(f"{path}: config file not found")
+    seen = set() if _seen is None else _seen
+    if path.resolve() in seen:
+        raise ConfigError(f"{path}: 'base' chain loops")
+    seen.add(path.resolve())
+    try:
+        data = yaml.safe_load(path.read_text()) or {}
+    except yaml.YAMLError as e:
+        raise ConfigError(f"{path}: cannot parse YAML ({e})") from e
+    if not isinstance(data, dict):
+        raise ConfigError(f"{path}: expected a mapping at the top level")
+    base = data.pop("base", None)
+    if base:
+        data = merge(read_yaml(path.parent / base, seen), data)
+    return data
+
+
+def merge(a: dict, b: dict) -> dict:
+    out = dict(a)
+    for k, v in b.items():
+        out[k] = merge(out[k], v) if isinstance(v, dict) and isinstance(out.get(k), dict) else v
+    return out
+
+
+def parse_override(text: str) -> dict:
+    """``"train.iterations=500"`` -> ``{"train": {"iterations": 500}}`` (value parsed as YAML)."""
+    if "=" not in text:
+        raise ConfigError(f"--set {text!r}: expected key=value, e.g. train.iterations=500")
+    key, raw = text.split("=", 1)
+    try:
+        value = yaml.safe_load(raw) if raw.strip() else None
+    except yaml.YAMLError as e:
+        raise ConfigError(f"--set {text!r}: cannot parse the value ({e})") from e
+    out: dict = value
+    for part in reversed(key.strip().split(".")):
+        if not part:
+            raise ConfigError(f"--set {text!r}: empty key component")
+        out = {part: out}
+    return out
+
+
+def build_config(layers: list[dict]) -> Config:
+    cfg = Config()
+    merged: dict = {}
+    for layer in layers:
+        merged = merge(merged, layer)
+    _apply(cfg, merged, "config")
+    return cfg
+
+
+def load_config(files: list[str | Path] = (), overrides: list[str] = ()) -> Config:
+    """Defaults, then ``files`` in order, then ``key=value`` overrides."""
+    layers = [read_yaml(f) for f in files] + [parse_override(o) for o in overrides]
+    return build_config(layers)
+
+
+def config_from_dict(d: dict) -> Config:
+    return build_config([d])
+
+
+def save_config(cfg: Config, path: str | Path) -> None:
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_text(yaml.safe_dump(to_dict(cfg), sort_keys=False))
+    tmp.replace(path)

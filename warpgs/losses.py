@@ -1,0 +1,194 @@
+"""Training losses: L1, D-SSIM (kornia), Pearson depth correlation, LPIPS (``lpips`` package, local weights).
+
+Images are [H, W, 3] (or [B, 3, H, W]) in [0, 1]. ``dssim`` is 1 - SSIM, the form 3D-GS and gsplat train
+with (weights 0.8 L1 + 0.2 D-SSIM). ``pearson_depth_loss`` is 1 - corr(rendered depth, prior) over the
+valid pixels (FSGS / DNGaussian): 0 when perfectly correlated, 2 when anti-correlated; it is blind to
+the prior's scale and shift, which monocular depth lacks anyway.
+
+LPIPS uses the ``lpips`` package (its linear heads ship inside it) with the AlexNet backbone loaded from
+a local file, never from the network: ``$WARPGS_LPIPS_WEIGHTS``, else
+``~/.cache/warpgs/weights/alexnet-owt-7be5be79.pth``, else torch's hub cache. When torchvision is
+absent (this project's CPU environment has no CPU build of it), warpgs gives ``lpips`` the
+torchvision AlexNet layout itself, so the same weight file loads.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+import types
+from pathlib import Path
+
+import torch
+from torch import nn
+
+ALEXNET_FILE = "alexnet-owt-7be5be79.pth"
+ALEXNET_URL = f"https://download.pytorch.org/models/{ALEXNET_FILE}"
+LPIPS_ENV = "WARPGS_LPIPS_WEIGHTS"
+
+
+def _bchw(x: torch.Tensor) -> torch.Tensor:
+    if x.dim() == 3:  # [H, W, C]
+        return x.permute(2, 0, 1)[None]
+    if x.dim() == 4:
+        return x
+    raise ValueError(f"expected an image [H, W, C] or a batch [B, C, H, W], got shape {list(x.shape)}")
+
+
+def l1(pred: torch.Tensor, target: torch.Tensor, mask: torch.Tensor | None = None) -> torch.Tensor:
+    d = (pred - target).abs()
+    if mask is None:
+        return d.mean()
+    m = mask[..., None].expand_as(d) if mask.dim() == d.dim() - 1 else mask
+    return d[m].mean() if m.any() else d.sum() * 0
+
+
+def ssim(pred: torch.Tensor, target: torch.Tensor, window_size: int = 11, padding: str = "same") -> torch.Tensor:
+    """Mean SSIM (Gaussian window, sigma 1.5) through kornia."""
+    from kornia.metrics import ssim as kssim
+
+    return kssim(_bchw(pred), _bchw(target), window_size, max_val=1.0, padding=padding).mean()
+
+
+def dssim(pred: torch.Tensor, target: torch.Tensor, window_size: int = 11) -> torch.Tensor:
+    """1 - SSIM (3D-GS's D-SSIM term)."""
+    return 1.0 - ssim(pred, target, window_size)
+
+
+def pearson_depth_loss(depth: torch.Tensor, prior: torch.Tensor, mask: torch.Tensor | None = None,
+                       eps: float = 1e-8) -> torch.Tensor:
+    """1 - Pearson correlation of ``depth`` and ``prior`` over ``mask`` (default: where prior > 0)."""
+    if depth.shape != prior.shape:
+        raise ValueError(f"pearson_depth_loss: depth {list(depth.shape)} and prior {list(prior.shape)} differ")
+    m = (prior > 0) if mask is None else mask.bool()
+    x, y = depth[m].reshape(-1), prior[m].reshape(-1).to(depth.dtype)
+    if x.numel() < 2:
+        return depth.sum() * 0
+    x, y = x - x.mean(), y - y.mean()
+    corr = (x * y).sum() / (x.norm() * y.norm() + eps)
+    return 1.0 - corr
+
+
+# ----------------------------------------------------------------------------------------------
+# LPIPS
+
+
+class LPIPSUnavailable(RuntimeError):
+    """LPIPS cannot run: the package or the backbone weights are missing (the message says what to do)."""
+
+
+def default_lpips_weights() -> list[Path]:
+    """Where the AlexNet backbone is looked for, in order."""
+    out = []
+    if os.environ.get(LPIPS_ENV):
+        out.append(Path(os.environ[LPIPS_ENV]).expanduser())
+    cache = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache")
+    out.append(cache / "warpgs" / "weights" / ALEXNET_FILE)
+    out.append(Path(os.environ.get("TORCH_HOME") or cache / "torch") / "hub" / "checkpoints" / ALEXNET_FILE)
+    return out
+
+
+def _missing_weights_message(looked: list[Path]) -> str:
+    where = "\n".join(f"  {p}" for p in looked)
+    return (f"LPIPS needs the AlexNet backbone weights ({ALEXNET_FILE}), and none were found. warpgs looked at:\n"
+            f"{where}\nDownload {ALEXNET_URL} and save it as {default_lpips_weights()[-2]} "
+            f"(or anywhere, and set {LPIPS_ENV}=/path/to/{ALEXNET_FILE}).")
+
+
+def _alexnet_features() -> nn.Sequential:
+    """torchvision's AlexNet ``features`` (same layer indices, so its state dict loads)."""
+    return nn.Sequential(
+        nn.Conv2d(3, 64, kernel_size=11, stride=4, padding=2), nn.ReLU(inplace=True),
+        nn.MaxPool2d(kernel_size=3, stride=2),
+        nn.Conv2d(64, 192, kernel_size=5, padding=2), nn.ReLU(inplace=True),
+        nn.MaxPool2d(kernel_size=3, stride=2),
+        nn.Conv2d(192, 384, kernel_size=3, padding=1), nn.ReLU(inplace=True),
+        nn.Conv2d(384, 256, kernel_size=3, padding=1), nn.ReLU(inplace=True),
+        nn.Conv2d(256, 256, kernel_size=3, padding=1), nn.ReLU(inplace=True),
+        nn.MaxPool2d(kernel_size=3, stride=2),
+    )
+
+
+def _import_lpips():
+    """``import lpips``; without torchvision, with a stand-in that provides only ``models.alexnet``
+    (removed from ``sys.modules`` again so nothing else mistakes it for torchvision)."""
+    try:
+        import lpips  # noqa: F401
+
+        return sys.modules["lpips"]
+    except ModuleNotFoundError as e:
+        if e.name == "lpips":
+            raise LPIPSUnavailable(
+                "LPIPS needs the 'lpips' package: pip install --no-deps lpips scipy "
+                "(--no-deps keeps your torch build; warpgs supplies the AlexNet layout if torchvision is absent)"
+            ) from e
+        if e.name != "torchvision":
+            raise LPIPSUnavailable(f"the 'lpips' package cannot be imported: {e}") from e
+    for k in [k for k in sys.modules if k == "lpips" or k.startswith("lpips.")]:
+        del sys.modules[k]
+
+    class _AlexNet(nn.Module):
+        def __init__(self):
+            super().__init__()
+            self.features = _alexnet_features()
+
+    def alexnet(pretrained=False, weights=None, **_):
+        if pretrained or weights is not None:
+            raise RuntimeError("warpgs's torchvision stand-in has no pretrained weights")
+        return _AlexNet()
+
+    tv = types.ModuleType("torchvision")
+    models = types.ModuleType("torchvision.models")
+    models.alexnet = alexnet
+    tv.models = models
+    saved = {k: sys.modules.get(k) for k in ("torchvision", "torchvision.models")}
+    sys.modules.update({"torchvision": tv, "torchvision.models": models})
+    try:
+        import lpips  # noqa: F811
+    except ModuleNotFoundError as e:
+        raise LPIPSUnavailable(f"the 'lpips' package cannot be imported: {e} (pip install scipy)") from e
+    finally:
+        for k, v in saved.items():
+            if v is None:
+                sys.modules.pop(k, None)
+            else:
+                sys.modules[k] = v
+    return lpips
+
+
+class LPIPS(nn.Module):
+    """LPIPS (AlexNet, v0.1) on images in [0, 1]: ``LPIPS(weights)(pred, target)`` -> mean distance.
+
+    ``weights``: the torchvision AlexNet state dict file; None searches ``default_lpips_weights()``.
+    Raises ``LPIPSUnavailable`` with download instructions when the file or the package is missing.
+    """
+
+    def __init__(self, weights: str | Path | None = None):
+        super().__init__()
+        looked = [Path(weights).expanduser()] if weights is not None else default_lpips_weights()
+        path = next((p for p in looked if p.is_file()), None)
+        if path is None:
+            raise LPIPSUnavailable(_missing_weights_message(looked))
+        lpips = _import_lpips()
+        try:
+            state = torch.load(path, map_location="cpu", weights_only=True)
+        except Exception as e:
+            raise LPIPSUnavailable(f"{path}: cannot read the AlexNet weights ({e}); download {ALEXNET_URL} again") from e
+        self.model = lpips.LPIPS(net="alex", pnet_rand=True, verbose=False)
+        net = self.model.net
+        mapped = {}
+        for key in net.state_dict():
+            _, idx, pname = key.split(".")  # slice{k}.{layer index}.{weight|bias}
+            src = f"features.{idx}.{pname}"
+            if src not in state:
+                raise LPIPSUnavailable(f"{path}: not a torchvision AlexNet state dict (no '{src}')")
+            mapped[key] = state[src]
+        net.load_state_dict(mapped, strict=True)
+        self.weights_path = path
+        self.eval()
+        for p in self.parameters():
+            p.requires_grad_(False)
+
+    def forward(self, pred: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
+        a, b = _bchw(pred), _bchw(target)
+        return self.model(a * 2 - 1, b * 2 - 1).mean()

@@ -1,0 +1,234 @@
+"""Densification and pruning: gsplat's DefaultStrategy (the 3D-GS rules), with a Gaussian budget and compaction.
+
+Every ``refine_every`` steps between ``refine_start_iter`` and ``refine_stop_iter``:
+
+- grow: Gaussians whose mean 2D positional gradient (in normalised device units, gsplat's statistic:
+  ``warpgs.render.means2d_grad_norm``) exceeds ``grow_grad2d`` are cloned when small
+  (max scale <= ``grow_scale3d`` x scene scale) and split in two when large (new means sampled from the
+  Gaussian, scales / 1.6);
+- prune: opacity < ``prune_opa``, and after the first opacity reset, max scale > ``prune_scale3d`` x scene scale;
+- every ``reset_every`` steps opacities are clamped to 2 x ``prune_opa``.
+
+``max_gaussians`` caps the count: when growth would pass it, only the candidates with the largest
+gradients grow. ``compact`` removes what the training views do not need: Gaussians whose total
+blending weight over all training views is below ``compact_min_weight`` pixels, and transparent ones.
+
+New Gaussians get zeroed Adam moments, as in gsplat. The strategy's running state (gradient sums and
+counts) is a plain dict of tensors, saved in checkpoints.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Callable
+
+import torch
+from torch import nn
+
+from warpgs.model import GaussianModel
+from warpgs.render import RenderOutput, means2d_grad_norm
+
+
+@dataclass
+class DefaultStrategy:
+    prune_opa: float = 0.005  # prune below this opacity
+    grow_grad2d: float = 0.0002  # grow above this mean 2D gradient (normalised device units)
+    grow_scale3d: float = 0.01  # clone below / split above this max scale (x scene scale)
+    grow_scale2d: float = 0.05  # split above this screen radius (fraction of the image), if refine_scale2d_stop_iter > 0
+    prune_scale3d: float = 0.1  # prune above this max scale (x scene scale), after the first reset
+    prune_scale2d: float = 0.15  # prune above this screen radius (fraction), if refine_scale2d_stop_iter > 0
+    refine_scale2d_stop_iter: int = 0  # 0 = no screen-size rules (gsplat's default)
+    refine_start_iter: int = 500
+    refine_stop_iter: int = 15_000
+    reset_every: int = 3000
+    refine_every: int = 100
+    pause_refine_after_reset: int = 0
+    max_gaussians: int = 0  # 0 = no budget
+    compact_min_weight: float = 0.05  # compaction keeps Gaussians with at least this total weight (pixels)
+    verbose: bool = False
+
+    # ------------------------------------------------------------------------------------------
+
+    def initialize_state(self, n: int, device) -> dict[str, torch.Tensor]:
+        return {
+            "grad2d": torch.zeros(n, device=device),
+            "count": torch.zeros(n, device=device),
+            "radii": torch.zeros(n, device=device),
+        }
+
+    def step_post_backward(self, model: GaussianModel, optimizer: torch.optim.Optimizer, state: dict,
+                           step: int, out: RenderOutput, width: int, height: int, scene_scale: float,
+                           generator: torch.Generator | None = None) -> dict[str, int]:
+        """Call after ``loss.backward()`` (gsplat calls it after the optimiser step; the means2d
+        gradient is unaffected). Returns what changed: ``{"cloned", "split", "pruned", "reset"}``."""
+        info = {"cloned": 0, "split": 0, "pruned": 0, "reset": 0}
+        if step >= self.refine_stop_iter:
+            return info
+        self.update_state(state, out, width, height)
+        if (step > self.refine_start_iter and step % self.refine_every == 0
+                and step % self.reset_every >= self.pause_refine_after_reset):
+            info["cloned"], info["split"] = self.grow(model, optimizer, state, step, scene_scale, generator)
+            info["pruned"] = self.prune(model, optimizer, state, step, scene_scale)
+            for v in state.values():
+                v.zero_()
+        if step % self.reset_every == 0 and step > 0:
+            reset_opacities(model, optimizer, self.prune_opa * 2.0)
+            info["reset"] = 1
+        return info
+
+    def update_state(self, state: dict, out: RenderOutput, width: int, height: int) -> None:
+        grads = means2d_grad_norm(out, width, height)
+        sel = (out.radii > 0).all(dim=-1)
+        ids = torch.where(sel)[0]
+        state["grad2d"].index_add_(0, ids, grads[ids])
+        state["count"].index_add_(0, ids, torch.ones_like(grads[ids]))
+        if self.refine_scale2d_stop_iter > 0:
+            r = out.radii[ids].max(dim=-1).values.float() / float(max(width, height))
+            state["radii"][ids] = torch.maximum(state["radii"][ids], r)
+
+    def grow(self, model, optimizer, state, step, scene_scale, generator=None) -> tuple[int, int]:
+        grads = state["grad2d"] / state["count"].clamp_min(1)
+        is_grad_high = grads > self.grow_grad2d
+        is_small = model.scales.max(dim=-1).values <= self.grow_scale3d * scene_scale
+        is_dupli = is_grad_high & is_small
+        is_split = is_grad_high & ~is_small
+        if step < self.refine_scale2d_stop_iter:
+            is_split |= state["radii"] > self.grow_scale2d
+        if self.max_gaussians > 0:  # keep the candidates with the largest gradients within the budget
+            room = max(0, self.max_gaussians - len(model))
+            cand = torch.where(is_dupli | is_split)[0]
+            if cand.numel() > room:
+                keep = cand[torch.argsort(grads[cand], descending=True, stable=True)[:room]]
+                allowed = torch.zeros_like(is_dupli)
+                allowed[keep] = True
+                is_dupli &= allowed
+                is_split &= allowed
+        n_dupli, n_split = int(is_dupli.sum()), int(is_split.sum())
+        if n_dupli:
+            duplicate(model, optimizer, state, is_dupli)
+        if n_split:
+            split(model, optimizer, state, torch.cat([is_split, torch.zeros(n_dupli, dtype=torch.bool,
+                                                                            device=is_split.device)]), generator)
+        if self.verbose:
+            print(f"step {step}: {n_dupli} cloned, {n_split} split, now {len(model)}")
+        return n_dupli, n_split
+
+    def prune(self, model, optimizer, state, step, scene_scale) -> int:
+        is_prune = model.opacities < self.prune_opa
+        if step > self.reset_every:
+            is_too_big = model.scales.max(dim=-1).values > self.prune_scale3d * scene_scale
+            if step < self.refine_scale2d_stop_iter:
+                is_too_big |= state["radii"] > self.prune_scale2d
+            is_prune |= is_too_big
+        n = int(is_prune.sum())
+        if n:
+            remove(model, optimizer, state, is_prune)
+        return n
+
+    def compact(self, model, optimizer, state, cameras, background=None) -> int:
+        """Removes Gaussians that add less than ``compact_min_weight`` pixels of blending weight to all
+        ``cameras`` together, and those below ``prune_opa``. Returns how many went."""
+        weight = contribution(model, cameras, background)
+        drop = (weight < self.compact_min_weight) | (model.opacities.detach() < self.prune_opa)
+        n = int(drop.sum())
+        if n and n < len(model):
+            remove(model, optimizer, state, drop)
+        return n if n < len(model) else 0
+
+
+# ----------------------------------------------------------------------------------------------
+# the operations (gsplat's strategy/ops.py semantics)
+
+
+def _update(model: GaussianModel, optimizer: torch.optim.Optimizer | None,
+            param_fn: Callable[[str, torch.Tensor], torch.Tensor],
+            state_fn: Callable[[str, torch.Tensor], torch.Tensor], names=None) -> None:
+    """Replaces each parameter by ``param_fn(name, p)`` and its Adam moments by ``state_fn(key, v)``."""
+    names = list(model.params.keys()) if names is None else names
+    for name in names:
+        old = model.params[name]
+        new = nn.Parameter(param_fn(name, old.detach()), requires_grad=old.requires_grad)
+        if optimizer is not None:
+            for group in optimizer.param_groups:
+                for i, p in enumerate(group["params"]):
+                    if p is old:
+                        st = optimizer.state.pop(old, None)
+                        group["params"][i] = new
+                        if st:
+                            optimizer.state[new] = {k: (state_fn(k, v) if isinstance(v, torch.Tensor) and v.dim() > 0
+                                                        else v) for k, v in st.items()}
+        model.params[name] = new
+
+
+def duplicate(model, optimizer, state, mask: torch.Tensor) -> None:
+    sel = torch.where(mask)[0]
+    _update(model, optimizer, lambda n, p: torch.cat([p, p[sel]]),
+            lambda k, v: torch.cat([v, torch.zeros((len(sel), *v.shape[1:]), device=v.device, dtype=v.dtype)]))
+    for k, v in state.items():
+        state[k] = torch.cat([v, v[sel]])
+
+
+def split(model, optimizer, state, mask: torch.Tensor, generator: torch.Generator | None = None) -> None:
+    sel = torch.where(mask)[0]
+    rest = torch.where(~mask)[0]
+    p = model.params
+    scales = torch.exp(p["scales"].detach()[sel])
+    q = torch.nn.functional.normalize(p["quats"].detach()[sel], dim=-1)
+    R = quat_to_rotmat(q)
+    noise = torch.randn(2, len(sel), 3, device=scales.device, generator=generator)
+    samples = torch.einsum("nij,nj,bnj->bni", R, scales, noise)  # [2, n, 3]
+
+    def param_fn(name, t):
+        if name == "means":
+            new = (t[sel] + samples).reshape(-1, 3)
+        elif name == "scales":
+            new = torch.log(scales / 1.6).repeat(2, 1)
+        else:
+            new = t[sel].repeat(2, *([1] * (t.dim() - 1)))
+        return torch.cat([t[rest], new])
+
+    _update(model, optimizer, param_fn,
+            lambda k, v: torch.cat([v[rest], torch.zeros((2 * len(sel), *v.shape[1:]), device=v.device, dtype=v.dtype)]))
+    for k, v in state.items():
+        state[k] = torch.cat([v[rest], v[sel].repeat(2, *([1] * (v.dim() - 1)))])
+
+
+def remove(model, optimizer, state, mask: torch.Tensor) -> None:
+    keep = torch.where(~mask)[0]
+    _update(model, optimizer, lambda n, p: p[keep], lambda k, v: v[keep])
+    for k, v in state.items():
+        state[k] = v[keep]
+
+
+def reset_opacities(model, optimizer, value: float) -> None:
+    """Clamps opacities to at most ``value`` and zeroes their Adam moments (3D-GS's opacity reset)."""
+    logit = float(torch.logit(torch.tensor(value)))
+    _update(model, optimizer, lambda n, p: p.clamp(max=logit), lambda k, v: torch.zeros_like(v), names=["opacities"])
+
+
+def quat_to_rotmat(q: torch.Tensor) -> torch.Tensor:
+    """Unit quaternions (w, x, y, z) [N, 4] -> rotation matrices [N, 3, 3]."""
+    w, x, y, z = q.unbind(-1)
+    return torch.stack([
+        1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y),
+        2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x),
+        2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y),
+    ], dim=-1).reshape(q.shape[:-1] + (3, 3))
+
+
+def contribution(model: GaussianModel, cameras, background=None) -> torch.Tensor:
+    """Total blending weight sum_pixels w_i of each Gaussian over ``cameras`` (objects with viewmat, K,
+    width, height as tensors on the model's device). The image is sum_i w_i c_i + T bg, so the
+    gradient of the image's sum with respect to a plain RGB colour c_i is exactly that weight."""
+    from warpgs.render import rasterize
+
+    total = torch.zeros(len(model), device=model.device)
+    means, quats = model.means.detach(), model.quats.detach()
+    scales, opac = model.scales.detach(), model.opacities.detach()
+    for cam in cameras:
+        colors = torch.zeros(len(model), 3, device=model.device, requires_grad=True)
+        out = rasterize(means, quats, scales, opac, colors, cam.viewmat, cam.K, cam.width, cam.height,
+                        background=background)
+        out.image[..., 0].sum().backward()
+        total += colors.grad[:, 0]
+    return total
