@@ -51,9 +51,6 @@ def to_wp(t: torch.Tensor, dtype=None) -> wp.array:
     return wp.from_torch(t, dtype=dtype, requires_grad=False)
 
 
-# Trailing tensor dims that one element of each Warp dtype spans.
-_INNER_DIMS = {None: 0, wp.vec2: 1, wp.vec3: 1, wp.vec4: 1, wp.vec2i: 1, wp.mat33: 2, wp.mat44: 2}
-
 
 def arg(t: torch.Tensor, dtype=None):
     """A kernel-argument descriptor of a contiguous torch tensor: the same zero-copy view as ``to_wp``,
@@ -63,7 +60,7 @@ def arg(t: torch.Tensor, dtype=None):
         raise ValueError("kernel arguments must be contiguous tensors")
     if array_t is None:  # pragma: no cover
         return wp.from_torch(t, dtype=dtype, requires_grad=False, return_ctype=True)
-    k = _INNER_DIMS[dtype]
+    k = len(getattr(dtype, "_shape_", ()))  # trailing tensor dims one element spans (vec3: 1, mat44: 2)
     nd = t.dim() - k
     es = t.element_size()
     return array_t(t.data_ptr(), 0, nd, t.shape[:nd], [s * es for s in t.stride()[:nd]])

@@ -169,46 +169,46 @@ class _Composite(torch.autograd.Function):
     def forward(ctx, means2d, conics, opac_eff, colors, depths, background, ranges, gauss_ids,
                 width, height, alpha_max):
         dev = device_of(means2d)
+        stream = stream_of(dev)
         tiles_x = (width + TILE_SIZE - 1) // TILE_SIZE
         n_threads = ranges.shape[0] * kr.BLOCK
         f = dict(device=means2d.device, dtype=torch.float32)
+        splats = torch.empty(means2d.shape[0], 10, **f)
+        launch(kr.pack_splats, means2d.shape[0],
+               [arg(means2d, wp.vec2), arg(conics, wp.vec3), arg(opac_eff), arg(colors, wp.vec3), arg(depths),
+                arg(splats, kr.splat)], dev, stream)
         color = torch.empty(height, width, 3, **f)
         depth = torch.empty(height, width, **f)
         alpha = torch.empty(height, width, **f)
         last = torch.empty(height, width, device=means2d.device, dtype=torch.int32)
         launch(
             kr.rasterize_fwd, n_threads,
-            [arg(ranges), arg(gauss_ids), arg(means2d, wp.vec2), arg(conics, wp.vec3), arg(opac_eff),
-             arg(colors, wp.vec3), arg(depths), arg(background.reshape(1, 3), wp.vec3),
+            [arg(ranges), arg(gauss_ids), arg(splats, kr.splat), arg(background.reshape(1, 3), wp.vec3),
              width, height, tiles_x, alpha_max,
              arg(color.view(-1, 3), wp.vec3), arg(depth.view(-1)), arg(alpha.view(-1)), arg(last.view(-1))],
-            dev, stream_of(dev),
+            dev, stream,
         )
-        ctx.save_for_backward(means2d, conics, opac_eff, colors, depths, background, ranges, gauss_ids, depth,
-                              alpha, last)
+        ctx.save_for_backward(splats, background, ranges, gauss_ids, depth, alpha, last)
         ctx.cfg = (width, height, alpha_max)
         return color, depth, alpha
 
     @staticmethod
     def backward(ctx, v_color, v_depth, v_alpha):
-        means2d, conics, opac_eff, colors, depths, background, ranges, gauss_ids, depth, alpha, last = ctx.saved_tensors
+        splats, background, ranges, gauss_ids, depth, alpha, last = ctx.saved_tensors
         width, height, alpha_max = ctx.cfg
-        dev = device_of(means2d)
+        dev = device_of(splats)
         tiles_x = (width + TILE_SIZE - 1) // TILE_SIZE
-        v_means2d = torch.zeros_like(means2d)
-        v_conics = torch.zeros_like(conics)
-        v_opac = torch.zeros_like(opac_eff)
-        v_colors = torch.zeros_like(colors)
-        v_depths = torch.zeros_like(depths)
+        n = splats.shape[0]
+        z = dict(device=splats.device, dtype=torch.float32)
+        v_means2d, v_conics, v_colors = torch.zeros(n, 2, **z), torch.zeros(n, 3, **z), torch.zeros(n, 3, **z)
+        v_opac, v_depths = torch.zeros(n, **z), torch.zeros(n, **z)
         launch(
             kr.rasterize_bwd, ranges.shape[0] * kr.BLOCK,
-            [arg(ranges), arg(gauss_ids), arg(means2d, wp.vec2), arg(conics, wp.vec3), arg(opac_eff),
-             arg(colors, wp.vec3), arg(depths), arg(background.reshape(1, 3), wp.vec3),
+            [arg(ranges), arg(gauss_ids), arg(splats, kr.splat), arg(background.reshape(1, 3), wp.vec3),
              width, height, tiles_x, alpha_max, arg(depth.view(-1)), arg(alpha.view(-1)), arg(last.view(-1)),
              arg(_zeros_like_or(v_color, alpha.new_empty(height, width, 3)).view(-1, 3), wp.vec3),
              arg(_zeros_like_or(v_depth, alpha).view(-1)), arg(_zeros_like_or(v_alpha, alpha).view(-1)),
-             arg(v_means2d, wp.vec2), arg(v_conics, wp.vec3), arg(v_opac), arg(v_colors, wp.vec3),
-             arg(v_depths)],
+             arg(v_means2d, wp.vec2), arg(v_conics, wp.vec3), arg(v_opac), arg(v_colors, wp.vec3), arg(v_depths)],
             dev, stream_of(dev),
         )
         return v_means2d, v_conics, v_opac, v_colors, v_depths, None, None, None, None, None, None

@@ -18,8 +18,6 @@ import math
 import re
 from pathlib import Path
 
-import numpy as np
-
 from .scene import Scene, SceneError, check_pose, downsample, intrinsics, make_camera, opengl_to_opencv_c2w, read_image
 from .splits import blender_train_ids
 

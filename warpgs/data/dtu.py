@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .scene import Scene, SceneError, list_images, make_camera, read_image, read_mask
+from .scene import Scene, SceneError, downsample, list_images, make_camera, read_image, read_mask
 from .splits import dtu_split
 
 
@@ -108,8 +108,6 @@ def load_dtu(
             if mask.shape != rgb.shape[:2]:
                 raise SceneError(f"{mp}: mask is {mask.shape[1]}x{mask.shape[0]} but {files[i].name} is {w_img}x{h_img}")
         if d > 1:
-            from .scene import downsample
-
             rgb = downsample(rgb, d)
             mask = None if mask is None else downsample(mask, d)
             s = s * rgb.shape[1] / w_img

@@ -301,7 +301,7 @@ def load_nerfstudio(
     elif load_points:
         raise SceneError(f"{tf}: load_points asked but no COLMAP model found near it (looked in {', '.join(COLMAP_MODEL_DIRS)})")
 
-    bounds = _bounds(train + test, pts_world)
+    bounds = _bounds(train, pts_world)
     return Scene(
         name=name or _scene_name(root),
         train=train,
@@ -466,7 +466,7 @@ def load_colmap(
         name=name or (root.name if root.name not in ("0", "sparse") else root.parent.name),
         train=train,
         test=test,
-        bounds=_bounds(train + test, pts_xyz),
+        bounds=_bounds(train, pts_xyz),
         world_transform=np.eye(4),
         points3d=None if not (load_points and pts_xyz is not None) else pts_xyz.astype(np.float32),
         points_rgb=None if not (load_points and pts_xyz is not None) else (pts.rgb / 255.0).astype(np.float32),

@@ -155,12 +155,12 @@ def resolve_scene_dir(name: str, cfg: dict, scene: str | None = None, root: str 
     raise DatasetNotFoundError("\n".join(msg))
 
 
-def _call(loader, path: Path, kwargs: dict[str, Any]) -> Scene:
+def _call(loader, path: Path | None, kwargs: dict[str, Any]) -> Scene:
     params = inspect.signature(loader).parameters
     unknown = [k for k in kwargs if k not in params]
     if unknown:
         raise SceneError(f"{loader.__name__} does not take option(s) {unknown}; it takes {[p for p in params if p != 'path']}")
-    return loader(path, **kwargs)
+    return loader(**kwargs) if path is None else loader(path, **kwargs)
 
 
 def load_scene(
@@ -198,7 +198,7 @@ def load_scene(
 
                 sc = SyntheticConfig(**{k: opts[k] for k in ("seed", "width", "height", "frames", "kind", "samples_per_side") if k in opts})
                 cache = Path(root).expanduser() / sc.dirname()
-            return load_synthetic(views=v, downscale=d, out_dir=cache, device=device, **opts)
+            return _call(load_synthetic, None, {"views": v, "downscale": d, "out_dir": cache, "device": device, **opts})
         folder, fmt = resolve_scene_dir(data, cfg, scene, root)
         return _call(LOADERS[fmt], folder, {"views": v, "downscale": d, **opts})
     if data in ("dl3dv", "llff", "dtu", "blender", "synthetic") and data not in names:

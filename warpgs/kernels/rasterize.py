@@ -85,15 +85,39 @@ def pixel_of_thread(tid: int, tiles_x: int):
     return tile, tx * TILE_SIZE + local % TILE_SIZE, ty * TILE_SIZE + local / TILE_SIZE
 
 
+# One Gaussian as the compositing loops read it: (x, y, conic a, b, c, opacity, r, g, b, depth), packed
+# so that a tile's loop issues one gathered load per Gaussian instead of five.
+splat = wp.types.vector(length=10, dtype=wp.float32)
+
+
 @wp.kernel
-def rasterize_fwd(
-    ranges: wp.array2d(dtype=wp.int32),
-    gauss_ids: wp.array(dtype=wp.int32),
+def pack_splats(
     means2d: wp.array(dtype=wp.vec2),
     conics: wp.array(dtype=wp.vec3),
     opacities: wp.array(dtype=float),
     colors: wp.array(dtype=wp.vec3),
     depths: wp.array(dtype=float),
+    splats: wp.array(dtype=splat),
+):
+    i = wp.tid()
+    m = means2d[i]
+    cn = conics[i]
+    c = colors[i]
+    splats[i] = splat(m[0], m[1], cn[0], cn[1], cn[2], opacities[i], c[0], c[1], c[2], depths[i])
+
+
+@wp.func
+def splat_sigma(s: splat, px: float, py: float) -> float:
+    dx = s[0] - px
+    dy = s[1] - py
+    return 0.5 * (s[2] * dx * dx + s[4] * dy * dy) + s[3] * dx * dy
+
+
+@wp.kernel
+def rasterize_fwd(
+    ranges: wp.array2d(dtype=wp.int32),
+    gauss_ids: wp.array(dtype=wp.int32),
+    splats: wp.array(dtype=splat),
     background: wp.array(dtype=wp.vec3),
     width: int,
     height: int,
@@ -115,22 +139,23 @@ def rasterize_fwd(
     C = wp.vec3(0.0)
     D = float(0.0)
     n = start
+    nxt = splat()
+    if start < end:
+        nxt = splats[gauss_ids[start]]
     for k in range(start, end):
-        g = gauss_ids[k]
-        m = means2d[g]
-        cn = conics[g]
-        dx = m[0] - px
-        dy = m[1] - py
-        sigma = 0.5 * (cn[0] * dx * dx + cn[2] * dy * dy) + cn[1] * dx * dy
-        alpha = wp.min(alpha_max, opacities[g] * wp.exp(-sigma))
+        s = nxt
+        if k + 1 < end:  # prefetch the next Gaussian while this one is composited
+            nxt = splats[gauss_ids[k + 1]]
+        sigma = splat_sigma(s, px, py)
+        alpha = wp.min(alpha_max, s[5] * wp.exp(-sigma))
         if sigma < 0.0 or alpha < ALPHA_MIN:
             continue
         next_T = T * (1.0 - alpha)
         if next_T <= T_MIN:
             break
         w = alpha * T
-        C = C + w * colors[g]
-        D = D + w * depths[g]
+        C = C + w * wp.vec3(s[6], s[7], s[8])
+        D = D + w * s[9]
         T = next_T
         n = k + 1
     pix = y * width + x
@@ -145,11 +170,7 @@ def rasterize_fwd(
 def rasterize_bwd(
     ranges: wp.array2d(dtype=wp.int32),
     gauss_ids: wp.array(dtype=wp.int32),
-    means2d: wp.array(dtype=wp.vec2),
-    conics: wp.array(dtype=wp.vec3),
-    opacities: wp.array(dtype=float),
-    colors: wp.array(dtype=wp.vec3),
-    depths: wp.array(dtype=float),
+    splats: wp.array(dtype=splat),
     background: wp.array(dtype=wp.vec3),
     width: int,
     height: int,
@@ -179,7 +200,7 @@ def rasterize_bwd(
     last = start
     T_final = float(1.0)
     vC = wp.vec3(0.0)
-    vD = float(0.0)
+    vD = float(0.0)  # gradient of the accumulated depth D = sum w_i z_i
     vA = float(0.0)
     if inside:
         last = last_count[pix]
@@ -196,12 +217,20 @@ def rasterize_bwd(
     T = T_final
     S_c = wp.vec3(0.0)  # sum over Gaussians behind of w_j c_j
     S_d = float(0.0)  # sum over Gaussians behind of w_j z_j
-    # (vD is now the gradient of the accumulated depth D = sum w_i z_i)
 
     bound = warp_max(last)
+    g_nxt = int(0)
+    s_nxt = splat()
+    if bound > start:
+        g_nxt = gauss_ids[bound - 1]
+        s_nxt = splats[g_nxt]
     for j in range(bound - start):
         k = bound - 1 - j
-        g = gauss_ids[k]
+        g = g_nxt
+        s = s_nxt
+        if k > start:  # prefetch the next (nearer) Gaussian
+            g_nxt = gauss_ids[k - 1]
+            s_nxt = splats[g_nxt]
         valid = int(0)
         vm2 = wp.vec2(0.0)
         vcon = wp.vec3(0.0)
@@ -209,12 +238,10 @@ def rasterize_bwd(
         vop = float(0.0)
         vdep = float(0.0)
         if inside and k < last:
-            m = means2d[g]
-            cn = conics[g]
-            o = opacities[g]
-            dx = m[0] - px
-            dy = m[1] - py
-            sigma = 0.5 * (cn[0] * dx * dx + cn[2] * dy * dy) + cn[1] * dx * dy
+            dx = s[0] - px
+            dy = s[1] - py
+            sigma = 0.5 * (s[2] * dx * dx + s[4] * dy * dy) + s[3] * dx * dy
+            o = s[5]
             vis = wp.exp(-sigma)
             alpha = wp.min(alpha_max, o * vis)
             if sigma >= 0.0 and alpha >= ALPHA_MIN:
@@ -222,8 +249,8 @@ def rasterize_bwd(
                 ra = 1.0 / (1.0 - alpha)
                 T = T * ra
                 fac = alpha * T
-                c = colors[g]
-                z = depths[g]
+                c = wp.vec3(s[6], s[7], s[8])
+                z = s[9]
                 vcol = fac * vC
                 vdep = fac * vD
                 v_alpha = (wp.dot(c, vC) * T - wp.dot(S_c, vC) * ra) + (z * T - S_d * ra) * vD
@@ -233,7 +260,7 @@ def rasterize_bwd(
                 if o * vis <= alpha_max:
                     v_sigma = -o * vis * v_alpha
                     vcon = wp.vec3(0.5 * v_sigma * dx * dx, v_sigma * dx * dy, 0.5 * v_sigma * dy * dy)
-                    vm2 = v_sigma * wp.vec2(cn[0] * dx + cn[1] * dy, cn[1] * dx + cn[2] * dy)
+                    vm2 = v_sigma * wp.vec2(s[2] * dx + s[3] * dy, s[3] * dx + s[4] * dy)
                     vop = vis * v_alpha
         if warp_any(valid) != 0:
             vm2 = wp.vec2(warp_sum(vm2[0]), warp_sum(vm2[1]))
