@@ -166,6 +166,32 @@ def profile(make_fwd, inp):
     print(prof.key_averages().table(sort_by="cuda_time_total", row_limit=25, max_name_column_width=60))
 
 
+def diagnose(inp, width, height, img_w, img_g):
+    """Where warpgs and gsplat differ: projected quantities bit for bit, and the pixels that differ."""
+    import gsplat
+
+    from warpgs.render import _Project
+
+    m2, con, dep, _, radii, _ = _Project.apply(inp["means"], inp["quats"], inp["scales"], inp["opacities"],
+                                               inp["viewmat"], inp["K"], width, height, 0.3, 0.01, 1e10, False)
+    _, _, meta = gsplat.rasterization(inp["means"], inp["quats"], inp["scales"], inp["opacities"], inp["colors"],
+                                      inp["viewmat"][None], inp["K"][None], width, height, packed=False)
+    g_r = meta["radii"][0].reshape(-1, 2)
+    both = (radii > 0).all(-1) & (g_r > 0).all(-1)
+    out = {"visible_warpgs": int((radii > 0).all(-1).sum()), "visible_gsplat": int((g_r > 0).all(-1).sum()),
+           "radii_equal": float((radii[both] == g_r[both]).all(-1).float().mean())}
+    for name, a, b in (("means2d", m2, meta["means2d"][0]), ("conics", con, meta["conics"][0]),
+                       ("depths", dep, meta["depths"][0])):
+        a, b = a[both], b.reshape(a.shape)[both]
+        out[f"{name}_bit_equal"] = float((a == b).reshape(a.shape[0], -1).all(-1).float().mean())
+        out[f"{name}_max_rel"] = float(((a - b).abs() / b.abs().clamp_min(1e-12)).max())
+    d = (img_w - img_g).abs().max(-1).values
+    out.update(pixels=d.numel(), px_over_1e3=int((d > 1e-3).sum()), px_over_1e4=int((d > 1e-4).sum()),
+               px_over_1e5=int((d > 1e-5).sum()), p9999=float(torch.quantile(d.flatten()[:16_000_000].float(), 0.9999)))
+    print("  diagnosis:", json.dumps(out))
+    return out
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--device", choices=["cuda", "cpu"], default="cuda" if torch.cuda.is_available() else "cpu")
@@ -202,6 +228,7 @@ def main(argv=None):
             row["gsplat_rgb_ed"], _ = measure("gsplat RGB+ED", gsplat_fn(inp, width, height, "RGB+ED"), inp, iters,
                                               warmup, device)
             row["max_abs_rgb_diff"] = float((img_w - img_g).abs().max())
+            row["diagnosis"] = diagnose(inp, width, height, img_w, img_g)
             if args.profile:
                 profile(warpgs_fn(inp, width, height, 0.999), inp)
             row["ratio_fwd"] = row["warpgs"]["forward_ms"] / row["gsplat"]["forward_ms"]

@@ -18,6 +18,65 @@ MAX_EXTENT = wp.constant(3.33)
 mat23 = wp.types.matrix(shape=(2, 3), dtype=wp.float32)
 
 
+vec8 = wp.types.vector(length=8, dtype=wp.float32)
+
+
+@wp.func_native(
+    """
+    // The forward 2D covariance chain written as gsplat 1.5.3 writes it with glm (column-major g[col][row],
+    // same expressions, same evaluation order), so that with fast math both round alike and the two
+    // rasterizers agree bit for bit: quaternion -> rotation, M = R S, cov = M M^T, R_view cov R_view^T,
+    // J cov J^T, 0.3 px dilation, glm::inverse. Returns (a, c, det_orig, det_blur, conic x, y, z, 0)
+    // with a, c the dilated diagonal.
+    float w = q.c[0], x = q.c[1], y = q.c[2], z = q.c[3];
+#if defined(__CUDA_ARCH__)
+    float inv_norm = rsqrtf(x * x + y * y + z * z + w * w);
+#else
+    float inv_norm = 1.0f / sqrtf(x * x + y * y + z * z + w * w);
+#endif
+    x *= inv_norm; y *= inv_norm; z *= inv_norm; w *= inv_norm;
+    float x2 = x * x, y2 = y * y, z2 = z * z;
+    float xy = x * y, xz = x * z, yz = y * z;
+    float wx = w * x, wy = w * y, wz = w * z;
+    float Rq[3][3] = {{1.f - 2.f * (y2 + z2), 2.f * (xy + wz), 2.f * (xz - wy)},
+                      {2.f * (xy - wz), 1.f - 2.f * (x2 + z2), 2.f * (yz + wx)},
+                      {2.f * (xz + wy), 2.f * (yz - wx), 1.f - 2.f * (x2 + y2)}};
+    float S[3][3] = {{s.c[0], 0.f, 0.f}, {0.f, s.c[1], 0.f}, {0.f, 0.f, s.c[2]}};
+    float Rv[3][3], Rvt[3][3];
+    for (int c = 0; c < 3; ++c)
+        for (int r = 0; r < 3; ++r) { Rv[c][r] = Rview.data[r][c]; Rvt[c][r] = Rview.data[c][r]; }
+    float M[3][3], Mt[3][3], C[3][3], T1[3][3], Cc[3][3];
+#define WARPGS_GLM_MUL3(A, B, O) \
+    for (int c = 0; c < 3; ++c) for (int r = 0; r < 3; ++r) { \
+        float t = A[0][r] * B[c][0]; t += A[1][r] * B[c][1]; t += A[2][r] * B[c][2]; O[c][r] = t; }
+    WARPGS_GLM_MUL3(Rq, S, M)
+    for (int c = 0; c < 3; ++c) for (int r = 0; r < 3; ++r) Mt[c][r] = M[r][c];
+    WARPGS_GLM_MUL3(M, Mt, C)
+    WARPGS_GLM_MUL3(Rv, C, T1)
+    WARPGS_GLM_MUL3(T1, Rvt, Cc)
+#undef WARPGS_GLM_MUL3
+    float Jg[3][2];
+    for (int k = 0; k < 3; ++k) for (int r = 0; r < 2; ++r) Jg[k][r] = J.data[r][k];
+    float JC[3][2];
+    for (int c = 0; c < 3; ++c) for (int r = 0; r < 2; ++r)
+        JC[c][r] = Jg[0][r] * Cc[c][0] + Jg[1][r] * Cc[c][1] + Jg[2][r] * Cc[c][2];
+    float cv[2][2];
+    for (int c = 0; c < 2; ++c) for (int r = 0; r < 2; ++r)
+        cv[c][r] = JC[0][r] * Jg[0][c] + JC[1][r] * Jg[1][c] + JC[2][r] * Jg[2][c];
+    float det_orig = cv[0][0] * cv[1][1] - cv[0][1] * cv[1][0];
+    cv[0][0] += eps2d;
+    cv[1][1] += eps2d;
+    float det_blur = cv[0][0] * cv[1][1] - cv[0][1] * cv[1][0];
+    float ood = 1.f / (+cv[0][0] * cv[1][1] - cv[1][0] * cv[0][1]);
+    wp::vec_t<8, wp::float32> out;
+    out.c[0] = cv[0][0]; out.c[1] = cv[1][1]; out.c[2] = det_orig; out.c[3] = det_blur;
+    out.c[4] = +cv[1][1] * ood; out.c[5] = -cv[0][1] * ood; out.c[6] = +cv[0][0] * ood; out.c[7] = 0.f;
+    return out;
+"""
+)
+def covariance_2d(q: wp.vec4, s: wp.vec3, Rview: wp.mat33, J: mat23, eps2d: float) -> vec8: ...
+
+
 @wp.func
 def quat_to_rotmat(q: wp.vec4) -> wp.mat33:
     """Rotation matrix of a unit quaternion q = (w, x, y, z)."""
@@ -61,14 +120,6 @@ def view_rotation(V: wp.mat44) -> wp.mat33:
 
 
 @wp.func
-def covariance_3d(q: wp.vec4, s: wp.vec3) -> wp.mat33:
-    # normalise as gsplat does (x*rsqrt(|q|^2)), so both round the same way
-    qn = q * (1.0 / wp.sqrt(q[1] * q[1] + q[2] * q[2] + q[3] * q[3] + q[0] * q[0]))
-    M = quat_to_rotmat(qn) * wp.diag(s)
-    return M * wp.transpose(M)
-
-
-@wp.func
 def clamped_tan(v: float, lim_pos: float, lim_neg: float) -> float:
     return wp.min(lim_pos, wp.max(-lim_neg, v))
 
@@ -84,9 +135,10 @@ def persp_jacobian(p: wp.vec3, fx: float, fy: float, cx: float, cy: float, width
     lim_y_pos = (height - cy) / fy + 0.3 * tan_fovy
     lim_y_neg = cy / fy + 0.3 * tan_fovy
     rz = 1.0 / p[2]
+    rz2 = rz * rz
     tx = p[2] * clamped_tan(p[0] * rz, lim_x_pos, lim_x_neg)
     ty = p[2] * clamped_tan(p[1] * rz, lim_y_pos, lim_y_neg)
-    J = mat23(fx * rz, 0.0, -fx * tx * rz * rz, 0.0, fy * rz, -fy * ty * rz * rz)
+    J = mat23(fx * rz, 0.0, -fx * tx * rz2, 0.0, fy * rz, -fy * ty * rz2)
     return J
 
 
@@ -137,14 +189,12 @@ def project_gaussians_fwd(
     W = float(width)
     H = float(height)
 
-    cov_c = R * covariance_3d(quats[i], scales[i]) * wp.transpose(R)
     J = persp_jacobian(p, fx, fy, cx, cy, W, H)
-    cov2 = J * cov_c * wp.transpose(J)
-    det_orig = cov2[0, 0] * cov2[1, 1] - cov2[0, 1] * cov2[1, 0]
-    a = cov2[0, 0] + eps2d
-    b = cov2[0, 1]
-    c = cov2[1, 1] + eps2d
-    det = a * c - b * b
+    cv = covariance_2d(quats[i], scales[i], R, J, eps2d)
+    a = cv[0]
+    c = cv[1]
+    det_orig = cv[2]
+    det = cv[3]
     if det <= 0.0:
         return
     o = opacities[i]
@@ -170,9 +220,8 @@ def project_gaussians_fwd(
     tx1 = wp.clamp(int(wp.ceil((m2[0] + rx) / ts)), 0, tiles_x)
     ty1 = wp.clamp(int(wp.ceil((m2[1] + ry) / ts)), 0, tiles_y)
 
-    inv_det = 1.0 / det
     means2d[i] = m2
-    conics[i] = wp.vec3(c * inv_det, -b * inv_det, a * inv_det)
+    conics[i] = wp.vec3(cv[4], cv[5], cv[6])
     depths[i] = p[2]
     radii[i] = wp.vec2i(int(rx), int(ry))
     opac_eff[i] = o
