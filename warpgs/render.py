@@ -182,7 +182,7 @@ class _Composite(torch.autograd.Function):
         alpha = torch.empty(height, width, **f)
         last = torch.empty(height, width, device=means2d.device, dtype=torch.int32)
         launch(
-            kr.rasterize_fwd, n_threads,
+            kr.rasterize_fwd if dev == "cpu" else kr.rasterize_fwd_cuda, n_threads,
             [arg(ranges), arg(gauss_ids), arg(splats, kr.splat), arg(background.reshape(1, 3), wp.vec3),
              width, height, tiles_x, alpha_max,
              arg(color.view(-1, 3), wp.vec3), arg(depth.view(-1)), arg(alpha.view(-1)), arg(last.view(-1))],
@@ -203,7 +203,7 @@ class _Composite(torch.autograd.Function):
         v_means2d, v_conics, v_colors = torch.zeros(n, 2, **z), torch.zeros(n, 3, **z), torch.zeros(n, 3, **z)
         v_opac, v_depths = torch.zeros(n, **z), torch.zeros(n, **z)
         launch(
-            kr.rasterize_bwd, ranges.shape[0] * kr.BLOCK,
+            kr.rasterize_bwd if dev == "cpu" else kr.rasterize_bwd_cuda, ranges.shape[0] * kr.BLOCK,
             [arg(ranges), arg(gauss_ids), arg(splats, kr.splat), arg(background.reshape(1, 3), wp.vec3),
              width, height, tiles_x, alpha_max, arg(depth.view(-1)), arg(alpha.view(-1)), arg(last.view(-1)),
              arg(_zeros_like_or(v_color, alpha.new_empty(height, width, 3)).view(-1, 3), wp.vec3),

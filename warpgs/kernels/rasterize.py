@@ -274,3 +274,244 @@ def rasterize_bwd(
                 wp.atomic_add(v_colors, g, vcol)
                 wp.atomic_add(v_opacities, g, vop)
                 wp.atomic_add(v_depths, g, vdep)
+
+
+# ----------------------------------------------------------------------------------------------------
+# CUDA variants: each 256-thread block (one tile) loads the tile's Gaussians into shared memory in
+# batches of 256, one per thread, then every thread composites from shared memory (as gsplat does).
+# They need cooperating threads, which Warp's CPU backend does not have (one thread per block), so
+# the CPU runs the kernels above; the CUDA tests check these against the same torch oracle.
+
+splat_id = wp.types.vector(length=11, dtype=wp.float32)  # a splat and its Gaussian id (as float bits)
+
+
+@wp.func_native(
+    """
+#if defined(__CUDA_ARCH__)
+    __shared__ float warpgs_batch[256 * 11];
+    wp::vec_t<11, wp::float32> out;
+    if (store) {
+        for (int c = 0; c < 10; ++c) warpgs_batch[slot * 11 + c] = s.c[c];
+        warpgs_batch[slot * 11 + 10] = __int_as_float(g);
+    } else {
+        for (int c = 0; c < 11; ++c) out.c[c] = warpgs_batch[slot * 11 + c];
+    }
+    return out;
+#else
+    return wp::vec_t<11, wp::float32>();
+#endif
+"""
+)
+def batch_splat(store: int, slot: int, s: splat, g: int) -> splat_id: ...
+
+
+@wp.func_native(
+    """
+#if defined(__CUDA_ARCH__)
+    return __float_as_int(f);
+#else
+    return 0;
+#endif
+"""
+)
+def float_bits(f: float) -> int: ...
+
+
+@wp.func_native(
+    """
+#if defined(__CUDA_ARCH__)
+    return __syncthreads_count(v);
+#else
+    return v;
+#endif
+"""
+)
+def block_count(v: int) -> int: ...
+
+
+@wp.func_native(
+    """
+#if defined(__CUDA_ARCH__)
+    __syncthreads();
+#endif
+"""
+)
+def block_sync(): ...
+
+
+@wp.kernel
+def rasterize_fwd_cuda(
+    ranges: wp.array2d(dtype=wp.int32),
+    gauss_ids: wp.array(dtype=wp.int32),
+    splats: wp.array(dtype=splat),
+    background: wp.array(dtype=wp.vec3),
+    width: int,
+    height: int,
+    tiles_x: int,
+    alpha_max: float,
+    out_color: wp.array(dtype=wp.vec3),
+    out_depth: wp.array(dtype=float),
+    out_alpha: wp.array(dtype=float),
+    last_count: wp.array(dtype=wp.int32),
+):
+    tid = wp.tid()
+    tile, x, y = pixel_of_thread(tid, tiles_x)
+    lane = tid % BLOCK
+    inside = x < width and y < height
+    px = float(x) + 0.5
+    py = float(y) + 0.5
+    start = ranges[tile, 0]
+    end = ranges[tile, 1]
+    T = float(1.0)
+    C = wp.vec3(0.0)
+    D = float(0.0)
+    n = start
+    done = int(0)
+    if not inside:
+        done = 1
+    n_batches = (end - start + BLOCK - 1) / BLOCK
+    for b in range(n_batches):
+        if block_count(done) == BLOCK:  # every pixel of the tile is saturated
+            break
+        k0 = start + b * BLOCK
+        if k0 + lane < end:
+            g = gauss_ids[k0 + lane]
+            batch_splat(1, lane, splats[g], g)
+        block_sync()
+        for t in range(wp.min(BLOCK, end - k0)):
+            if done == 0:
+                s = batch_splat(0, t, splat(), 0)
+                dx = s[0] - px
+                dy = s[1] - py
+                sigma = 0.5 * (s[2] * dx * dx + s[4] * dy * dy) + s[3] * dx * dy
+                alpha = wp.min(alpha_max, s[5] * wp.exp(-sigma))
+                if sigma >= 0.0 and alpha >= ALPHA_MIN:
+                    next_T = T * (1.0 - alpha)
+                    if next_T <= T_MIN:
+                        done = 1
+                    else:
+                        w = alpha * T
+                        C = C + w * wp.vec3(s[6], s[7], s[8])
+                        D = D + w * s[9]
+                        T = next_T
+                        n = k0 + t + 1
+        block_sync()
+    if inside:
+        pix = y * width + x
+        A = 1.0 - T
+        out_color[pix] = C + T * background[0]
+        out_depth[pix] = wp.where(A > DEPTH_ALPHA_MIN, D / A, 0.0)
+        out_alpha[pix] = A
+        last_count[pix] = n
+
+
+@wp.kernel
+def rasterize_bwd_cuda(
+    ranges: wp.array2d(dtype=wp.int32),
+    gauss_ids: wp.array(dtype=wp.int32),
+    splats: wp.array(dtype=splat),
+    background: wp.array(dtype=wp.vec3),
+    width: int,
+    height: int,
+    tiles_x: int,
+    alpha_max: float,
+    out_depth: wp.array(dtype=float),
+    out_alpha: wp.array(dtype=float),
+    last_count: wp.array(dtype=wp.int32),
+    v_out_color: wp.array(dtype=wp.vec3),
+    v_out_depth: wp.array(dtype=float),
+    v_out_alpha: wp.array(dtype=float),
+    v_means2d: wp.array(dtype=wp.vec2),
+    v_conics: wp.array(dtype=wp.vec3),
+    v_opacities: wp.array(dtype=float),
+    v_colors: wp.array(dtype=wp.vec3),
+    v_depths: wp.array(dtype=float),
+):
+    tid = wp.tid()
+    tile, x, y = pixel_of_thread(tid, tiles_x)
+    lane = tid % BLOCK
+    inside = x < width and y < height
+    start = ranges[tile, 0]
+    end = ranges[tile, 1]
+    pix = wp.min(y, height - 1) * width + wp.min(x, width - 1)
+    px = float(x) + 0.5
+    py = float(y) + 0.5
+
+    last = start
+    T_final = float(1.0)
+    vC = wp.vec3(0.0)
+    vD = float(0.0)
+    vA = float(0.0)
+    if inside:
+        last = last_count[pix]
+        A = out_alpha[pix]
+        T_final = 1.0 - A
+        vC = v_out_color[pix]
+        vA = v_out_alpha[pix]
+        if A > DEPTH_ALPHA_MIN:
+            vE = v_out_depth[pix]
+            vD = vE / A
+            vA = vA - vE * out_depth[pix] / A
+    bg_dot = wp.dot(background[0], vC)
+    T = T_final
+    S_c = wp.vec3(0.0)
+    S_d = float(0.0)
+    warp_last = warp_max(last)
+
+    n_batches = (end - start + BLOCK - 1) / BLOCK
+    for b in range(n_batches):
+        block_sync()
+        k_hi = end - 1 - b * BLOCK  # batches run back to front
+        if k_hi - lane >= start:
+            g = gauss_ids[k_hi - lane]
+            batch_splat(1, lane, splats[g], g)
+        block_sync()
+        count = wp.min(BLOCK, k_hi - start + 1)
+        t0 = wp.max(0, k_hi - warp_last + 1)  # skip Gaussians behind every pixel of this warp
+        for t in range(t0, count):
+            k = k_hi - t
+            sg = batch_splat(0, t, splat(), 0)
+            valid = int(0)
+            vm2 = wp.vec2(0.0)
+            vcon = wp.vec3(0.0)
+            vcol = wp.vec3(0.0)
+            vop = float(0.0)
+            vdep = float(0.0)
+            if inside and k < last:
+                dx = sg[0] - px
+                dy = sg[1] - py
+                sigma = 0.5 * (sg[2] * dx * dx + sg[4] * dy * dy) + sg[3] * dx * dy
+                o = sg[5]
+                vis = wp.exp(-sigma)
+                alpha = wp.min(alpha_max, o * vis)
+                if sigma >= 0.0 and alpha >= ALPHA_MIN:
+                    valid = 1
+                    ra = 1.0 / (1.0 - alpha)
+                    T = T * ra
+                    fac = alpha * T
+                    c = wp.vec3(sg[6], sg[7], sg[8])
+                    z = sg[9]
+                    vcol = fac * vC
+                    vdep = fac * vD
+                    v_alpha = (wp.dot(c, vC) * T - wp.dot(S_c, vC) * ra) + (z * T - S_d * ra) * vD
+                    v_alpha = v_alpha + T_final * ra * (vA - bg_dot)
+                    S_c = S_c + fac * c
+                    S_d = S_d + fac * z
+                    if o * vis <= alpha_max:
+                        v_sigma = -o * vis * v_alpha
+                        vcon = wp.vec3(0.5 * v_sigma * dx * dx, v_sigma * dx * dy, 0.5 * v_sigma * dy * dy)
+                        vm2 = v_sigma * wp.vec2(sg[2] * dx + sg[3] * dy, sg[3] * dx + sg[4] * dy)
+                        vop = vis * v_alpha
+            if warp_any(valid) != 0:
+                vm2 = wp.vec2(warp_sum(vm2[0]), warp_sum(vm2[1]))
+                vcon = wp.vec3(warp_sum(vcon[0]), warp_sum(vcon[1]), warp_sum(vcon[2]))
+                vcol = wp.vec3(warp_sum(vcol[0]), warp_sum(vcol[1]), warp_sum(vcol[2]))
+                vop = warp_sum(vop)
+                vdep = warp_sum(vdep)
+                if warp_leader() != 0:
+                    g = float_bits(sg[10])
+                    wp.atomic_add(v_means2d, g, vm2)
+                    wp.atomic_add(v_conics, g, vcon)
+                    wp.atomic_add(v_colors, g, vcol)
+                    wp.atomic_add(v_opacities, g, vop)
+                    wp.atomic_add(v_depths, g, vdep)
