@@ -1,0 +1,173 @@
+"""Cross-view warping for pseudo-view guidance, Warp kernels only (no torch).
+
+Two stages, one thread per pixel of a guidance frame ``(frame f, row i, column j)``:
+
+``inverse_warp``
+    the guidance image by inverse warping an input view (paper Sec. 3.2):
+    ``q = K_inp P_inp P_guid^-1 D_guid(p) K_guid^-1 p``, then ``I_inp(q)`` sampled bilinearly.
+``reproject_uncertainty``
+    the backward projection with the depth rendered at the input,
+    ``p' = K_guid P_guid P_inp^-1 D_inp(q) K_inp^-1 q``, and the cross-view uncertainty
+    ``U(p) = 1 - exp(-|p - p'|^2 / s1 - |I_gs(p) - I_inp(q)|^2 / s2)``.
+
+Conventions (``warpgs/__init__.py``): OpenCV cameras, world-to-camera ``P`` (4x4), ``K`` in pixels,
+pixel (j, i) centred at (j + 0.5, i + 0.5); depth is z-depth along the optical axis, <= 0 = unknown.
+Each guidance frame reads input view ``src_index[f]`` of a stack of inputs, so a whole trajectory
+is one launch. Matrices arrive precomputed per frame (``dst_to_src = P_inp P_guid^-1`` and inverse
+intrinsics), so the kernels do no matrix inversion.
+
+Colour is interpolated bilinearly (clamped at the border). Depth is interpolated as inverse depth
+(exact on a plane, where inverse depth is affine in the image), over the valid neighbours only;
+a sample whose valid neighbours weigh less than one half counts as having no depth.
+"""
+
+import warp as wp
+
+INVALID = wp.constant(-1.0)  # coordinate written where a pixel has no correspondence
+
+
+@wp.func
+def pixel_ray(j: int, i: int) -> wp.vec3:
+    # homogeneous pixel centre
+    return wp.vec3(float(j) + 0.5, float(i) + 0.5, 1.0)
+
+
+@wp.func
+def sample_rgb(img: wp.array3d(dtype=wp.vec3), s: int, x: float, y: float) -> wp.vec3:
+    # bilinear sample of image s at continuous pixel coordinates (x, y), edges clamped
+    h = img.shape[1]
+    w = img.shape[2]
+    fx = x - 0.5
+    fy = y - 0.5
+    x0 = int(wp.floor(fx))
+    y0 = int(wp.floor(fy))
+    ax = fx - float(x0)
+    ay = fy - float(y0)
+    xa = wp.clamp(x0, 0, w - 1)
+    xb = wp.clamp(x0 + 1, 0, w - 1)
+    ya = wp.clamp(y0, 0, h - 1)
+    yb = wp.clamp(y0 + 1, 0, h - 1)
+    top = img[s, ya, xa] * (1.0 - ax) + img[s, ya, xb] * ax
+    bot = img[s, yb, xa] * (1.0 - ax) + img[s, yb, xb] * ax
+    return top * (1.0 - ay) + bot * ay
+
+
+@wp.func
+def _inv_depth_tap(depth: wp.array3d(dtype=float), s: int, i: int, j: int, wgt: float, min_depth: float) -> wp.vec2:
+    # (weight * 1/d, weight) for a valid tap, zeros otherwise
+    d = depth[s, i, j]
+    if d > min_depth:
+        return wp.vec2(wgt / d, wgt)
+    return wp.vec2(0.0, 0.0)
+
+
+@wp.func
+def sample_depth(depth: wp.array3d(dtype=float), s: int, x: float, y: float, min_depth: float) -> float:
+    # inverse-depth bilinear sample over valid neighbours; 0 where the valid weight is below 1/2
+    h = depth.shape[1]
+    w = depth.shape[2]
+    fx = x - 0.5
+    fy = y - 0.5
+    x0 = int(wp.floor(fx))
+    y0 = int(wp.floor(fy))
+    ax = fx - float(x0)
+    ay = fy - float(y0)
+    xa = wp.clamp(x0, 0, w - 1)
+    xb = wp.clamp(x0 + 1, 0, w - 1)
+    ya = wp.clamp(y0, 0, h - 1)
+    yb = wp.clamp(y0 + 1, 0, h - 1)
+    acc = _inv_depth_tap(depth, s, ya, xa, (1.0 - ax) * (1.0 - ay), min_depth)
+    acc += _inv_depth_tap(depth, s, ya, xb, ax * (1.0 - ay), min_depth)
+    acc += _inv_depth_tap(depth, s, yb, xa, (1.0 - ax) * ay, min_depth)
+    acc += _inv_depth_tap(depth, s, yb, xb, ax * ay, min_depth)
+    if acc[1] < 0.5 or acc[0] <= 0.0:
+        return 0.0
+    return acc[1] / acc[0]
+
+
+@wp.func
+def transform_point(m: wp.mat44, p: wp.vec3) -> wp.vec3:
+    return wp.vec3(
+        m[0, 0] * p[0] + m[0, 1] * p[1] + m[0, 2] * p[2] + m[0, 3],
+        m[1, 0] * p[0] + m[1, 1] * p[1] + m[1, 2] * p[2] + m[1, 3],
+        m[2, 0] * p[0] + m[2, 1] * p[1] + m[2, 2] * p[2] + m[2, 3],
+    )
+
+
+@wp.kernel
+def inverse_warp(
+    dst_depth: wp.array3d(dtype=float),  # (F, H, W) D_guid: depth rendered at the guidance pose
+    dst_to_src: wp.array(dtype=wp.mat44),  # (F,) P_inp P_guid^-1
+    dst_K_inv: wp.array(dtype=wp.mat33),  # (F,) K_guid^-1
+    src_K: wp.array(dtype=wp.mat33),  # (F,) K_inp of the frame's source
+    src_index: wp.array(dtype=wp.int32),  # (F,) which input each frame warps from
+    src_image: wp.array3d(dtype=wp.vec3),  # (S, Hs, Ws) input images
+    min_depth: float,
+    guidance: wp.array3d(dtype=wp.vec3),  # out (F, H, W): I_inp(q), 0 where invalid
+    coords: wp.array3d(dtype=wp.vec2),  # out (F, H, W): q in input pixels, INVALID where none
+    valid: wp.array3d(dtype=wp.int32),  # out (F, H, W): 1 where q lands inside the input image
+):
+    f, i, j = wp.tid()
+    s = src_index[f]
+    hs = float(src_image.shape[1])
+    ws = float(src_image.shape[2])
+    d = dst_depth[f, i, j]
+    guidance[f, i, j] = wp.vec3(0.0, 0.0, 0.0)
+    coords[f, i, j] = wp.vec2(INVALID, INVALID)
+    valid[f, i, j] = 0
+    if d <= min_depth:
+        return
+    x_dst = (dst_K_inv[f] @ pixel_ray(j, i)) * d  # point in the guidance camera
+    x_src = transform_point(dst_to_src[f], x_dst)  # ... in the input camera
+    if x_src[2] <= min_depth:
+        return
+    h = src_K[f] @ x_src
+    qx = h[0] / h[2]
+    qy = h[1] / h[2]
+    if qx < 0.0 or qy < 0.0 or qx >= ws or qy >= hs:
+        return
+    coords[f, i, j] = wp.vec2(qx, qy)
+    guidance[f, i, j] = sample_rgb(src_image, s, qx, qy)
+    valid[f, i, j] = 1
+
+
+@wp.kernel
+def reproject_uncertainty(
+    coords: wp.array3d(dtype=wp.vec2),  # (F, H, W) q from inverse_warp
+    valid: wp.array3d(dtype=wp.int32),  # (F, H, W) from inverse_warp
+    src_depth: wp.array3d(dtype=float),  # (S, Hs, Ws) D_inp: depth rendered at the inputs
+    src_index: wp.array(dtype=wp.int32),  # (F,)
+    src_to_dst: wp.array(dtype=wp.mat44),  # (F,) P_guid P_inp^-1
+    src_K_inv: wp.array(dtype=wp.mat33),  # (F,) K_inp^-1 of the frame's source
+    dst_K: wp.array(dtype=wp.mat33),  # (F,) K_guid
+    render: wp.array3d(dtype=wp.vec3),  # (F, H, W) I_gs: colour rendered at the guidance pose
+    guidance: wp.array3d(dtype=wp.vec3),  # (F, H, W) I_inp(q) from inverse_warp
+    inv_s1: float,  # 1/s1 (pixels^-2); 0 drops the geometric term
+    inv_s2: float,  # 1/s2; 0 drops the photometric term
+    min_depth: float,
+    uncertainty: wp.array3d(dtype=float),  # out (F, H, W) U in [0, 1]; 1 where no correspondence
+    reprojected: wp.array3d(dtype=wp.vec2),  # out (F, H, W) p', INVALID where none
+):
+    f, i, j = wp.tid()
+    uncertainty[f, i, j] = 1.0
+    reprojected[f, i, j] = wp.vec2(INVALID, INVALID)
+    if valid[f, i, j] == 0:
+        return
+    s = src_index[f]
+    q = coords[f, i, j]
+    d = sample_depth(src_depth, s, q[0], q[1], min_depth)
+    if d <= 0.0:
+        return
+    x_src = (src_K_inv[f] @ wp.vec3(q[0], q[1], 1.0)) * d
+    x_dst = transform_point(src_to_dst[f], x_src)
+    if x_dst[2] <= min_depth:
+        return
+    h = dst_K[f] @ x_dst
+    px = h[0] / h[2]
+    py = h[1] / h[2]
+    reprojected[f, i, j] = wp.vec2(px, py)
+    ex = px - (float(j) + 0.5)
+    ey = py - (float(i) + 0.5)
+    dc = render[f, i, j] - guidance[f, i, j]
+    energy = (ex * ex + ey * ey) * inv_s1 + wp.dot(dc, dc) * inv_s2
+    uncertainty[f, i, j] = 1.0 - wp.exp(-energy)

@@ -1,0 +1,265 @@
+"""Warped guidance and cross-view uncertainty (paper Sec. 3.2): torch tensors in, torch tensors out.
+
+    g = warp_guidance(src_images, src_viewmats, src_Ks, dst_depths, dst_viewmats, dst_Ks)
+    U, p2 = uncertainty_map(g.coords, g.valid, src_depths, src_viewmats, src_Ks, dst_viewmats, dst_Ks,
+                            renders=renders, guidance=g.guidance)
+    r = guidance_and_uncertainty(...)      # both, as one ``WarpResult``
+
+A guidance frame ``f`` (pose ``P_guid``, depth ``D_guid`` rendered by 3D-GS there) is filled by inverse
+warping input ``src_index[f]``: ``q = K P_inp P_guid^-1 D_guid(p) K^-1 p``, ``g(p) = I_inp(q)``. The
+backward projection ``p' = K P_guid P_inp^-1 D_inp(q) K^-1 q`` uses the depth rendered at the input,
+and ``U(p) = 1 - exp(-|p - p'|^2 / s1 - |I_gs(p) - I_inp(q)|^2 / s2)`` (s1 in pixels^2, colours in
+[0, 1], ``|.|`` the Euclidean norm over RGB). ``uncertainty_map`` takes s1 in the image's own pixels;
+``guidance_and_uncertainty`` converts the config's s1, given for 1024-wide frames as in the paper's SVD
+setting, to the image's width (``effective_s1``). Pixels with no correspondence (no depth, q outside the
+input image, no input depth at q, a point behind a camera) get ``U = 1``.
+
+Shapes: inputs stacked ``src_images [S, Hs, Ws, 3]``, ``src_depths [S, Hs, Ws]``, ``src_viewmats
+[S, 4, 4]``, ``src_Ks [S, 3, 3]`` or ``[3, 3]``; guidance frames ``dst_depths [F, H, W]``,
+``dst_viewmats [F, 4, 4]``, ``dst_Ks [F, 3, 3]`` or ``[3, 3]``, ``renders [F, H, W, 3]``;
+``src_index [F]`` (default: input 0 for every frame when S == 1, else frame f from input f).
+Unbatched arguments (one image ``[H, W, 3]``, one pose ``[4, 4]``, one depth ``[H, W]``) are accepted
+and give unbatched results. Tensors stay on their device and go to the Warp kernels without copies
+(``warpgs._warp.arg``); float32 contiguous tensors are used as they are.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import NamedTuple
+
+import torch
+import warp as wp
+
+from warpgs._warp import arg, device_of, launch, stream_of
+from warpgs.kernels import warping as kw
+
+
+@dataclass
+class UncertaintyConfig:
+    s1: float = 100.0  # pixels^2 (of a reference_width-wide image): scale of the squared reprojection error
+    reference_width: float | None = 1024.0  # s1's pixels: SVD's 1024-wide frames; None = the image's own
+    s2: float = 0.25  # scale of the squared RGB difference between the 3D-GS render and the warp
+    geometric: bool = True  # keep the |p - p'|^2 / s1 term
+    photometric: bool = True  # keep the |I_gs(p) - I_inp(q)|^2 / s2 term
+    min_depth: float = 1e-6  # depths at or below this count as "no surface"
+
+
+class WarpResult(NamedTuple):
+    guidance: torch.Tensor  # [F, H, W, 3] I_inp(q); 0 where there is no correspondence
+    uncertainty: torch.Tensor  # [F, H, W] U in [0, 1]; 1 where there is no correspondence
+    coords: torch.Tensor  # [F, H, W, 2] q in input pixels; -1 where none
+    reprojected: torch.Tensor  # [F, H, W, 2] p' in guidance pixels; -1 where none
+    valid: torch.Tensor  # [F, H, W] bool: q lands inside the input image
+
+
+def _f32(t: torch.Tensor) -> torch.Tensor:
+    return t.contiguous() if t.dtype == torch.float32 else t.float().contiguous()
+
+
+def _stack(t: torch.Tensor, nd: int) -> tuple[torch.Tensor, bool]:
+    """Adds a leading batch dim to an unbatched tensor of ``nd`` dims; returns (tensor, was_batched)."""
+    return (t, True) if t.dim() == nd + 1 else (t.unsqueeze(0), False)
+
+
+def _per_frame(m: torch.Tensor, n: int, what: str, nd: int = 2) -> torch.Tensor:
+    """A per-frame stack [n, ...] from one matrix or a stack of n (broadcast without copy)."""
+    if m.dim() == nd:
+        return m.unsqueeze(0).expand(n, *m.shape)
+    if m.shape[0] == 1:
+        return m.expand(n, *m.shape[1:])
+    if m.shape[0] != n:
+        raise ValueError(f"{what}: expected {n} matrices (or one), got shape {tuple(m.shape)}")
+    return m
+
+
+def _check_index(src_index, n_src: int, n_frames: int, device) -> torch.Tensor:
+    if src_index is None:
+        if n_src == 1:
+            return torch.zeros(n_frames, dtype=torch.int32, device=device)
+        if n_src == n_frames:
+            return torch.arange(n_frames, dtype=torch.int32, device=device)
+        raise ValueError(f"src_index is needed to pair {n_frames} guidance frames with {n_src} input views")
+    idx = torch.as_tensor(src_index, device=device).to(torch.int32).reshape(-1).contiguous()
+    if idx.numel() != n_frames:
+        raise ValueError(f"src_index has {idx.numel()} entries for {n_frames} guidance frames")
+    if idx.numel() and (int(idx.min()) < 0 or int(idx.max()) >= n_src):
+        raise ValueError(f"src_index must lie in [0, {n_src}), got {idx.tolist()}")
+    return idx
+
+
+def relative_transforms(src_viewmats: torch.Tensor, dst_viewmats: torch.Tensor, src_index: torch.Tensor):
+    """Per frame ``(P_inp P_guid^-1, P_guid P_inp^-1)`` as float32 [F, 4, 4] (composed in float64).
+
+    ``inv_ex`` rather than ``inv``: no host synchronisation on CUDA."""
+    S = src_viewmats[src_index.long()].double()
+    D = dst_viewmats.double()
+    Dinv = torch.linalg.inv_ex(D)[0]
+    Sinv = torch.linalg.inv_ex(S)[0]
+    return (S @ Dinv).float().contiguous(), (D @ Sinv).float().contiguous()
+
+
+def _inv3(K: torch.Tensor) -> torch.Tensor:
+    return torch.linalg.inv_ex(K.double())[0].float().contiguous()
+
+
+def warp_guidance(
+    src_images: torch.Tensor,
+    src_viewmats: torch.Tensor,
+    src_Ks: torch.Tensor,
+    dst_depths: torch.Tensor,
+    dst_viewmats: torch.Tensor,
+    dst_Ks: torch.Tensor,
+    src_index=None,
+    *,
+    min_depth: float = 1e-6,
+) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """Inverse-warps input views into guidance frames -> (guidance [F,H,W,3], coords q [F,H,W,2], valid [F,H,W]).
+
+    ``guidance`` is ``I_inp(q)`` sampled bilinearly, 0 where ``valid`` is False (no depth at p, the point
+    behind the input camera, or q outside the input image)."""
+    src_images, _ = _stack(src_images, 3)
+    dst_depths, batched = _stack(dst_depths, 2)
+    src_viewmats, _ = _stack(src_viewmats, 2)
+    dst_viewmats, _ = _stack(dst_viewmats, 2)
+    n_src, n = src_images.shape[0], dst_depths.shape[0]
+    dev_t = dst_depths.device
+    idx = _check_index(src_index, n_src, n, dev_t)
+    if src_images.shape[-1] != 3:
+        raise ValueError(f"src_images must be [S, H, W, 3], got {tuple(src_images.shape)}")
+    if src_viewmats.shape[0] != n_src or dst_viewmats.shape[0] != n:
+        raise ValueError("one viewmat per input view and one per guidance frame are needed")
+    src_K = _per_frame(src_Ks.to(dev_t), n_src, "src_Ks")[idx.long()]
+    dst_K = _per_frame(dst_Ks.to(dev_t), n, "dst_Ks")
+    to_src, _ = relative_transforms(src_viewmats.to(dev_t), dst_viewmats, idx)
+    F, H, W = dst_depths.shape
+    guidance = torch.empty(F, H, W, 3, device=dev_t, dtype=torch.float32)
+    coords = torch.empty(F, H, W, 2, device=dev_t, dtype=torch.float32)
+    valid = torch.empty(F, H, W, device=dev_t, dtype=torch.int32)
+    src_images = _f32(src_images.to(dev_t))
+    dst_depths = _f32(dst_depths)
+    src_K32 = _f32(src_K)
+    dst_Kinv = _inv3(dst_K)
+    dev = device_of(dst_depths)
+    launch(
+        kw.inverse_warp, (F, H, W),
+        [arg(dst_depths), arg(to_src, wp.mat44), arg(dst_Kinv, wp.mat33), arg(src_K32, wp.mat33), arg(idx),
+         arg(src_images, wp.vec3), float(min_depth), arg(guidance, wp.vec3), arg(coords, wp.vec2), arg(valid)],
+        dev, stream_of(dev),
+    )
+    valid = valid.bool()
+    if not batched:
+        return guidance[0], coords[0], valid[0]
+    return guidance, coords, valid
+
+
+def uncertainty_map(
+    coords: torch.Tensor,
+    valid: torch.Tensor,
+    src_depths: torch.Tensor,
+    src_viewmats: torch.Tensor,
+    src_Ks: torch.Tensor,
+    dst_viewmats: torch.Tensor,
+    dst_Ks: torch.Tensor,
+    src_index=None,
+    *,
+    renders: torch.Tensor | None = None,
+    guidance: torch.Tensor | None = None,
+    s1: float = 100.0,
+    s2: float = 0.25,
+    geometric: bool = True,
+    photometric: bool = True,
+    min_depth: float = 1e-6,
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """Cross-view uncertainty from ``warp_guidance``'s correspondences -> (U [F,H,W], p' [F,H,W,2]).
+
+    The photometric term needs ``renders`` (I_gs at the guidance poses) and ``guidance`` (I_inp(q));
+    ``geometric=False`` / ``photometric=False`` drop a term (the paper's ablations)."""
+    coords, batched = _stack(coords, 3)
+    valid, _ = _stack(valid, 2)
+    src_depths, _ = _stack(src_depths, 2)
+    src_viewmats, _ = _stack(src_viewmats, 2)
+    dst_viewmats, _ = _stack(dst_viewmats, 2)
+    F, H, W, _ = coords.shape
+    n_src = src_depths.shape[0]
+    dev_t = coords.device
+    idx = _check_index(src_index, n_src, F, dev_t)
+    if src_viewmats.shape[0] != n_src or dst_viewmats.shape[0] != F:
+        raise ValueError("one viewmat per input view and one per guidance frame are needed")
+    if s1 <= 0 or s2 <= 0:
+        raise ValueError(f"s1 and s2 must be positive, got {s1}, {s2}")
+    if photometric:
+        if renders is None or guidance is None:
+            raise ValueError("the photometric term needs renders (I_gs) and guidance (I_inp(q)); "
+                             "pass them or set photometric=False")
+        renders, _ = _stack(renders, 3)
+        guidance, _ = _stack(guidance, 3)
+        renders, guidance = _f32(renders.to(dev_t)), _f32(guidance.to(dev_t))
+        if renders.shape != (F, H, W, 3) or guidance.shape != (F, H, W, 3):
+            raise ValueError(f"renders and guidance must be [{F}, {H}, {W}, 3]")
+    else:  # the kernel reads them but multiplies by inv_s2 = 0
+        renders = guidance = torch.zeros(F, H, W, 3, device=dev_t)
+    src_K = _per_frame(src_Ks.to(dev_t), n_src, "src_Ks")[idx.long()]
+    dst_K = _f32(_per_frame(dst_Ks.to(dev_t), F, "dst_Ks"))
+    _, to_dst = relative_transforms(src_viewmats.to(dev_t), dst_viewmats.to(dev_t), idx)
+    U = torch.empty(F, H, W, device=dev_t, dtype=torch.float32)
+    p2 = torch.empty(F, H, W, 2, device=dev_t, dtype=torch.float32)
+    # every tensor handed to the kernel is held by a local name until the launch is enqueued
+    coords = _f32(coords)
+    valid_i = valid.to(torch.int32).contiguous()
+    src_depths = _f32(src_depths.to(dev_t))
+    src_Kinv = _inv3(src_K)
+    dev = device_of(coords)
+    launch(
+        kw.reproject_uncertainty, (F, H, W),
+        [arg(coords, wp.vec2), arg(valid_i), arg(src_depths), arg(idx), arg(to_dst, wp.mat44),
+         arg(src_Kinv, wp.mat33), arg(dst_K, wp.mat33), arg(renders, wp.vec3), arg(guidance, wp.vec3),
+         1.0 / s1 if geometric else 0.0, 1.0 / s2 if photometric else 0.0, float(min_depth),
+         arg(U), arg(p2, wp.vec2)],
+        dev, stream_of(dev),
+    )
+    if not batched:
+        return U[0], p2[0]
+    return U, p2
+
+
+def effective_s1(cfg: UncertaintyConfig, width: int) -> float:
+    """s1 in this image's pixels^2: the paper measures the reprojection error on SVD's 1024-wide frames,
+    so an image ``width`` pixels wide uses ``s1 * (width / reference_width)^2`` (the same angular tolerance)."""
+    if cfg.reference_width is None:
+        return cfg.s1
+    return cfg.s1 * (width / cfg.reference_width) ** 2
+
+
+def guidance_and_uncertainty(
+    src_images: torch.Tensor,
+    src_depths: torch.Tensor,
+    src_viewmats: torch.Tensor,
+    src_Ks: torch.Tensor,
+    dst_depths: torch.Tensor,
+    dst_viewmats: torch.Tensor,
+    dst_Ks: torch.Tensor,
+    src_index=None,
+    *,
+    renders: torch.Tensor | None = None,
+    cfg: UncertaintyConfig | None = None,
+) -> WarpResult:
+    """``warp_guidance`` then ``uncertainty_map`` with the settings of ``cfg`` (paper defaults)."""
+    cfg = cfg or UncertaintyConfig()
+    photometric = cfg.photometric and renders is not None
+    width = dst_depths.shape[-1]
+    if cfg.photometric and renders is None:
+        raise ValueError("renders (I_gs at the guidance poses) are needed for the photometric term; "
+                         "pass them or set photometric=False")
+    g, q, valid = warp_guidance(src_images, src_viewmats, src_Ks, dst_depths, dst_viewmats, dst_Ks, src_index,
+                                min_depth=cfg.min_depth)
+    batched = dst_depths.dim() == 3
+    idx = src_index
+    if idx is None:
+        n_src = src_images.shape[0] if src_images.dim() == 4 else 1
+        n = dst_depths.shape[0] if batched else 1
+        idx = _check_index(None, n_src, n, dst_depths.device)
+    U, p2 = uncertainty_map(q, valid, src_depths, src_viewmats, src_Ks, dst_viewmats, dst_Ks, idx,
+                            renders=renders, guidance=g, s1=effective_s1(cfg, width), s2=cfg.s2, geometric=cfg.geometric,
+                            photometric=photometric, min_depth=cfg.min_depth)
+    return WarpResult(g, U, q, p2, valid)

@@ -1,0 +1,268 @@
+"""Camera trajectories between the input views (numpy, float64).
+
+    order = nearest_neighbour_path(centers)                     # inputs ordered as a path
+    trajs = path_trajectories(viewmats, n_frames=25)           # one Trajectory per pair of neighbours
+    traj = perturb_trajectory(traj, score, rng, n_candidates=5)  # optional: keep the most uncertain pose
+
+Along the path, rotations are interpolated by slerp between neighbours and camera centres by a natural
+cubic spline through all centres (chord-length knots), as in the released SYN3R code. A trajectory has
+``n_frames`` poses and includes both ends: frame 0 is the start input's pose and frame N-1 the end
+input's, so the video model is conditioned on real images at both ends.
+
+Poses are world-to-camera 4x4 matrices in OpenCV axes (``warpgs/__init__.py``); quaternions (w, x, y, z).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+
+
+@dataclass
+class TrajectoryConfig:
+    n_frames: int = 25  # poses per trajectory, both inputs included (SVD img2vid-xt makes 25 frames)
+    perturb_candidates: int = 0  # 0: no perturbation; SYN3R draws 5 candidates per pose
+    perturb_translation: float = 0.1  # candidate centre sigma, x the distance between the two inputs
+    perturb_rotation_deg: float = 0.1  # candidate rotation sigma (degrees)
+    # nearest: the closest input camera (paper); halves: first half from the start input (SYN3R);
+    # best: per pixel, the less uncertain of the trajectory's two inputs (warps both)
+    guidance_source: str = "nearest"
+
+
+@dataclass
+class Trajectory:
+    """Poses from input ``start`` to input ``end`` (indices into the caller's list of inputs)."""
+
+    start: int
+    end: int
+    viewmats: np.ndarray  # (N, 4, 4) float64, world -> camera
+
+    def __len__(self) -> int:
+        return len(self.viewmats)
+
+    @property
+    def centers(self) -> np.ndarray:
+        return camera_centers(self.viewmats)
+
+
+# ----------------------------------------------------------------------------------------------
+# rotations
+
+
+def camera_centers(viewmats: np.ndarray) -> np.ndarray:
+    """Camera centres -R^T t of world-to-camera matrices (N, 4, 4) -> (N, 3)."""
+    V = np.asarray(viewmats, np.float64)
+    R, t = V[..., :3, :3], V[..., :3, 3]
+    return -np.einsum("...ji,...j->...i", R, t)
+
+
+def rotmat_to_quat(R: np.ndarray) -> np.ndarray:
+    """Rotation matrix (3, 3) -> unit quaternion (w, x, y, z) with w >= 0 (Shepperd's method)."""
+    R = np.asarray(R, np.float64)
+    tr = np.trace(R)
+    if tr > 0:
+        s = 2.0 * np.sqrt(1.0 + tr)
+        q = [0.25 * s, (R[2, 1] - R[1, 2]) / s, (R[0, 2] - R[2, 0]) / s, (R[1, 0] - R[0, 1]) / s]
+    elif R[0, 0] > R[1, 1] and R[0, 0] > R[2, 2]:
+        s = 2.0 * np.sqrt(1.0 + R[0, 0] - R[1, 1] - R[2, 2])
+        q = [(R[2, 1] - R[1, 2]) / s, 0.25 * s, (R[0, 1] + R[1, 0]) / s, (R[0, 2] + R[2, 0]) / s]
+    elif R[1, 1] > R[2, 2]:
+        s = 2.0 * np.sqrt(1.0 + R[1, 1] - R[0, 0] - R[2, 2])
+        q = [(R[0, 2] - R[2, 0]) / s, (R[0, 1] + R[1, 0]) / s, 0.25 * s, (R[1, 2] + R[2, 1]) / s]
+    else:
+        s = 2.0 * np.sqrt(1.0 + R[2, 2] - R[0, 0] - R[1, 1])
+        q = [(R[1, 0] - R[0, 1]) / s, (R[0, 2] + R[2, 0]) / s, (R[1, 2] + R[2, 1]) / s, 0.25 * s]
+    q = np.asarray(q)
+    q /= np.linalg.norm(q)
+    return q if q[0] >= 0 else -q
+
+
+def quat_to_rotmat(q: np.ndarray) -> np.ndarray:
+    w, x, y, z = np.asarray(q, np.float64) / np.linalg.norm(q)
+    return np.array([
+        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+    ])
+
+
+def slerp(q0: np.ndarray, q1: np.ndarray, s: float) -> np.ndarray:
+    """Spherical linear interpolation of unit quaternions along the shorter arc, s in [0, 1]."""
+    q0 = np.asarray(q0, np.float64)
+    q1 = np.asarray(q1, np.float64)
+    d = float(np.dot(q0, q1))
+    if d < 0.0:  # q and -q are one rotation: take the shorter way round
+        q1, d = -q1, -d
+    if d > 1.0 - 1e-10:
+        q = q0 + s * (q1 - q0)
+        return q / np.linalg.norm(q)
+    theta = np.arccos(np.clip(d, -1.0, 1.0))
+    return (np.sin((1 - s) * theta) * q0 + np.sin(s * theta) * q1) / np.sin(theta)
+
+
+def axis_angle_to_rotmat(v: np.ndarray) -> np.ndarray:
+    """Rodrigues: rotation vector (axis * angle in radians) -> (3, 3)."""
+    v = np.asarray(v, np.float64)
+    a = np.linalg.norm(v)
+    if a < 1e-12:
+        return np.eye(3)
+    k = v / a
+    Kx = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
+    return np.eye(3) + np.sin(a) * Kx + (1 - np.cos(a)) * Kx @ Kx
+
+
+def pose(R_c2w: np.ndarray, center: np.ndarray) -> np.ndarray:
+    """World-to-camera 4x4 from a camera-to-world rotation and a camera centre."""
+    V = np.eye(4)
+    V[:3, :3] = R_c2w.T
+    V[:3, 3] = -R_c2w.T @ np.asarray(center, np.float64)
+    return V
+
+
+# ----------------------------------------------------------------------------------------------
+# ordering and splines
+
+
+def nearest_neighbour_path(centers: np.ndarray) -> list[int]:
+    """Inputs ordered as an open path: a greedy nearest-neighbour tour from every start, the shortest kept.
+
+    Ties go to the lower index, so the result is deterministic."""
+    c = np.asarray(centers, np.float64)
+    n = len(c)
+    if n <= 2:
+        return list(range(n))
+    dist = np.linalg.norm(c[:, None] - c[None], axis=-1)
+    best, best_len = None, np.inf
+    for s in range(n):
+        path, seen, length = [s], {s}, 0.0
+        while len(path) < n:
+            d = dist[path[-1]].copy()
+            d[list(seen)] = np.inf
+            k = int(np.argmin(d))
+            length += d[k]
+            path.append(k)
+            seen.add(k)
+        if length < best_len - 1e-12:
+            best, best_len = path, length
+    # a path and its reverse are the same tour: start from the lower-indexed end
+    return best if best[0] < best[-1] else best[::-1]
+
+
+def natural_cubic_spline(knots: np.ndarray, values: np.ndarray) -> Callable[[np.ndarray], np.ndarray]:
+    """The natural cubic spline (second derivative 0 at both ends) through (knots, values (n, d))."""
+    t = np.asarray(knots, np.float64)
+    y = np.asarray(values, np.float64).reshape(len(t), -1)
+    n = len(t)
+    h = np.diff(t)
+    if n < 2 or np.any(h <= 0):
+        raise ValueError("spline knots must be strictly increasing and at least two")
+    M = np.zeros_like(y)  # second derivatives at the knots
+    if n > 2:
+        A = np.zeros((n - 2, n - 2))
+        rhs = 6.0 * ((y[2:] - y[1:-1]) / h[1:, None] - (y[1:-1] - y[:-2]) / h[:-1, None])
+        for i in range(n - 2):
+            A[i, i] = 2.0 * (h[i] + h[i + 1])
+            if i > 0:
+                A[i, i - 1] = h[i]
+            if i < n - 3:
+                A[i, i + 1] = h[i + 1]
+        M[1:-1] = np.linalg.solve(A, rhs)
+
+    def evaluate(s: np.ndarray) -> np.ndarray:
+        s = np.atleast_1d(np.asarray(s, np.float64))
+        k = np.clip(np.searchsorted(t, s, side="right") - 1, 0, n - 2)
+        hk = h[k][:, None]
+        a = (t[k + 1][:, None] - s[:, None]) / hk
+        b = (s[:, None] - t[k][:, None]) / hk
+        return a * y[k] + b * y[k + 1] + ((a**3 - a) * M[k] + (b**3 - b) * M[k + 1]) * hk**2 / 6.0
+
+    return evaluate
+
+
+def chord_knots(centers: np.ndarray) -> np.ndarray:
+    """Cumulative distance along the centres (uniform knots where two centres coincide)."""
+    d = np.linalg.norm(np.diff(np.asarray(centers, np.float64), axis=0), axis=1)
+    if np.any(d <= 1e-9 * max(1.0, float(d.max(initial=0.0)))):
+        return np.arange(len(centers), dtype=np.float64)
+    return np.concatenate([[0.0], np.cumsum(d)])
+
+
+def path_trajectories(viewmats: np.ndarray, n_frames: int, order: list[int] | None = None) -> list[Trajectory]:
+    """One trajectory of ``n_frames`` poses between each pair of neighbours along the path.
+
+    ``order`` defaults to ``nearest_neighbour_path`` of the camera centres; Trajectory.start/end index
+    ``viewmats``."""
+    V = np.asarray(viewmats, np.float64).reshape(-1, 4, 4)
+    if n_frames < 2:
+        raise ValueError(f"a trajectory needs at least 2 frames, got {n_frames}")
+    if len(V) < 2:
+        raise ValueError("pseudo-view trajectories need at least two input views")
+    order = nearest_neighbour_path(camera_centers(V)) if order is None else list(order)
+    C = camera_centers(V[order])
+    knots = chord_knots(C)
+    spline = natural_cubic_spline(knots, C)
+    quats = [rotmat_to_quat(V[k, :3, :3].T) for k in order]  # camera-to-world rotations
+    s = np.linspace(0.0, 1.0, n_frames)
+    out = []
+    for seg in range(len(order) - 1):
+        centres = spline(knots[seg] + s * (knots[seg + 1] - knots[seg]))
+        mats = np.stack([pose(quat_to_rotmat(slerp(quats[seg], quats[seg + 1], si)), c) for si, c in zip(s, centres)])
+        mats[0], mats[-1] = V[order[seg]], V[order[seg + 1]]  # the ends are the inputs, exactly
+        out.append(Trajectory(order[seg], order[seg + 1], mats))
+    return out
+
+
+# ----------------------------------------------------------------------------------------------
+# perturbation
+
+
+def perturb_pose(viewmat: np.ndarray, rng: np.random.Generator, translation_sigma: float,
+                 rotation_sigma_deg: float) -> np.ndarray:
+    """A nearby pose: centre + N(0, translation_sigma^2 I), rotation by a random small rotation vector."""
+    V = np.asarray(viewmat, np.float64)
+    R_c2w = V[:3, :3].T
+    c = -R_c2w @ V[:3, 3]
+    dR = axis_angle_to_rotmat(rng.normal(0.0, np.radians(rotation_sigma_deg), 3))
+    return pose(R_c2w @ dR, c + rng.normal(0.0, translation_sigma, 3))
+
+
+def perturb_trajectory(
+    traj: Trajectory,
+    score: Callable[[int, np.ndarray], float],
+    rng: np.random.Generator,
+    n_candidates: int = 5,
+    translation: float = 0.1,
+    rotation_deg: float = 0.1,
+) -> Trajectory:
+    """Replaces every interior pose by the most uncertain of ``n_candidates`` perturbed candidates.
+
+    ``score(frame, viewmat)`` is the uncertainty of a candidate (e.g. the mean of ``uncertainty_map``);
+    the translation sigma is ``translation`` x the distance between the trajectory's two inputs.
+    The end poses are the inputs and stay."""
+    if n_candidates <= 0 or len(traj) <= 2:
+        return traj
+    c = traj.centers
+    sigma_t = translation * float(np.linalg.norm(c[-1] - c[0]))
+    mats = traj.viewmats.copy()
+    for f in range(1, len(traj) - 1):
+        cands = [perturb_pose(traj.viewmats[f], rng, sigma_t, rotation_deg) for _ in range(n_candidates)]
+        scores = [float(score(f, m)) for m in cands]
+        mats[f] = cands[int(np.argmax(scores))]
+    return Trajectory(traj.start, traj.end, mats)
+
+
+def guidance_sources(traj: Trajectory, input_centers: np.ndarray, mode: str = "nearest") -> np.ndarray:
+    """For each frame, the input (index into ``input_centers``) whose view is warped into its guidance.
+
+    ``nearest``: the input with the closest camera centre (the paper's "nearest input view");
+    ``halves``: frames i < N/2 from the start input, the rest from the end input (SYN3R).
+    (``best`` chooses per pixel and is resolved by the caller, which warps both ends.)"""
+    n = len(traj)
+    if mode == "halves":
+        return np.where(np.arange(n) < n / 2, traj.start, traj.end).astype(np.int64)
+    if mode != "nearest":
+        raise ValueError(f"guidance_source must be 'nearest' or 'halves', got {mode!r}")
+    d = np.linalg.norm(traj.centers[:, None] - np.asarray(input_centers, np.float64)[None], axis=-1)
+    return np.argmin(d, axis=1).astype(np.int64)

@@ -1,0 +1,369 @@
+"""Pseudo views along camera trajectories between the input views (the whole of issue #5 in one call).
+
+    from warpgs.pseudo.views import PseudoConfig, generate_pseudo_views, model_renderer
+    cfg = PseudoConfig.load()                           # configs/pseudo.yaml (the paper's settings)
+    seqs = generate_pseudo_views(model_renderer(model), scene.train, cfg)
+    for s in seqs: save_sequence(s, "outputs/pseudo")   # PNGs: pseudo views, guidance, uncertainty, renders
+
+For each pair of neighbouring inputs along the nearest-neighbour path: poses interpolated between them
+(optionally perturbed towards the most uncertain), the trained 3D-GS rendered there (colour I_gs and
+depth D_gs), the nearest input warped into each frame with D_gs, the cross-view uncertainty U with
+the depth rendered at the input, and the video backend sampled with the uncertainty-modulated,
+bidirectional sampler from the two inputs. ``render_fn(viewmat, K, width, height) -> (image [H, W, 3],
+depth [H, W])`` is all this needs of the model; ``model_renderer`` adapts a ``GaussianModel``.
+
+Command line (a trained model and its scene)::
+
+    python -m warpgs.pseudo.views --model outputs/sparse/point_cloud.ply --data synthetic --views 3 \
+        --out outputs/pseudo [--pseudo-backend svd --svd-path /path/to/svd] [--set sampler.steps=50]
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import types
+import typing
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable, Sequence
+
+import numpy as np
+import torch
+import yaml
+
+from .backends import DefaultBackendConfig, SVDConfig, make_backend
+from .guidance import UncertaintyConfig, WarpResult, guidance_and_uncertainty
+from .sampler import SamplerConfig, sample_video
+from .trajectory import (
+    Trajectory,
+    TrajectoryConfig,
+    camera_centers,
+    guidance_sources,
+    path_trajectories,
+    perturb_trajectory,
+)
+
+CONFIG_PATH = Path(__file__).resolve().parents[2] / "configs" / "pseudo.yaml"
+
+RenderFn = Callable[[torch.Tensor, torch.Tensor, int, int], tuple[torch.Tensor, torch.Tensor]]
+
+
+# ----------------------------------------------------------------------------------------------
+# configuration
+
+
+@dataclass
+class PseudoConfig:
+    backend: str = "default"  # default (weight-free Gaussian video prior) | svd
+    trajectory: TrajectoryConfig = field(default_factory=TrajectoryConfig)
+    uncertainty: UncertaintyConfig = field(default_factory=UncertaintyConfig)
+    sampler: SamplerConfig = field(default_factory=SamplerConfig)
+    default_backend: DefaultBackendConfig = field(default_factory=DefaultBackendConfig)
+    svd: SVDConfig = field(default_factory=SVDConfig)
+
+    @classmethod
+    def load(cls, path: str | Path | None = CONFIG_PATH, overrides: Sequence[str] | dict | None = None) -> "PseudoConfig":
+        """Defaults, then the YAML file (if any), then ``section.key=value`` overrides (values as YAML).
+        Unknown keys are errors naming the valid ones."""
+        cfg = cls()
+        if path is not None and Path(path).is_file():
+            _merge(cfg, yaml.safe_load(Path(path).read_text()) or {}, str(path))
+        if overrides:
+            items = overrides.items() if isinstance(overrides, dict) else (_split(o) for o in overrides)
+            for key, value in items:
+                d: dict = {}
+                node = d
+                parts = key.split(".")
+                for p in parts[:-1]:
+                    node = node.setdefault(p, {})
+                node[parts[-1]] = value
+                _merge(cfg, d, f"override {key}")
+        return cfg
+
+
+def _split(item: str) -> tuple[str, object]:
+    if "=" not in item:
+        raise ValueError(f"override {item!r}: expected section.key=value")
+    k, v = item.split("=", 1)
+    return k.strip(), yaml.safe_load(v)
+
+
+def _merge(obj, data: dict, source: str) -> None:
+    if not isinstance(data, dict):
+        raise ValueError(f"{source}: expected a mapping, got {type(data).__name__}")
+    fields = {f.name: f for f in dataclasses.fields(obj)}
+    hints = typing.get_type_hints(type(obj))
+    for k, v in data.items():
+        if k not in fields:
+            raise ValueError(f"{source}: unknown key {k!r} in {type(obj).__name__} (valid: {', '.join(fields)})")
+        cur = getattr(obj, k)
+        if dataclasses.is_dataclass(cur):
+            _merge(cur, v, f"{source}: {k}")
+        else:
+            setattr(obj, k, _coerce(v, hints[k], f"{source}: {k}"))
+
+
+def _coerce(v, tp, where: str):
+    args = typing.get_args(tp)
+    optional = type(None) in args or tp is type(None)
+    if v is None:
+        if optional:
+            return None
+        raise ValueError(f"{where}: may not be null")
+    base = [a for a in args if a is not type(None)] if isinstance(tp, types.UnionType) or args else [tp]
+    for b in base:
+        if b is bool and isinstance(v, bool):
+            return v
+        if b is float and isinstance(v, (int, float)) and not isinstance(v, bool):
+            return float(v)
+        if b is int and isinstance(v, int) and not isinstance(v, bool):
+            return v
+        if b is str and isinstance(v, str):
+            return v
+    raise ValueError(f"{where}: {v!r} is not a {tp}")
+
+
+def backend_from_config(cfg: PseudoConfig, device="cpu"):
+    return make_backend(cfg.backend, device, default=cfg.default_backend, svd=cfg.svd, svd_path=cfg.svd.path)
+
+
+# ----------------------------------------------------------------------------------------------
+# results
+
+
+@dataclass
+class PseudoSequence:
+    """One trajectory's frames. Frame 0 and N-1 sit at the start and end inputs; 1..N-2 are the pseudo views."""
+
+    start: int  # input index (in the caller's list) of frame 0
+    end: int  # input index of frame N-1
+    viewmats: torch.Tensor  # [N, 4, 4] world -> camera
+    K: torch.Tensor  # [3, 3]
+    width: int
+    height: int
+    frames: torch.Tensor  # [N, H, W, 3] the completed video (pseudo views)
+    guidance: torch.Tensor  # [N, H, W, 3] warped input where U < delta, the 3D-GS render elsewhere
+    warped: torch.Tensor  # [N, H, W, 3] the raw warp I_inp(q) (0 where no correspondence)
+    uncertainty: torch.Tensor  # [N, H, W] U
+    renders: torch.Tensor  # [N, H, W, 3] I_gs
+    depths: torch.Tensor  # [N, H, W] D_gs
+    sources: torch.Tensor  # [N, H, W] input index each pixel's guidance was warped from
+    tau: torch.Tensor  # [N] guidance stop time per frame
+
+    def __len__(self) -> int:
+        return int(self.frames.shape[0])
+
+    def pseudo_cameras(self, prefix: str | None = None):
+        """The interior frames as ``CameraTensors`` (image = pseudo view, mask = U < 1) for training."""
+        from warpgs.data.scene import CameraTensors
+
+        prefix = prefix or f"pseudo_{self.start}_{self.end}"
+        return [
+            CameraTensors(name=f"{prefix}_{i:03d}", viewmat=self.viewmats[i], K=self.K, width=self.width,
+                          height=self.height, image=self.frames[i], mask=self.uncertainty[i] < 1.0)
+            for i in range(1, len(self) - 1)
+        ]
+
+
+def model_renderer(model, background=None) -> RenderFn:
+    """``render_fn`` of a ``GaussianModel`` (no gradients): colour and expected depth."""
+
+    def render(viewmat, K, width, height):
+        with torch.no_grad():
+            bg = background if background is None else torch.as_tensor(background, dtype=torch.float32,
+                                                                       device=model.device)
+            out = model.render(viewmat.to(model.device), K.to(model.device), width, height, background=bg)
+        return out.image, out.depth
+
+    return render
+
+
+def traj_poses(viewmats: torch.Tensor) -> np.ndarray:
+    return viewmats.detach().double().cpu().numpy()
+
+
+def _camera_tensors(cams, device):
+    from warpgs.data.scene import Camera
+
+    return [c.to_torch(device) if isinstance(c, Camera) else c for c in cams]
+
+
+# ----------------------------------------------------------------------------------------------
+
+
+def generate_pseudo_views(
+    render_fn: RenderFn,
+    inputs: Sequence,
+    cfg: PseudoConfig | None = None,
+    backend=None,
+    *,
+    device=None,
+    input_depths: Sequence[torch.Tensor] | None = None,
+    trajectories: Sequence[Trajectory] | None = None,
+    out_dir: str | Path | None = None,
+    generator: torch.Generator | None = None,
+) -> list[PseudoSequence]:
+    """Pseudo views between neighbouring inputs (see module doc).
+
+    Args:
+        render_fn: ``(viewmat [4,4], K [3,3], width, height) -> (image [H,W,3], depth [H,W])`` of the 3D-GS.
+        inputs: the input views (``Camera`` or ``CameraTensors``) with their images.
+        cfg: settings (``PseudoConfig.load()`` for configs/pseudo.yaml); backend: a sampler backend
+            (default: the one ``cfg.backend`` names).
+        input_depths: depth at each input; default: rendered by ``render_fn`` (as in the paper).
+        trajectories: poses to use instead of the path through all inputs (indices into ``inputs``).
+        out_dir: if given, every sequence's images are saved there (``save_sequence``).
+    """
+    cfg = cfg or PseudoConfig()
+    cams = _camera_tensors(inputs, device or "cpu")
+    dev = cams[0].image.device if device is None else torch.device(device)
+    backend = backend or backend_from_config(cfg, dev)
+    tc, uc = cfg.trajectory, cfg.uncertainty
+    generator = generator or torch.Generator().manual_seed(cfg.sampler.seed)
+    rng = np.random.default_rng(cfg.sampler.seed)
+
+    src_images = torch.stack([c.image.to(dev).float() for c in cams])
+    src_V = torch.stack([c.viewmat.to(dev).float() for c in cams])
+    src_K = torch.stack([c.K.to(dev).float() for c in cams])
+    if input_depths is None:
+        input_depths = [render_fn(c.viewmat.to(dev), c.K.to(dev), c.width, c.height)[1] for c in cams]
+    src_D = torch.stack([d.to(dev).float() for d in input_depths])
+    centers = camera_centers(src_V.double().cpu().numpy())
+
+    if trajectories is None:
+        trajectories = path_trajectories(src_V.double().cpu().numpy(), tc.n_frames)
+    if tc.guidance_source not in ("nearest", "halves", "best"):
+        raise ValueError(f"trajectory.guidance_source must be nearest, halves or best, got {tc.guidance_source!r}")
+    out = []
+    for traj in trajectories:
+        K, W, H = src_K[traj.start], cams[traj.start].width, cams[traj.start].height
+
+        def warp(viewmats: torch.Tensor, frames: np.ndarray):
+            """Renders at the poses, warps their inputs in -> (WarpResult, sources [F,H,W], renders, depths)."""
+            renders, depths = zip(*(render_fn(v, K, W, H) for v in viewmats))
+            renders = torch.stack([r.float() for r in renders]).to(dev)
+            depths = torch.stack([d.float() for d in depths]).to(dev)
+            if tc.guidance_source == "best":
+                choices = [np.full(len(frames), traj.start), np.full(len(frames), traj.end)]
+            elif tc.guidance_source == "halves":
+                choices = [guidance_sources(traj, centers, "halves")[frames]]
+            else:  # nearest to the poses given (perturbed candidates included)
+                choices = [guidance_sources(Trajectory(traj.start, traj.end, traj_poses(viewmats)), centers)]
+            best = src_map = None
+            for c in choices:
+                idx = torch.as_tensor(c, device=dev)
+                r = guidance_and_uncertainty(src_images, src_D, src_V, src_K, depths, viewmats, K, idx,
+                                             renders=renders, cfg=uc)
+                m = idx.view(-1, 1, 1).expand(r.uncertainty.shape).contiguous()
+                if best is None:
+                    best, src_map = r, m
+                    continue
+                take = r.uncertainty < best.uncertainty  # ties keep the earlier (start) input
+                best = WarpResult(*(torch.where(take.view(*take.shape, *([1] * (a.dim() - 3))), a, b)
+                                    for a, b in zip(r, best)))
+                src_map = torch.where(take, m, src_map)
+            return best, src_map, renders, depths
+
+        if tc.perturb_candidates > 0:
+            def score(f: int, viewmat: np.ndarray) -> float:
+                v = torch.as_tensor(viewmat, dtype=torch.float32, device=dev)[None]
+                return float(warp(v, np.array([f]))[0].uncertainty.mean())
+
+            traj = perturb_trajectory(traj, score, rng, tc.perturb_candidates, tc.perturb_translation,
+                                      tc.perturb_rotation_deg)
+        V = torch.as_tensor(traj.viewmats, dtype=torch.float32, device=dev)
+        r, sources, renders, depths = warp(V, np.arange(len(traj)))
+        guidance = torch.where((r.uncertainty < cfg.sampler.delta)[..., None], r.guidance, renders)
+        res = sample_video(backend, src_images[traj.start], src_images[traj.end], guidance=guidance,
+                           uncertainty=r.uncertainty, prior=renders, cfg=cfg.sampler, generator=generator)
+        seq = PseudoSequence(traj.start, traj.end, V, K, W, H, res.frames.to(dev), guidance, r.guidance,
+                             r.uncertainty, renders, depths, sources, res.tau)
+        if out_dir is not None:
+            save_sequence(seq, out_dir)
+        out.append(seq)
+    return out
+
+
+# ----------------------------------------------------------------------------------------------
+# images
+
+
+def to_uint8(image: torch.Tensor | np.ndarray) -> np.ndarray:
+    a = image.detach().float().cpu().numpy() if isinstance(image, torch.Tensor) else np.asarray(image, np.float32)
+    return (np.clip(np.nan_to_num(a), 0.0, 1.0) * 255.0 + 0.5).astype(np.uint8)
+
+
+def save_image(path: str | Path, image) -> Path:
+    """Saves [H, W, 3] or [H, W] values in [0, 1] as an 8-bit PNG."""
+    from PIL import Image
+
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    Image.fromarray(to_uint8(image)).save(path)
+    return path
+
+
+def save_sequence(seq: PseudoSequence, out_dir: str | Path) -> Path:
+    """``<out_dir>/seq_<start>_<end>/{pseudo,guidance,warped,uncertainty,render}_NNN.png`` plus poses.npz.
+    Uncertainty is grey (white = 1, unreliable)."""
+    d = Path(out_dir) / f"seq_{seq.start:03d}_{seq.end:03d}"
+    for i in range(len(seq)):
+        save_image(d / f"pseudo_{i:03d}.png", seq.frames[i])
+        save_image(d / f"guidance_{i:03d}.png", seq.guidance[i])
+        save_image(d / f"warped_{i:03d}.png", seq.warped[i])
+        save_image(d / f"uncertainty_{i:03d}.png", seq.uncertainty[i])
+        save_image(d / f"render_{i:03d}.png", seq.renders[i])
+    np.savez(d / "poses.npz", viewmats=seq.viewmats.cpu().numpy(), K=seq.K.cpu().numpy(),
+             sources=seq.sources.cpu().numpy().astype(np.int16), tau=seq.tau.cpu().numpy())
+    return d
+
+
+# ----------------------------------------------------------------------------------------------
+# command line
+
+
+def add_pseudo_args(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
+    g = parser.add_argument_group("pseudo views")
+    g.add_argument("--pseudo-config", default=str(CONFIG_PATH), help="YAML settings (default: configs/pseudo.yaml)")
+    g.add_argument("--pseudo-backend", choices=["default", "svd"], default=None, help="video backend")
+    g.add_argument("--svd-path", default=None, help="local Stable Video Diffusion folder (or $WARPGS_SVD_PATH)")
+    g.add_argument("--set", dest="pseudo_set", action="append", default=[], metavar="SECTION.KEY=VALUE",
+                   help="override a setting, e.g. --set sampler.steps=50")
+    return parser
+
+
+def config_from_args(args: argparse.Namespace) -> PseudoConfig:
+    cfg = PseudoConfig.load(args.pseudo_config, args.pseudo_set)
+    if args.pseudo_backend:
+        cfg.backend = args.pseudo_backend
+    if args.svd_path:
+        cfg.svd.path = args.svd_path
+    return cfg
+
+
+def main(argv=None) -> int:
+    from warpgs.data import add_data_args, load_scene_from_args
+    from warpgs.train import load_trained
+
+    p = argparse.ArgumentParser(prog="python -m warpgs.pseudo.views", description=__doc__.split("\n")[0])
+    p.add_argument("--model", required=True, help="trained 3D-GS: a PLY or a checkpoint.pt")
+    p.add_argument("--out", default="outputs/pseudo", help="folder for the PNGs")
+    p.add_argument("--device", default="auto", help="cpu | cuda | auto")
+    add_data_args(p)
+    add_pseudo_args(p)
+    args = p.parse_args(argv)
+    device = ("cuda" if torch.cuda.is_available() else "cpu") if args.device == "auto" else args.device
+    cfg = config_from_args(args)
+    scene = load_scene_from_args(args)
+    model = load_trained(args.model, device=device)
+    bg = [1.0, 1.0, 1.0] if scene.white_background else [0.0, 0.0, 0.0]
+    seqs = generate_pseudo_views(model_renderer(model, bg), scene.train, cfg, device=device, out_dir=args.out)
+    for s in seqs:
+        print(f"inputs {s.start} -> {s.end}: {len(s)} frames, mean U {float(s.uncertainty.mean()):.3f}")
+    print(f"wrote {args.out}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
