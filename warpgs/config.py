@@ -85,8 +85,9 @@ class TrainConfig:
     sh_degree_interval: int = 1000  # raise the rendered SH degree every this many steps
     checkpoint_every: int = 1000  # 0 = only at the end (and on Ctrl-C)
     background: list | None = None  # [r, g, b]; None: white if the scene says so, else black
-    compact: bool = True  # drop Gaussians the training views do not need, before evaluation and export
+    compact: bool = False  # at the end, drop Gaussians no training view needs (costs novel-view PSNR)
     max_nan_steps: int = 20  # give up after this many consecutive non-finite steps
+    cpu_threads: int = 1  # torch threads on the CPU (0: torch's default); Warp's CPU kernels use one anyway
     progress: bool = True
 
 
@@ -138,6 +139,11 @@ def _type_ok(value, tp) -> tuple[bool, Any]:
     if base is float:
         if isinstance(value, (int, float)) and not isinstance(value, bool):
             return True, float(value)
+        if isinstance(value, str):  # YAML 1.1 reads '1e-3' (no dot) as a string
+            try:
+                return True, float(value)
+            except ValueError:
+                return False, value
         return False, value
     if base is str:
         return isinstance(value, str), value

@@ -14,6 +14,7 @@ torchvision AlexNet layout itself, so the same weight file loads.
 
 from __future__ import annotations
 
+import importlib
 import os
 import sys
 import types
@@ -113,9 +114,7 @@ def _import_lpips():
     """``import lpips``; without torchvision, with a stand-in that provides only ``models.alexnet``
     (removed from ``sys.modules`` again so nothing else mistakes it for torchvision)."""
     try:
-        import lpips  # noqa: F401
-
-        return sys.modules["lpips"]
+        return importlib.import_module("lpips")
     except ModuleNotFoundError as e:
         if e.name == "lpips":
             raise LPIPSUnavailable(
@@ -144,7 +143,7 @@ def _import_lpips():
     saved = {k: sys.modules.get(k) for k in ("torchvision", "torchvision.models")}
     sys.modules.update({"torchvision": tv, "torchvision.models": models})
     try:
-        import lpips  # noqa: F811
+        return importlib.import_module("lpips")
     except ModuleNotFoundError as e:
         raise LPIPSUnavailable(f"the 'lpips' package cannot be imported: {e} (pip install scipy)") from e
     finally:
@@ -153,7 +152,6 @@ def _import_lpips():
                 sys.modules.pop(k, None)
             else:
                 sys.modules[k] = v
-    return lpips
 
 
 class LPIPS(nn.Module):

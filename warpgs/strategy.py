@@ -12,6 +12,10 @@ Every ``refine_every`` steps between ``refine_start_iter`` and ``refine_stop_ite
 ``max_gaussians`` caps the count: when growth would pass it, only the candidates with the largest
 gradients grow. ``compact`` removes what the training views do not need: Gaussians whose total
 blending weight over all training views is below ``compact_min_weight`` pixels, and transparent ones.
+The trainer compacts whenever a refinement finds the budget spent (``compact_when_full``), so growth
+goes on where the views need it, and optionally once more at the end (``train.compact``). Note that in
+sparse-view training the Gaussians no input view sees still fill the novel views: dropping them at
+the end lowered test PSNR by 0.4 dB on the synthetic scene, so the final compaction is off by default.
 
 New Gaussians get zeroed Adam moments, as in gsplat. The strategy's running state (gradient sums and
 counts) is a plain dict of tensors, saved in checkpoints.
@@ -44,6 +48,7 @@ class DefaultStrategy:
     refine_every: int = 100
     pause_refine_after_reset: int = 0
     max_gaussians: int = 0  # 0 = no budget
+    compact_when_full: bool = True  # compact when a refinement finds the budget spent
     compact_min_weight: float = 0.05  # compaction keeps Gaussians with at least this total weight (pixels)
     verbose: bool = False
 
@@ -78,13 +83,12 @@ class DefaultStrategy:
 
     def update_state(self, state: dict, out: RenderOutput, width: int, height: int) -> None:
         grads = means2d_grad_norm(out, width, height)
-        sel = (out.radii > 0).all(dim=-1)
-        ids = torch.where(sel)[0]
-        state["grad2d"].index_add_(0, ids, grads[ids])
-        state["count"].index_add_(0, ids, torch.ones_like(grads[ids]))
+        sel = (out.radii > 0).all(dim=-1)  # visible in this view
+        state["grad2d"] += torch.where(sel, grads, torch.zeros_like(grads))  # no index lists: no device sync
+        state["count"] += sel.float()
         if self.refine_scale2d_stop_iter > 0:
-            r = out.radii[ids].max(dim=-1).values.float() / float(max(width, height))
-            state["radii"][ids] = torch.maximum(state["radii"][ids], r)
+            r = out.radii.max(dim=-1).values.float() / float(max(width, height))
+            state["radii"] = torch.where(sel, torch.maximum(state["radii"], r), state["radii"])
 
     def grow(self, model, optimizer, state, step, scene_scale, generator=None) -> tuple[int, int]:
         grads = state["grad2d"] / state["count"].clamp_min(1)
@@ -131,9 +135,10 @@ class DefaultStrategy:
         weight = contribution(model, cameras, background)
         drop = (weight < self.compact_min_weight) | (model.opacities.detach() < self.prune_opa)
         n = int(drop.sum())
-        if n and n < len(model):
-            remove(model, optimizer, state, drop)
-        return n if n < len(model) else 0
+        if n == 0 or n == len(model):  # nothing to drop, or nothing would be left: keep everything
+            return 0
+        remove(model, optimizer, state, drop)
+        return n
 
 
 # ----------------------------------------------------------------------------------------------

@@ -136,6 +136,10 @@ class Trainer:
         self.out = Path(out_dir) if out_dir is not None else None
         self.log = log or (lambda msg: print(msg, file=sys.stderr))
         self.device = resolve_device(cfg.train.device)
+        if self.device.type == "cpu" and cfg.train.cpu_threads > 0:
+            # The images are small and Warp's CPU kernels run on one thread: more torch threads gain
+            # little, and on a busy machine their synchronisation made small ops 50x slower.
+            torch.set_num_threads(cfg.train.cpu_threads)
         if not scene.train:
             raise ValueError(f"{scene.name}: no training views")
         self.train_cams = [c.to_torch(self.device) for c in scene.train]
@@ -208,18 +212,25 @@ class Trainer:
         cam = self.train_cams[self.next_view()]
         out = self.model.render(cam.viewmat, cam.K, cam.width, cam.height, background=self.background)
         loss, parts = self.compute_loss(out, cam)
-        if not bool(torch.isfinite(loss)):
-            return self._skip(step, "the loss is not finite")
         loss.backward()
-        for name, p in self.model.params.items():
-            if p.grad is not None and not bool(torch.isfinite(p.grad).all()):
-                return self._skip(step, f"the gradient of {name} is not finite")
+        # one device sync for the whole guard: the loss and every gradient must be finite
+        checks = [torch.isfinite(loss)] + [torch.isfinite(p.grad).all() for p in self.model.params.values()
+                                           if p.grad is not None]
+        if not bool(torch.stack(checks).all()):
+            bad = [n for n, p in self.model.params.items() if p.grad is not None and not bool(torch.isfinite(p.grad).all())]
+            return self._skip(step, "the loss is not finite" if not bool(torch.isfinite(loss))
+                              else f"the gradient of {', '.join(bad)} is not finite")
         self.optimizer.step()
         self.optimizer.zero_grad(set_to_none=True)
         self.nan_steps = 0
         info = self.strategy.step_post_backward(self.model, self.optimizer, self.state, step, out,
                                                 cam.width, cam.height, self.scene_scale, generator=self.split_gen)
-        value = float(loss)
+        s = self.strategy
+        if (s.compact_when_full and s.max_gaussians > 0 and (info["cloned"] or info["split"] or info["pruned"])
+                and len(self.model) >= s.max_gaussians):
+            # the budget is spent: free what the training views do not use, so growth can go on where it helps
+            info["compacted"] = s.compact(self.model, self.optimizer, self.state, self.train_cams, self.background)
+        value = float(loss.detach())
         self.losses.append(value)
         with torch.no_grad():
             mse = float(((out.image.detach().clamp(0, 1) - cam.image) ** 2).mean())
@@ -390,10 +401,10 @@ class Trainer:
         return result
 
     def compact(self) -> int:
+        """Final compaction (``train.compact``): drops what no training view uses."""
         if self.n_before_compaction is None:
             self.n_before_compaction = len(self.model)
-        n = self.strategy.compact(self.model, self.optimizer, self.state, self.train_cams, self.background)
-        return n
+        return self.strategy.compact(self.model, self.optimizer, self.state, self.train_cams, self.background)
 
     def export_ply(self, path: str | Path | None = None) -> Path:
         return self.model.save_ply(Path(path) if path is not None else self.out / "point_cloud.ply")

@@ -1,0 +1,200 @@
+"""Densification: clone / split / prune / reset on constructed gradients, the budget, compaction."""
+
+import math
+from types import SimpleNamespace
+
+import pytest
+import torch
+
+from warpgs.model import GaussianModel
+from warpgs.strategy import DefaultStrategy, contribution, quat_to_rotmat, reset_opacities
+from warpgs.train import make_optimizer
+from warpgs.config import Config
+
+
+def _model(scales, opacities, seed=0):
+    n = len(scales)
+    g = torch.Generator().manual_seed(seed)
+    means = torch.randn(n, 3, generator=g) + torch.tensor([0.0, 0.0, 5.0])
+    quats = torch.nn.functional.normalize(torch.randn(n, 4, generator=g), dim=-1)
+    sc = torch.log(torch.tensor(scales, dtype=torch.float32))[:, None].repeat(1, 3)
+    op = torch.logit(torch.tensor(opacities, dtype=torch.float32))
+    sh0 = torch.randn(n, 1, 3, generator=g)
+    shN = torch.randn(n, 15, 3, generator=g)
+    return GaussianModel(means, quats, sc, op, sh0, shN)
+
+
+def _with_adam_state(model):
+    opt = make_optimizer(model, Config(), 1.0)
+    for p in model.params.values():
+        p.grad = torch.ones_like(p)
+    opt.step()  # every moment becomes non-zero
+    opt.zero_grad()
+    return opt
+
+
+def test_grow_clones_small_and_splits_large():
+    s = DefaultStrategy(grow_grad2d=0.5, grow_scale3d=0.1)
+    # 0: high grad, small -> clone; 1: high grad, large -> split; 2: low grad; 3: high grad, small -> clone
+    m = _model([0.05, 0.5, 0.05, 0.08], [0.5, 0.5, 0.5, 0.5])
+    opt = _with_adam_state(m)
+    st = s.initialize_state(4, "cpu")
+    st["grad2d"][:] = torch.tensor([3.0, 2.0, 0.1, 1.2])
+    st["count"][:] = torch.tensor([2.0, 2.0, 2.0, 2.0])  # means 1.5, 1.0, 0.05, 0.6
+    before = {k: v.detach().clone() for k, v in m.params.items()}
+    n_clone, n_split = s.grow(m, opt, st, step=1000, scene_scale=1.0, generator=torch.Generator().manual_seed(0))
+    assert (n_clone, n_split) == (2, 1)
+    assert len(m) == 4 + 2 + 1  # clones add one each; a split replaces one by two
+    # layout (gsplat): [kept originals 0, 2, 3] + [clones of 0, 3] + [2 children of 1]
+    order = [0, 2, 3, 0, 3]
+    for name in ("quats", "opacities", "sh0", "shN"):
+        assert torch.equal(m.params[name][:5], before[name][order]), name
+        assert torch.equal(m.params[name][5], before[name][1]) and torch.equal(m.params[name][6], before[name][1])
+    assert torch.equal(m.params["means"][:5], before["means"][order])
+    # children: scale / 1.6, means sampled around the parent (so they differ from it and each other)
+    assert torch.allclose(m.scales[5:], torch.exp(before["scales"][1]).expand(2, 3) / 1.6)
+    assert not torch.equal(m.params["means"][5], m.params["means"][6])
+    assert float((m.params["means"][5:] - before["means"][1]).norm(dim=-1).max()) < 0.5 * 6
+    # Adam moments: kept for the originals, zero for the new ones; every tensor follows the parameters
+    for name, p in m.params.items():
+        st_p = opt.state[p]
+        assert st_p["exp_avg"].shape == p.shape
+        assert bool((st_p["exp_avg"][:3] != 0).all()) and bool((st_p["exp_avg"][3:] == 0).all()), name
+        assert any(q is p for g in opt.param_groups for q in g["params"])
+    assert st["grad2d"].shape == (7,)
+
+
+def test_split_samples_follow_the_gaussian():
+    # many splits of one anisotropic Gaussian: the offsets' covariance is R S^2 R^T
+    s = DefaultStrategy(grow_grad2d=0.0, grow_scale3d=0.0)
+    n = 4000
+    m = _model([1.0] * n, [0.5] * n)
+    q = torch.nn.functional.normalize(torch.tensor([0.9, 0.3, -0.2, 0.1]), dim=0)
+    with torch.no_grad():
+        m.params["quats"][:] = q
+        m.params["scales"][:] = torch.log(torch.tensor([0.5, 0.1, 0.2]))
+        m.params["means"][:] = 0
+    st = s.initialize_state(n, "cpu")
+    st["grad2d"][:] = 1.0
+    st["count"][:] = 1.0
+    s.grow(m, None, st, step=1000, scene_scale=1.0, generator=torch.Generator().manual_seed(0))
+    off = m.params["means"].detach()
+    R = quat_to_rotmat(q[None])[0]
+    want = R @ torch.diag(torch.tensor([0.25, 0.01, 0.04])) @ R.T
+    got = off.T @ off / off.shape[0]
+    assert torch.allclose(got, want, atol=0.01)
+
+
+def test_budget_keeps_the_largest_gradients():
+    s = DefaultStrategy(grow_grad2d=0.5, grow_scale3d=0.1, max_gaussians=6)
+    m = _model([0.05, 0.05, 0.05, 0.05, 0.05], [0.5] * 5)
+    st = s.initialize_state(5, "cpu")
+    st["grad2d"][:] = torch.tensor([1.0, 4.0, 2.0, 3.0, 0.1])
+    st["count"][:] = 1.0
+    before = m.params["sh0"].detach().clone()
+    n_clone, n_split = s.grow(m, None, st, step=1000, scene_scale=1.0)
+    assert (n_clone, n_split, len(m)) == (1, 0, 6)
+    assert torch.equal(m.params["sh0"][5], before[1])  # the largest gradient grew
+    n_clone, _ = s.grow(m, None, st, step=1100, scene_scale=1.0)
+    assert n_clone == 0 and len(m) == 6  # full
+
+
+def test_prune_opacity_and_size_after_reset():
+    s = DefaultStrategy(prune_opa=0.01, prune_scale3d=0.1, reset_every=3000)
+    m = _model([0.05, 0.05, 0.5, 0.05], [0.5, 0.005, 0.5, 0.5])
+    st = s.initialize_state(4, "cpu")
+    keep_sh = m.params["sh0"].detach()[[0, 2, 3]].clone()
+    assert s.prune(m, None, st, step=1000, scene_scale=1.0) == 1  # transparent only: no size rule yet
+    assert torch.equal(m.params["sh0"], keep_sh)
+    assert s.prune(m, None, st, step=3100, scene_scale=1.0) == 1  # now the large one (0.5 > 0.1) goes
+    assert len(m) == 2 and float(m.scales.max()) < 0.1
+
+
+def test_reset_opacities_clamps_and_zeroes_moments():
+    m = _model([0.05] * 3, [0.9, 0.005, 0.5])
+    opt = _with_adam_state(m)
+    before = m.opacities.detach().clone()
+    reset_opacities(m, opt, 0.01)
+    assert float(before[1]) < 0.01
+    assert torch.allclose(m.opacities, torch.tensor([0.01, float(before[1]), 0.01]), atol=1e-6)
+    p = m.params["opacities"]
+    assert bool((opt.state[p]["exp_avg"] == 0).all()) and bool((opt.state[p]["exp_avg_sq"] == 0).all())
+    assert bool((opt.state[m.params["means"]]["exp_avg"] != 0).all())
+
+
+def test_step_post_backward_schedule_and_statistic():
+    s = DefaultStrategy(refine_start_iter=2, refine_every=2, reset_every=4, refine_stop_iter=7, grow_grad2d=1e9)
+    m = _model([0.05] * 20, [0.5] * 20)
+    with torch.no_grad():  # half of them behind the camera: never visible
+        m.params["means"][10:, 2] = -5.0
+    opt = make_optimizer(m, Config(), 1.0)
+    st = s.initialize_state(len(m), "cpu")
+    V, K = torch.eye(4), torch.tensor([[30.0, 0, 16], [0, 30.0, 16], [0, 0, 1]])
+    events = []
+    for step in range(9):
+        out = m.render(V, K, 32, 32)
+        out.image.sum().backward()
+        if step == 0:
+            from warpgs.render import means2d_grad_norm
+            expect = means2d_grad_norm(out, 32, 32)
+        info = s.step_post_backward(m, opt, st, step, out, 32, 32, 1.0)
+        opt.zero_grad()
+        if step == 0:  # the statistic: the norm in normalised device units, counted where visible
+            vis = (out.radii > 0).all(-1)
+            assert torch.allclose(st["grad2d"], torch.where(vis, expect, torch.zeros_like(expect)))
+            assert torch.equal(st["count"], vis.float())
+            assert int(vis[10:].sum()) == 0
+        events.append((step, info["reset"]))
+        if step in (4,):  # refined at step 4 (> start, % every == 0): statistics restart
+            assert float(st["count"].sum()) == 0
+    assert [e for e, r in events if r] == [4]  # reset at 4; 8 is past refine_stop_iter
+    assert math.isclose(float(m.opacities.max()), 0.01, rel_tol=1e-4)
+
+
+def test_contribution_is_the_blending_weight():
+    V, K = torch.eye(4), torch.tensor([[30.0, 0, 16], [0, 30.0, 16], [0, 0, 1]])
+
+    Cam = SimpleNamespace(viewmat=V, K=K, width=32, height=32)
+
+    m = _model([0.3, 0.3, 0.3], [0.7, 0.7, 0.7], seed=3)
+    with torch.no_grad():
+        m.params["means"][:] = torch.tensor([[0.0, 0, 4], [0.3, 0, 5], [0.0, 0, -4]])  # last: behind
+    w = contribution(m, [Cam, Cam])
+    # with white colours on black the image is the accumulated alpha = sum of all weights
+    alpha = m.render(V, K, 32, 32, sh_degree=None).alpha  # sh path irrelevant for alpha
+    assert torch.allclose(w.sum(), 2 * alpha.sum(), rtol=1e-4)
+    assert float(w[2]) == 0.0 and float(w[0]) > float(w[1]) > 0
+    # a lone Gaussian: its weight is its alpha image
+    one = _model([0.3], [0.7], seed=3)
+    with torch.no_grad():
+        one.params["means"][:] = torch.tensor([[0.1, 0.0, 4.0]])
+    assert torch.allclose(contribution(one, [Cam])[0], one.render(V, K, 32, 32).alpha.sum(), rtol=1e-5)
+
+
+def test_compact_drops_unseen_and_transparent():
+    V, K = torch.eye(4), torch.tensor([[30.0, 0, 16], [0, 30.0, 16], [0, 0, 1]])
+
+    Cam = SimpleNamespace(viewmat=V, K=K, width=32, height=32)
+
+    s = DefaultStrategy(prune_opa=0.005, compact_min_weight=0.05)
+    m = _model([0.3, 0.3, 0.3, 0.3], [0.7, 0.7, 0.003, 0.7], seed=4)
+    with torch.no_grad():
+        m.params["means"][:] = torch.tensor([[0.0, 0, 4], [0.0, 0, -4], [0.2, 0, 4], [50.0, 0, 4]])
+    opt = make_optimizer(m, Config(), 1.0)
+    st = s.initialize_state(4, "cpu")
+    keep = m.params["means"][0].detach().clone()
+    assert s.compact(m, opt, st, [Cam]) == 3  # behind, transparent, off-screen
+    assert len(m) == 1 and torch.equal(m.params["means"][0], keep)
+    assert st["grad2d"].shape == (1,)
+
+
+@pytest.mark.parametrize("q", [[1.0, 0, 0, 0], [0.7, 0.1, -0.5, 0.3]])
+def test_quat_to_rotmat_is_a_rotation(q):
+    q = torch.nn.functional.normalize(torch.tensor(q), dim=0)
+    R = quat_to_rotmat(q[None])[0]
+    assert torch.allclose(R @ R.T, torch.eye(3), atol=1e-6)
+    assert math.isclose(float(torch.det(R)), 1.0, rel_tol=1e-6)
+    # rotating by q: v' = q v q*, checked on the x axis
+    w, x, y, z = q.tolist()
+    vx = torch.tensor([1 - 2 * (y * y + z * z), 2 * (x * y + w * z), 2 * (x * z - w * y)])
+    assert torch.allclose(R[:, 0], vx, atol=1e-6)

@@ -1,0 +1,93 @@
+"""A tiny ground-truth scene for the training tests: Gaussians rendered by the rasterizer from known cameras.
+
+The ground truth is a cluster of coloured Gaussians around the origin; cameras sit on a circle of
+radius 4 looking at it. Images are tiny (48x48 by default) so that a few hundred training steps take
+seconds on one CPU thread.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from warpgs.data.scene import Camera, Scene, make_camera
+from warpgs.render import rasterize
+
+
+def look_at_c2w(eye, target=(0.0, 0.0, 0.0), up=(0.0, -1.0, 0.0)) -> np.ndarray:
+    """OpenCV camera-to-world (x right, y down, z forward) at ``eye`` looking at ``target``."""
+    eye, target, up = (np.asarray(v, np.float64) for v in (eye, target, up))
+    z = target - eye
+    z /= np.linalg.norm(z)
+    x = np.cross(z, up)
+    x /= np.linalg.norm(x)
+    y = np.cross(z, x)
+    c2w = np.eye(4)
+    c2w[:3, :3] = np.stack([x, y, z], 1)
+    c2w[:3, 3] = eye
+    return c2w
+
+
+def gt_gaussians(n: int = 40, seed: int = 0):
+    g = torch.Generator().manual_seed(seed)
+    means = (torch.rand(n, 3, generator=g) * 2 - 1) * 0.9
+    quats = torch.randn(n, 4, generator=g)
+    scales = 0.12 + 0.18 * torch.rand(n, 3, generator=g)
+    opac = 0.6 + 0.35 * torch.rand(n, generator=g)
+    colors = torch.rand(n, 3, generator=g)
+    return means, quats, scales, opac, colors
+
+
+def camera_ring(angles_deg, radius=4.0, height=-0.8):
+    return [look_at_c2w((radius * math.sin(math.radians(a)), height, -radius * math.cos(math.radians(a))))
+            for a in angles_deg]
+
+
+def render_views(c2ws, width, height, focal, gaussians, prefix, background=(0.0, 0.0, 0.0)) -> list[Camera]:
+    K = np.array([[focal, 0, width / 2], [0, focal, height / 2], [0, 0, 1]], np.float64)
+    bg = torch.tensor(background, dtype=torch.float32)
+    cams = []
+    for i, c2w in enumerate(c2ws):
+        V = torch.tensor(np.linalg.inv(c2w), dtype=torch.float32)
+        img = rasterize(*gaussians, V, torch.tensor(K, dtype=torch.float32), width, height, background=bg).image
+        cams.append(make_camera(f"{prefix}{i:02d}", c2w, K, img.numpy().astype(np.float32)))
+    return cams
+
+
+def make_scene(width=48, height=48, train_angles=(0, 35, 70), test_angles=(18, 52), seed=0, masked=False) -> Scene:
+    gs = gt_gaussians(seed=seed)
+    focal = 1.1 * width
+    train = render_views(camera_ring(train_angles), width, height, focal, gs, "train")
+    test = render_views(camera_ring(test_angles), width, height, focal, gs, "test")
+    if masked:
+        for c in train + test:
+            c.mask = np.zeros((height, width), bool)
+            c.mask[height // 4: 3 * height // 4, width // 4: 3 * width // 4] = True
+    return Scene(name="tiny", train=train, test=test, bounds=(2.5, 5.5), eval_masked=masked)
+
+
+def write_nerfstudio(folder: Path, n_frames: int = 10) -> Path:
+    """Writes frames on a ring as a nerfstudio capture (transforms.json + PNGs) the loaders read."""
+    from PIL import Image
+
+    folder = Path(folder)
+    (folder / "images").mkdir(parents=True, exist_ok=True)
+    gs = gt_gaussians()
+    c2ws = camera_ring(np.linspace(0, 80, n_frames))
+    w = h = 48
+    focal = 1.1 * w
+    cams = render_views(c2ws, w, h, focal, gs, "frame")
+    frames = []
+    for i, (cam, c2w) in enumerate(zip(cams, c2ws)):
+        Image.fromarray((np.clip(cam.image, 0, 1) * 255 + 0.5).astype(np.uint8)).save(folder / "images" / f"f{i:03d}.png")
+        gl = c2w.copy()
+        gl[:3, 1:3] *= -1  # OpenCV -> OpenGL axes
+        frames.append({"file_path": f"images/f{i:03d}.png", "transform_matrix": gl.tolist()})
+    meta = {"w": w, "h": h, "fl_x": focal, "fl_y": focal, "cx": w / 2, "cy": h / 2, "camera_model": "OPENCV",
+            "frames": frames}
+    (folder / "transforms.json").write_text(json.dumps(meta))
+    return folder
