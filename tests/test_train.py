@@ -219,7 +219,7 @@ def test_cli_runs_resumes_and_writes_outputs(tmp_path, capsys):
 
     data = write_nerfstudio(tmp_path / "scene")
     out = tmp_path / "out"
-    common = ["--data", str(data), "--views", "3", "--device", "cpu", "--no-progress",
+    common = ["--data", str(data), "--views", "3", "--device", "cpu", "--no-progress", "--method", "baseline",
               "--set", "model.init=box", "--set", "model.init_box=[-1.2,-1.2,-1.2,1.2,1.2,1.2]",
               "--set", "model.init_num=200", "--set", f"eval.lpips_weights={tmp_path / 'none.pth'}",
               "--set", "eval.fps_repeats=1"]

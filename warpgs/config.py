@@ -85,6 +85,8 @@ class TrainConfig:
     sh_degree_interval: int = 1000  # raise the rendered SH degree every this many steps
     checkpoint_every: int = 1000  # 0 = only at the end (and on Ctrl-C)
     background: list | None = None  # [r, g, b]; None: white if the scene says so, else black
+    random_background: bool = False  # views with an alpha channel: a random background each step (no floaters
+                                     # that mimic the background colour); evaluation keeps ``background``
     compact: bool = False  # at the end, drop Gaussians no training view needs (costs novel-view PSNR)
     max_nan_steps: int = 20  # give up after this many consecutive non-finite steps
     cpu_threads: int = 1  # torch threads on the CPU (0: torch's default); Warp's CPU kernels use one anyway
@@ -99,6 +101,32 @@ class EvalConfig:
 
 
 @dataclass
+class FullConfig:
+    """The generation-guided method (``method: full``; warpgs/pipelines/full.py). Loss weights are the
+    paper's (w4 LPIPS 1.0, w5 D-SSIM 0.2, w6 depth 1.0 on pseudo views, scaled by pseudo_weight)."""
+
+    cycles: int = 2  # pseudo-view updates (the paper: refinement cycles of 10K iterations)
+    baseline_fraction: float = 0.4  # share of train.iterations before the first pseudo-view update
+    pseudo_weight: float = 0.2  # scale of the pseudo-view loss (SYN3R: 0.05 for LLFF/DTU, 0.2 for DL3DV)
+    lpips_weight: float = 1.0  # w4
+    ssim_weight: float = 0.2  # w5
+    depth_weight: float = 1.0  # w6, Pearson against the plane-sweep depth where it is confident
+    input_depth_weight: float = 1.0  # w3 on the inputs, against their plane-sweep depth (never the loader's)
+    pseudo_loss: str = "lpips"  # lpips | l1 (ablation; also the fallback when LPIPS weights are absent)
+    guidance: str = "warped"  # warped | render (ablation: 3D-GS renders instead of warped guidance)
+    geometric: bool = True  # uncertainty's geometric term (ablation: false)
+    photometric: bool = True  # uncertainty's photometric term (ablation: false)
+    densify: bool = True  # densification from pseudo views (ablation: false)
+    point_filter: bool = True  # statistical outlier removal of the stereo cloud (ablation: false)
+    n_frames: int = 9  # poses per trajectory, both inputs included (SVD: 25)
+    init_opacity: float = 0.1  # opacity of the Gaussians densification adds
+    max_new: int = 0  # cap on Gaussians added per cycle (0: none)
+    flythrough_frames: int = 24  # frames per trajectory in flythrough.gif
+    pseudo: dict = field(default_factory=dict)  # overrides of configs/pseudo.yaml, e.g. {sampler: {steps: 10}}
+    densify_config: dict = field(default_factory=dict)  # overrides of configs/densify.yaml
+
+
+@dataclass
 class Config:
     method: str = "baseline"
     out: str = "outputs/sparse"
@@ -109,6 +137,7 @@ class Config:
     strategy: DefaultStrategy = field(default_factory=DefaultStrategy)
     train: TrainConfig = field(default_factory=TrainConfig)
     eval: EvalConfig = field(default_factory=EvalConfig)
+    full: FullConfig = field(default_factory=FullConfig)
 
 
 # ----------------------------------------------------------------------------------------------

@@ -20,6 +20,7 @@ stops at once, keeping the last checkpoint.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import os
@@ -210,7 +211,12 @@ class Trainer:
             if g["name"] == "means":
                 g["lr"] = self.means_lr(step)
         cam = self.train_cams[self.next_view()]
-        out = self.model.render(cam.viewmat, cam.K, cam.width, cam.height, background=self.background)
+        bg = self.background
+        if self.cfg.train.random_background and cam.alpha is not None:
+            # target over a random colour: image = rgb a + bg (1 - a)  ->  image + (1 - a) (new_bg - bg)
+            bg = torch.rand(3, device=self.device, generator=self.split_gen)
+            cam = dataclasses.replace(cam, image=cam.image + (1 - cam.alpha)[..., None] * (bg - self.background))
+        out = self.model.render(cam.viewmat, cam.K, cam.width, cam.height, background=bg)
         loss, parts = self.compute_loss(out, cam)
         loss.backward()
         # one device sync for the whole guard: the loss and every gradient must be finite

@@ -73,10 +73,11 @@ def load_blender(
         h, w = rgb.shape[:2]
         f = 0.5 * w / math.tan(0.5 * float(meta["camera_angle_x"]))
         rgb = downsample(rgb, factor)
-        mask = None if alpha is None else downsample(alpha, factor) > 0.5
+        alpha = None if alpha is None else downsample(alpha, factor)
+        mask = None if alpha is None else alpha > 0.5
         s = rgb.shape[1] / w
         K = intrinsics(f * s, f * s, rgb.shape[1] / 2.0, rgb.shape[0] / 2.0)
-        return make_camera(Path(fr["file_path"]).stem, c2w, K, rgb, mask, image_path=p)
+        return make_camera(Path(fr["file_path"]).stem, c2w, K, rgb, mask, image_path=p, alpha=alpha)
 
     by_num = {_frame_number(fr["file_path"]): fr for fr in train_meta["frames"]}
     train = []

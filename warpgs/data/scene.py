@@ -36,6 +36,7 @@ class Camera:
     mask: np.ndarray | None = None  # (H, W) bool, True = inside the object / valid
     depth: np.ndarray | None = None  # (H, W) float32 z-depth along the camera axis; 0 = unknown
     image_path: str | None = None
+    alpha: np.ndarray | None = None  # (H, W) float32 opacity of an RGBA source (image is composited over the scene's background)
 
     @property
     def c2w(self) -> np.ndarray:
@@ -78,6 +79,7 @@ class Camera:
             image=t(self.image, torch.float32),
             mask=t(self.mask, torch.bool),
             depth=t(self.depth, torch.float32),
+            alpha=t(self.alpha, torch.float32),
         )
 
 
@@ -93,6 +95,7 @@ class CameraTensors:
     image: Any
     mask: Any = None
     depth: Any = None
+    alpha: Any = None
 
 
 @dataclass
@@ -184,6 +187,7 @@ def make_camera(
     mask: np.ndarray | None = None,
     depth: np.ndarray | None = None,
     image_path: str | Path | None = None,
+    alpha: np.ndarray | None = None,
 ) -> Camera:
     """Builds a ``Camera`` from an OpenCV camera-to-world pose (float64 in, float32 stored)."""
     h, w = image.shape[:2]
@@ -199,6 +203,7 @@ def make_camera(
         mask=mask,
         depth=None if depth is None else depth.astype(np.float32),
         image_path=None if image_path is None else str(image_path),
+        alpha=None if alpha is None else np.asarray(alpha, np.float32),
     )
 
 

@@ -1,9 +1,15 @@
 """Main job: sparse-view 3D Gaussian Splatting, ``python -m warpgs.pipelines.sparse``.
 
-With no arguments it trains the baseline on the embedded synthetic scene (3 views at 128x96, a few
-minutes on a 2-core CPU) and prints its test metrics. Examples:
+With no arguments it runs the embedded synthetic scene (3 views at 128x96) with the plain 3D-GS
+baseline and with the full generation-guided method, at equal iterations, and prints them side by side
+(a few minutes on a 2-core CPU). Methods: ``baseline`` (3D-GS on the inputs), ``full`` (the paper's
+loop: pseudo views, densification from them, training on both), ``compare`` (both; the default).
+Examples:
 
-    python -m warpgs.pipelines.sparse                                   # synthetic, 3 views, CPU-sized
+    python -m warpgs.pipelines.sparse                                   # synthetic, 3 views, compare
+    python -m warpgs.pipelines.sparse --data dl3dv --views 9 --method full --device cuda
+    python -m warpgs.pipelines.sparse --data llff --method compare --cycles 2
+    python -m warpgs.pipelines.sparse --method full --ablation no_densify --ablation l1_pseudo
     python -m warpgs.pipelines.sparse --data llff --views 3 --device cuda
     python -m warpgs.pipelines.sparse --data blender --iterations 10000 --out outputs/lego
     python -m warpgs.pipelines.sparse --data /path/to/scene --set strategy.max_gaussians=200000
@@ -19,14 +25,17 @@ metrics.json, test/NNN_<view>.png (render | ground truth) and point_cloud.ply (3
 from __future__ import annotations
 
 import argparse
+import copy
+import json
 import sys
 from pathlib import Path
 
 import torch
 
 from warpgs.config import CONFIG_DIR, ConfigError, build_config, parse_override, read_yaml, save_config
+from warpgs.pipelines.full import ABLATIONS
 
-METHODS = ("baseline",)
+METHODS = ("baseline", "full", "compare")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -37,7 +46,10 @@ def build_parser() -> argparse.ArgumentParser:
     add_data_args(ap)
     ap.set_defaults(data=None)  # None: the config's data.name (synthetic by default)
     g = ap.add_argument_group("run")
-    g.add_argument("--method", default=None, help=f"training method: {', '.join(METHODS)} (default: baseline)")
+    g.add_argument("--method", default=None, help=f"training method: {', '.join(METHODS)} (default: compare)")
+    g.add_argument("--cycles", type=int, default=None, help="pseudo-view cycles of the full method")
+    g.add_argument("--ablation", action="append", default=[], metavar="NAME",
+                   help="switch of the paper's Table 4 (repeatable): " + ", ".join(ABLATIONS))
     g.add_argument("--config", action="append", default=[], metavar="FILE", help="extra YAML config (repeatable)")
     g.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                    help="override a config value, e.g. --set strategy.max_gaussians=20000 (repeatable)")
@@ -82,8 +94,15 @@ def flag_layer(args) -> dict:
         train["progress"] = False
     if train:
         layer["train"] = train
-    if args.method is not None:
-        layer["method"] = args.method
+    full = {}
+    if args.cycles is not None:
+        full["cycles"] = args.cycles
+    for name in args.ablation:
+        if name not in ABLATIONS:
+            raise ConfigError(f"--ablation {name!r}: available ablations are {', '.join(ABLATIONS)}")
+        full.update(ABLATIONS[name])
+    if full:
+        layer["full"] = full
     if args.out is not None:
         layer["out"] = args.out
     return layer
@@ -97,14 +116,17 @@ def make_config(args):
         if not str(resume_dir) or str(resume_dir) == ".":
             raise ConfigError("--resume needs a folder: --resume DIR (or --out DIR)")
         ck = resume_dir / "checkpoint.pt"
-        if not ck.is_file():
+        if ck.is_file():
+            base = [torch.load(ck, map_location="cpu", weights_only=False)["config"], {"out": str(resume_dir)}]
+        elif (resume_dir / "config.yaml").is_file():  # a compare run: each method has its own checkpoint
+            base = [read_yaml(resume_dir / "config.yaml"), {"out": str(resume_dir)}]
+        else:
             raise ConfigError(f"--resume: {ck} does not exist; nothing to resume")
-        base = [torch.load(ck, map_location="cpu", weights_only=False)["config"], {"out": str(resume_dir)}]
     else:
-        method = args.method or "baseline"
+        method = args.method or "compare"
         if method not in METHODS:
             raise ConfigError(f"--method {method!r}: available methods are {', '.join(METHODS)}")
-        base = [read_yaml(CONFIG_DIR / f"{method}.yaml")]
+        base = [read_yaml(CONFIG_DIR / "baseline.yaml"), read_yaml(CONFIG_DIR / "full.yaml"), {"method": method}]
         overlay = dataset_overlay(args.data or "synthetic")
         if overlay is not None:
             base.append(read_yaml(overlay))
@@ -138,27 +160,20 @@ def print_metrics(m: dict, out: Path) -> None:
     print(f"  wrote {out / 'metrics.json'}, {out / 'point_cloud.ply'}, {out / 'test'}/")
 
 
-def main(argv=None) -> int:
-    from warpgs.data.scene import SceneError
+def run_method(method: str, cfg, scene, out: Path, resume: bool, baseline_metrics: dict | None = None,
+               resume_hint: str | None = None):
+    """Trains one method into ``out``; returns its metrics, or an exit code when it stopped early."""
+    from warpgs.pipelines.full import GenerativeTrainer, finish_full, train_full
     from warpgs.train import Trainer, TrainingDiverged, TrainingInterrupted
 
-    args = build_parser().parse_args(argv)
+    cfg = copy.deepcopy(cfg)
+    cfg.method = method
     try:
-        cfg, resume_dir = make_config(args)
-        scene = load_scene_for(cfg)
-    except (ConfigError, SceneError) as e:
-        print(f"error: {e}", file=sys.stderr)
-        return 2
-    if args.out is None and resume_dir is None and cfg.out == "outputs/sparse":
-        cfg.out = f"outputs/{cfg.method}/{scene.name}_{len(scene.train)}v"
-    out = Path(cfg.out)
-    print(f"warpgs: {scene.summary()}", file=sys.stderr)
-    try:
-        trainer = Trainer(cfg, scene, out)
+        trainer = GenerativeTrainer(cfg, scene, out) if method == "full" else Trainer(cfg, scene, out)
     except (RuntimeError, ValueError) as e:
         print(f"error: {e}", file=sys.stderr)
         return 2
-    if resume_dir is not None:
+    if resume and (out / "checkpoint.pt").is_file():
         trainer.load_checkpoint()
         print(f"warpgs: resumed {out / 'checkpoint.pt'} at step {trainer.step} of {cfg.train.iterations}",
               file=sys.stderr)
@@ -166,20 +181,74 @@ def main(argv=None) -> int:
         print(f"warpgs: {out} holds an earlier run; starting over (use --resume to continue it)", file=sys.stderr)
     out.mkdir(parents=True, exist_ok=True)
     save_config(cfg, out / "config.yaml")
+    resume_hint = resume_hint or f"--resume {out}"
     try:
-        trainer.train()
+        train_full(trainer) if method == "full" else trainer.train()
     except TrainingInterrupted as e:
         print(f"\nwarpgs: stopped at step {e.step}; checkpoint {e.checkpoint}. Continue with:\n"
-              f"  python -m warpgs.pipelines.sparse --resume {out}", file=sys.stderr)
+              f"  python -m warpgs.pipelines.sparse {resume_hint}", file=sys.stderr)
         return 130
     except KeyboardInterrupt:
-        print(f"\nwarpgs: stopped; the last checkpoint in {out} is intact (--resume {out})", file=sys.stderr)
+        print(f"\nwarpgs: stopped; the last checkpoint in {out} is intact ({resume_hint})", file=sys.stderr)
         return 130
     except TrainingDiverged as e:
         print(f"error: {e}", file=sys.stderr)
         return 1
-    metrics = trainer.finish()
+    metrics = finish_full(trainer, baseline_metrics) if method == "full" else trainer.finish()
     print_metrics(metrics, out)
+    return metrics
+
+
+def print_side_by_side(base: dict, full: dict, out: Path) -> None:
+    def f(v, fmt):
+        return "n/a" if v is None else format(v, fmt)
+
+    rows = [("test PSNR", "psnr", ".2f"), ("test SSIM", "ssim", ".3f"), ("test LPIPS", "lpips", ".3f"),
+            ("Gaussians", "num_gaussians", "d"), ("training time (s)", "train_time_s", ".1f"),
+            ("render FPS", "render_fps", ".1f")]
+    print(f"\n{base['scene']}: {base['train_views']} views, {base['iterations']} iterations each")
+    print(f"  {'':<20}{'baseline':>12}{'full':>12}{'gain':>10}")
+    for label, key, fmt in rows:
+        b, g = base.get(key), full.get(key)
+        gain = f(g - b, "+.2f" if fmt != "d" else "+d") if b is not None and g is not None else ""
+        print(f"  {label:<20}{f(b, fmt):>12}{f(g, fmt):>12}{gain:>10}")
+    if full.get("pseudo_loss") == "l1" and full.get("full", {}).get("pseudo_loss") == "lpips":
+        print("  (pseudo views trained with L1: no LPIPS weights here; see metrics.json)")
+    table = {"baseline": {k: base.get(k) for _, k, _ in rows}, "full": {k: full.get(k) for _, k, _ in rows},
+             "psnr_gain": (full["psnr"] - base["psnr"]) if full.get("psnr") is not None and base.get("psnr") is not None
+             else None, "scene": base["scene"], "iterations": base["iterations"]}
+    (out / "comparison.json").write_text(json.dumps(table, indent=2))
+    print(f"  wrote {out / 'comparison.json'}, {out / 'full' / 'report.md'}")
+
+
+def main(argv=None) -> int:
+    from warpgs.data.scene import SceneError
+
+    args = build_parser().parse_args(argv)
+    try:
+        cfg, resume_dir = make_config(args)
+        scene = load_scene_for(cfg)
+    except (ConfigError, SceneError, ValueError) as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 2
+    if args.out is None and resume_dir is None and cfg.out == "outputs/sparse":
+        cfg.out = f"outputs/{cfg.method}/{scene.name}_{len(scene.train)}v"
+    out = Path(cfg.out)
+    resume = resume_dir is not None
+    print(f"warpgs: {scene.summary()}", file=sys.stderr)
+    if cfg.method != "compare":
+        result = run_method(cfg.method, cfg, scene, out, resume)
+        return result if isinstance(result, int) else 0
+    out.mkdir(parents=True, exist_ok=True)
+    save_config(cfg, out / "config.yaml")
+    hint = f"--resume {out}"
+    base = run_method("baseline", cfg, scene, out / "baseline", resume, resume_hint=hint)
+    if isinstance(base, int):
+        return base
+    full = run_method("full", cfg, scene, out / "full", resume, baseline_metrics=base, resume_hint=hint)
+    if isinstance(full, int):
+        return full
+    print_side_by_side(base, full, out)
     return 0
 
 
