@@ -55,7 +55,7 @@ if [ ! -x "$WARPGS_VENV/bin/python" ] || [ "$(cat "$_stamp" 2>/dev/null)" != "$_
   # LPIPS: the lpips package declares torchvision, whose PyPI build would replace the CPU torch; warpgs
   # needs only lpips's code (it supplies AlexNet's layout itself), so install it without dependencies.
   "${_pip[@]}" --no-deps "lpips>=0.1.4" 2>&1 | grep -v -e '^WARNING: Location' >&2 || true
-  "${_pip[@]}" "scipy>=1.8" 2>&1 | grep -v -e '^WARNING: Location' >&2 || true
+  "${_pip[@]}" "scipy>=1.8" 2>&1 | grep -v -e '^WARNING: Location' -e "dependency resolver" -e 'requires torchvision' >&2 || true
   "$WARPGS_VENV/bin/python" -c 'import warpgs, warp, torch, open3d, kornia, trimesh' \
     || { _say "installation incomplete (see the messages above)"; exit 1; }
   echo "$_want" > "$_stamp"

@@ -113,6 +113,84 @@ def splat_sigma(s: splat, px: float, py: float) -> float:
     return 0.5 * (s[2] * dx * dx + s[4] * dy * dy) + s[3] * dx * dy
 
 
+# per-Gaussian gradient of one pixel: means2d (2) | conic (3) | opacity | colour (3) | depth
+grad10 = wp.types.vector(length=10, dtype=wp.float32)
+
+
+@wp.func
+def pixel_grad_inputs(inside: bool, pix: int, start: int, last_count: wp.array(dtype=wp.int32),
+                      out_depth: wp.array(dtype=float), out_alpha: wp.array(dtype=float),
+                      v_out_color: wp.array(dtype=wp.vec3), v_out_depth: wp.array(dtype=float),
+                      v_out_alpha: wp.array(dtype=float)):
+    """-> (Gaussians composited, final T, dL/dcolour, dL/d(accumulated depth D = sum w_i z_i), dL/dalpha)."""
+    last = start
+    T_final = float(1.0)
+    vC = wp.vec3(0.0)
+    vD = float(0.0)
+    vA = float(0.0)
+    if inside:
+        last = last_count[pix]
+        A = out_alpha[pix]
+        T_final = 1.0 - A
+        vC = v_out_color[pix]
+        vA = v_out_alpha[pix]
+        if A > DEPTH_ALPHA_MIN:
+            # expected depth E = D / A: dL/dD = v_E / A, dL/dA += -v_E E / A
+            vE = v_out_depth[pix]
+            vD = vE / A
+            vA = vA - vE * out_depth[pix] / A
+    return last, T_final, vC, vD, vA
+
+
+@wp.func
+def splat_backward(s: splat, px: float, py: float, alpha_max: float, T: float, S_c: wp.vec3, S_d: float,
+                   vC: wp.vec3, vD: float, vA_bg: float, T_final: float):
+    """One Gaussian of a pixel, back to front: -> (valid, T in front of it, S_c, S_d, its gradient).
+    S_c, S_d: sums over the Gaussians behind of w_j c_j and w_j z_j; vA_bg = dL/dA - background . dL/dC."""
+    g = grad10()
+    dx = s[0] - px
+    dy = s[1] - py
+    sigma = 0.5 * (s[2] * dx * dx + s[4] * dy * dy) + s[3] * dx * dy
+    o = s[5]
+    vis = wp.exp(-sigma)
+    alpha = wp.min(alpha_max, o * vis)
+    if sigma < 0.0 or alpha < ALPHA_MIN:
+        return int(0), T, S_c, S_d, g
+    ra = 1.0 / (1.0 - alpha)
+    T = T * ra
+    fac = alpha * T
+    c = wp.vec3(s[6], s[7], s[8])
+    z = s[9]
+    v_alpha = (wp.dot(c, vC) * T - wp.dot(S_c, vC) * ra) + (z * T - S_d * ra) * vD + T_final * ra * vA_bg
+    S_c = S_c + fac * c
+    S_d = S_d + fac * z
+    v_sigma = float(0.0)
+    vop = float(0.0)
+    if o * vis <= alpha_max:  # the alpha clamp passes no gradient
+        v_sigma = -o * vis * v_alpha
+        vop = vis * v_alpha
+    g = grad10(v_sigma * (s[2] * dx + s[3] * dy), v_sigma * (s[3] * dx + s[4] * dy),
+               0.5 * v_sigma * dx * dx, v_sigma * dx * dy, 0.5 * v_sigma * dy * dy, vop,
+               fac * vC[0], fac * vC[1], fac * vC[2], fac * vD)
+    return int(1), T, S_c, S_d, g
+
+
+@wp.func
+def accumulate_grad(valid: int, gid: int, g: grad10, v_means2d: wp.array(dtype=wp.vec2),
+                    v_conics: wp.array(dtype=wp.vec3), v_opacities: wp.array(dtype=float),
+                    v_colors: wp.array(dtype=wp.vec3), v_depths: wp.array(dtype=float)):
+    """Sums a Gaussian's gradient over the warp (CUDA) and adds it once; every lane must call this."""
+    if warp_any(valid) != 0:
+        r = grad10(warp_sum(g[0]), warp_sum(g[1]), warp_sum(g[2]), warp_sum(g[3]), warp_sum(g[4]),
+                   warp_sum(g[5]), warp_sum(g[6]), warp_sum(g[7]), warp_sum(g[8]), warp_sum(g[9]))
+        if warp_leader() != 0:
+            wp.atomic_add(v_means2d, gid, wp.vec2(r[0], r[1]))
+            wp.atomic_add(v_conics, gid, wp.vec3(r[2], r[3], r[4]))
+            wp.atomic_add(v_opacities, gid, r[5])
+            wp.atomic_add(v_colors, gid, wp.vec3(r[6], r[7], r[8]))
+            wp.atomic_add(v_depths, gid, r[9])
+
+
 @wp.kernel
 def rasterize_fwd(
     ranges: wp.array2d(dtype=wp.int32),
@@ -197,26 +275,12 @@ def rasterize_bwd(
     px = float(x) + 0.5
     py = float(y) + 0.5
 
-    last = start
-    T_final = float(1.0)
-    vC = wp.vec3(0.0)
-    vD = float(0.0)  # gradient of the accumulated depth D = sum w_i z_i
-    vA = float(0.0)
-    if inside:
-        last = last_count[pix]
-        A = out_alpha[pix]
-        T_final = 1.0 - A
-        vC = v_out_color[pix]
-        vA = v_out_alpha[pix]
-        if A > DEPTH_ALPHA_MIN:
-            # expected depth E = D / A: dL/dD = v_E / A, dL/dA += -v_E E / A
-            vE = v_out_depth[pix]
-            vD = vE / A
-            vA = vA - vE * out_depth[pix] / A
-    bg_dot = wp.dot(background[0], vC)
+    last, T_final, vC, vD, vA = pixel_grad_inputs(inside, pix, start, last_count, out_depth, out_alpha,
+                                                  v_out_color, v_out_depth, v_out_alpha)
+    vA_bg = vA - wp.dot(background[0], vC)
     T = T_final
-    S_c = wp.vec3(0.0)  # sum over Gaussians behind of w_j c_j
-    S_d = float(0.0)  # sum over Gaussians behind of w_j z_j
+    S_c = wp.vec3(0.0)
+    S_d = float(0.0)
 
     bound = warp_max(last)
     g_nxt = int(0)
@@ -232,48 +296,10 @@ def rasterize_bwd(
             g_nxt = gauss_ids[k - 1]
             s_nxt = splats[g_nxt]
         valid = int(0)
-        vm2 = wp.vec2(0.0)
-        vcon = wp.vec3(0.0)
-        vcol = wp.vec3(0.0)
-        vop = float(0.0)
-        vdep = float(0.0)
+        grad = grad10()
         if inside and k < last:
-            dx = s[0] - px
-            dy = s[1] - py
-            sigma = 0.5 * (s[2] * dx * dx + s[4] * dy * dy) + s[3] * dx * dy
-            o = s[5]
-            vis = wp.exp(-sigma)
-            alpha = wp.min(alpha_max, o * vis)
-            if sigma >= 0.0 and alpha >= ALPHA_MIN:
-                valid = 1
-                ra = 1.0 / (1.0 - alpha)
-                T = T * ra
-                fac = alpha * T
-                c = wp.vec3(s[6], s[7], s[8])
-                z = s[9]
-                vcol = fac * vC
-                vdep = fac * vD
-                v_alpha = (wp.dot(c, vC) * T - wp.dot(S_c, vC) * ra) + (z * T - S_d * ra) * vD
-                v_alpha = v_alpha + T_final * ra * (vA - bg_dot)
-                S_c = S_c + fac * c
-                S_d = S_d + fac * z
-                if o * vis <= alpha_max:
-                    v_sigma = -o * vis * v_alpha
-                    vcon = wp.vec3(0.5 * v_sigma * dx * dx, v_sigma * dx * dy, 0.5 * v_sigma * dy * dy)
-                    vm2 = v_sigma * wp.vec2(s[2] * dx + s[3] * dy, s[3] * dx + s[4] * dy)
-                    vop = vis * v_alpha
-        if warp_any(valid) != 0:
-            vm2 = wp.vec2(warp_sum(vm2[0]), warp_sum(vm2[1]))
-            vcon = wp.vec3(warp_sum(vcon[0]), warp_sum(vcon[1]), warp_sum(vcon[2]))
-            vcol = wp.vec3(warp_sum(vcol[0]), warp_sum(vcol[1]), warp_sum(vcol[2]))
-            vop = warp_sum(vop)
-            vdep = warp_sum(vdep)
-            if warp_leader() != 0:
-                wp.atomic_add(v_means2d, g, vm2)
-                wp.atomic_add(v_conics, g, vcon)
-                wp.atomic_add(v_colors, g, vcol)
-                wp.atomic_add(v_opacities, g, vop)
-                wp.atomic_add(v_depths, g, vdep)
+            valid, T, S_c, S_d, grad = splat_backward(s, px, py, alpha_max, T, S_c, S_d, vC, vD, vA_bg, T_final)
+        accumulate_grad(valid, g, grad, v_means2d, v_conics, v_opacities, v_colors, v_depths)
 
 
 # ----------------------------------------------------------------------------------------------------
@@ -437,22 +463,9 @@ def rasterize_bwd_cuda(
     px = float(x) + 0.5
     py = float(y) + 0.5
 
-    last = start
-    T_final = float(1.0)
-    vC = wp.vec3(0.0)
-    vD = float(0.0)
-    vA = float(0.0)
-    if inside:
-        last = last_count[pix]
-        A = out_alpha[pix]
-        T_final = 1.0 - A
-        vC = v_out_color[pix]
-        vA = v_out_alpha[pix]
-        if A > DEPTH_ALPHA_MIN:
-            vE = v_out_depth[pix]
-            vD = vE / A
-            vA = vA - vE * out_depth[pix] / A
-    bg_dot = wp.dot(background[0], vC)
+    last, T_final, vC, vD, vA = pixel_grad_inputs(inside, pix, start, last_count, out_depth, out_alpha,
+                                                  v_out_color, v_out_depth, v_out_alpha)
+    vA_bg = vA - wp.dot(background[0], vC)
     T = T_final
     S_c = wp.vec3(0.0)
     S_d = float(0.0)
@@ -471,47 +484,9 @@ def rasterize_bwd_cuda(
         for t in range(t0, count):
             k = k_hi - t
             sg = batch_splat(0, t, splat(), 0)
+            s = splat(sg[0], sg[1], sg[2], sg[3], sg[4], sg[5], sg[6], sg[7], sg[8], sg[9])
             valid = int(0)
-            vm2 = wp.vec2(0.0)
-            vcon = wp.vec3(0.0)
-            vcol = wp.vec3(0.0)
-            vop = float(0.0)
-            vdep = float(0.0)
+            grad = grad10()
             if inside and k < last:
-                dx = sg[0] - px
-                dy = sg[1] - py
-                sigma = 0.5 * (sg[2] * dx * dx + sg[4] * dy * dy) + sg[3] * dx * dy
-                o = sg[5]
-                vis = wp.exp(-sigma)
-                alpha = wp.min(alpha_max, o * vis)
-                if sigma >= 0.0 and alpha >= ALPHA_MIN:
-                    valid = 1
-                    ra = 1.0 / (1.0 - alpha)
-                    T = T * ra
-                    fac = alpha * T
-                    c = wp.vec3(sg[6], sg[7], sg[8])
-                    z = sg[9]
-                    vcol = fac * vC
-                    vdep = fac * vD
-                    v_alpha = (wp.dot(c, vC) * T - wp.dot(S_c, vC) * ra) + (z * T - S_d * ra) * vD
-                    v_alpha = v_alpha + T_final * ra * (vA - bg_dot)
-                    S_c = S_c + fac * c
-                    S_d = S_d + fac * z
-                    if o * vis <= alpha_max:
-                        v_sigma = -o * vis * v_alpha
-                        vcon = wp.vec3(0.5 * v_sigma * dx * dx, v_sigma * dx * dy, 0.5 * v_sigma * dy * dy)
-                        vm2 = v_sigma * wp.vec2(sg[2] * dx + sg[3] * dy, sg[3] * dx + sg[4] * dy)
-                        vop = vis * v_alpha
-            if warp_any(valid) != 0:
-                vm2 = wp.vec2(warp_sum(vm2[0]), warp_sum(vm2[1]))
-                vcon = wp.vec3(warp_sum(vcon[0]), warp_sum(vcon[1]), warp_sum(vcon[2]))
-                vcol = wp.vec3(warp_sum(vcol[0]), warp_sum(vcol[1]), warp_sum(vcol[2]))
-                vop = warp_sum(vop)
-                vdep = warp_sum(vdep)
-                if warp_leader() != 0:
-                    g = float_bits(sg[10])
-                    wp.atomic_add(v_means2d, g, vm2)
-                    wp.atomic_add(v_conics, g, vcon)
-                    wp.atomic_add(v_colors, g, vcol)
-                    wp.atomic_add(v_opacities, g, vop)
-                    wp.atomic_add(v_depths, g, vdep)
+                valid, T, S_c, S_d, grad = splat_backward(s, px, py, alpha_max, T, S_c, S_d, vC, vD, vA_bg, T_final)
+            accumulate_grad(valid, float_bits(sg[10]), grad, v_means2d, v_conics, v_opacities, v_colors, v_depths)
