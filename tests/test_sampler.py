@@ -23,16 +23,6 @@ from warpgs.pseudo.sampler import (
 )
 
 
-@pytest.fixture(autouse=True, scope="module")
-def _one_torch_thread():
-    """Tiny tensors on a shared 2-core machine: torch's intra-op threads only wait on each other when
-    another process holds a core (measured 30x slower); Warp's CPU kernels are single-threaded anyway."""
-    n = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(n)
-
-
 class ToyBackend:
     """Latents = frames [N, 3, H/f, W/f] (average-pooled by f); x0 from a user function."""
 

@@ -23,15 +23,6 @@ from warpgs.pseudo.backends import SVD_ENV, SVD_REPO, SVDBackend, SVDConfig, SVD
 from warpgs.pseudo.sampler import SamplerConfig, karras_sigmas, sample_video  # noqa: E402
 
 
-@pytest.fixture(autouse=True, scope="module")
-def _one_torch_thread():
-    """Tiny tensors on a shared 2-core machine: torch's intra-op threads only wait on each other when
-    another process holds a core (measured 30x slower); Warp's CPU kernels are single-threaded anyway."""
-    n = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(n)
-
 N, S = 4, 32  # frames, pixels
 
 

@@ -24,15 +24,6 @@ from warpgs.pseudo.guidance import (
 from warpgs.render import rasterize
 
 
-@pytest.fixture(autouse=True, scope="module")
-def _one_torch_thread():
-    """Tiny tensors on a shared 2-core machine: torch's intra-op threads only wait on each other when
-    another process holds a core (measured 30x slower); Warp's CPU kernels are single-threaded anyway."""
-    n = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(n)
-
 DEVICES = ["cpu"] + (["cuda"] if torch.cuda.is_available() else [])
 
 

@@ -191,6 +191,19 @@ def accumulate_grad(valid: int, gid: int, g: grad10, v_means2d: wp.array(dtype=w
             wp.atomic_add(v_depths, gid, r[9])
 
 
+@wp.func
+def store_pixel(pix: int, C: wp.vec3, D: float, T: float, n: int, background: wp.vec3,
+                out_color: wp.array(dtype=wp.vec3), out_depth: wp.array(dtype=float),
+                out_alpha: wp.array(dtype=float), last_count: wp.array(dtype=wp.int32)):
+    """Colour over the background, expected depth D / A (0 where A <= 1e-6), alpha A = 1 - T, and the
+    count of Gaussians composited (where the backward pass starts)."""
+    A = 1.0 - T
+    out_color[pix] = C + T * background
+    out_depth[pix] = wp.where(A > DEPTH_ALPHA_MIN, D / A, 0.0)
+    out_alpha[pix] = A
+    last_count[pix] = n
+
+
 @wp.kernel
 def rasterize_fwd(
     ranges: wp.array2d(dtype=wp.int32),
@@ -236,12 +249,7 @@ def rasterize_fwd(
         D = D + w * s[9]
         T = next_T
         n = k + 1
-    pix = y * width + x
-    A = 1.0 - T
-    out_color[pix] = C + T * background[0]
-    out_depth[pix] = wp.where(A > DEPTH_ALPHA_MIN, D / A, 0.0)
-    out_alpha[pix] = A
-    last_count[pix] = n
+    store_pixel(y * width + x, C, D, T, n, background[0], out_color, out_depth, out_alpha, last_count)
 
 
 @wp.kernel
@@ -423,12 +431,7 @@ def rasterize_fwd_cuda(
                         n = k0 + t + 1
         block_sync()
     if inside:
-        pix = y * width + x
-        A = 1.0 - T
-        out_color[pix] = C + T * background[0]
-        out_depth[pix] = wp.where(A > DEPTH_ALPHA_MIN, D / A, 0.0)
-        out_alpha[pix] = A
-        last_count[pix] = n
+        store_pixel(y * width + x, C, D, T, n, background[0], out_color, out_depth, out_alpha, last_count)
 
 
 @wp.kernel
