@@ -107,7 +107,7 @@ class FullConfig:
 
     cycles: int = 2  # pseudo-view updates (the paper: refinement cycles of 10K iterations)
     baseline_fraction: float = 0.4  # share of train.iterations before the first pseudo-view update
-    pseudo_weight: float = 0.2  # scale of the pseudo-view loss (SYN3R: 0.05 for LLFF/DTU, 0.2 for DL3DV)
+    pseudo_weight: float = 1.0  # scale of the pseudo-view loss: 1 = the paper's weights (SYN3R code: 0.05 LLFF/DTU, 0.2 DL3DV)
     lpips_weight: float = 1.0  # w4
     ssim_weight: float = 0.2  # w5
     depth_weight: float = 1.0  # w6, Pearson against the plane-sweep depth where it is confident
