@@ -33,20 +33,23 @@ def pixel_ray(j: int, i: int) -> wp.vec3:
 
 
 @wp.func
-def sample_rgb(img: wp.array3d(dtype=wp.vec3), s: int, x: float, y: float) -> wp.vec3:
-    # bilinear sample of image s at continuous pixel coordinates (x, y), edges clamped
-    h = img.shape[1]
-    w = img.shape[2]
+def bilinear_taps(w: int, h: int, x: float, y: float):
+    # the four neighbouring pixels (clamped to the image) of continuous pixel coordinates (x, y), whose
+    # centres sit at +0.5, and the interpolation weights along x and y
     fx = x - 0.5
     fy = y - 0.5
     x0 = int(wp.floor(fx))
     y0 = int(wp.floor(fy))
-    ax = fx - float(x0)
-    ay = fy - float(y0)
-    xa = wp.clamp(x0, 0, w - 1)
-    xb = wp.clamp(x0 + 1, 0, w - 1)
-    ya = wp.clamp(y0, 0, h - 1)
-    yb = wp.clamp(y0 + 1, 0, h - 1)
+    return (wp.clamp(x0, 0, w - 1), wp.clamp(x0 + 1, 0, w - 1), wp.clamp(y0, 0, h - 1), wp.clamp(y0 + 1, 0, h - 1),
+            fx - float(x0), fy - float(y0))
+
+
+@wp.func
+def sample_rgb(img: wp.array3d(dtype=wp.vec3), s: int, x: float, y: float) -> wp.vec3:
+    # bilinear sample of image s at continuous pixel coordinates (x, y), edges clamped
+    h = img.shape[1]
+    w = img.shape[2]
+    xa, xb, ya, yb, ax, ay = bilinear_taps(w, h, x, y)
     top = img[s, ya, xa] * (1.0 - ax) + img[s, ya, xb] * ax
     bot = img[s, yb, xa] * (1.0 - ax) + img[s, yb, xb] * ax
     return top * (1.0 - ay) + bot * ay
@@ -66,16 +69,7 @@ def sample_depth(depth: wp.array3d(dtype=float), s: int, x: float, y: float, min
     # inverse-depth bilinear sample over valid neighbours; 0 where the valid weight is below 1/2
     h = depth.shape[1]
     w = depth.shape[2]
-    fx = x - 0.5
-    fy = y - 0.5
-    x0 = int(wp.floor(fx))
-    y0 = int(wp.floor(fy))
-    ax = fx - float(x0)
-    ay = fy - float(y0)
-    xa = wp.clamp(x0, 0, w - 1)
-    xb = wp.clamp(x0 + 1, 0, w - 1)
-    ya = wp.clamp(y0, 0, h - 1)
-    yb = wp.clamp(y0 + 1, 0, h - 1)
+    xa, xb, ya, yb, ax, ay = bilinear_taps(w, h, x, y)
     acc = _inv_depth_tap(depth, s, ya, xa, (1.0 - ax) * (1.0 - ay), min_depth)
     acc += _inv_depth_tap(depth, s, ya, xb, ax * (1.0 - ay), min_depth)
     acc += _inv_depth_tap(depth, s, yb, xa, (1.0 - ax) * ay, min_depth)
