@@ -84,6 +84,7 @@ class TrainConfig:
     device: str = "auto"  # auto | cpu | cuda | cuda:N
     sh_degree_interval: int = 1000  # raise the rendered SH degree every this many steps
     checkpoint_every: int = 1000  # 0 = only at the end (and on Ctrl-C)
+    eval_every: int = 0  # test PSNR/SSIM every this many steps into metrics.json's curve (0 = off)
     background: list | None = None  # [r, g, b]; None: white if the scene says so, else black
     random_background: bool = False  # views with an alpha channel: a random background each step (no floaters
                                      # that mimic the background colour); evaluation keeps ``background``

@@ -165,6 +165,7 @@ class Trainer:
         self.train_time = 0.0
         self.losses: list[float] = []
         self.nan_steps = 0
+        self.curve: list[dict] = []  # test metrics every train.eval_every steps (PSNR against time)
         self.initial: dict | None = None
         self.n_before_compaction: int | None = None
         self._stop = False
@@ -264,6 +265,7 @@ class Trainer:
         bar = tqdm(total=total, initial=self.step, desc=f"{self.cfg.method} {self.scene.name}", unit="it",
                    dynamic_ncols=True, disable=not self.cfg.train.progress, file=sys.stderr)
         every = self.cfg.train.checkpoint_every
+        ev_every = self.cfg.train.eval_every
         t0 = time.perf_counter()
         try:
             while self.step < total:
@@ -280,10 +282,23 @@ class Trainer:
                     self.train_time += time.perf_counter() - t0
                     t0 = time.perf_counter()
                     self.save_checkpoint()
+                if ev_every and self.step % ev_every == 0 and self.test_cams:
+                    self.train_time += time.perf_counter() - t0
+                    self.record_curve()
+                    t0 = time.perf_counter()
         finally:
             self.train_time += time.perf_counter() - t0
             bar.close()
             restore()
+
+    def record_curve(self) -> dict:
+        """Appends the test views' PSNR/SSIM now (training time so far, Gaussian count) to ``curve``;
+        evaluation time is not counted as training time."""
+        m = self.evaluate(save_dir=None, lpips=False)["mean"]
+        row = {"step": self.step, "train_time_s": round(self.train_time, 3), "psnr": m["psnr"], "ssim": m["ssim"],
+               "num_gaussians": len(self.model)}
+        self.curve.append(row)
+        return row
 
     def _update_bar(self, bar, info: dict) -> None:
         for k in ("loss", "psnr"):
@@ -332,6 +347,7 @@ class Trainer:
             "torch_rng": torch.get_rng_state(),
             "train_time": self.train_time,
             "losses": list(self.losses),
+            "curve": list(self.curve),
             "initial": self.initial,
             "n_before_compaction": self.n_before_compaction,
         }
@@ -369,6 +385,7 @@ class Trainer:
         self.model.active_sh_degree = min(self.step // max(self.cfg.train.sh_degree_interval, 1), self.model.max_sh_degree)
         self.train_time = float(ck["train_time"])
         self.losses = list(ck["losses"])
+        self.curve = list(ck.get("curve", []))
         self.initial = ck.get("initial")
         self.n_before_compaction = ck.get("n_before_compaction")
 
@@ -450,6 +467,7 @@ class Trainer:
             "seed": self.cfg.train.seed,
             "final_loss": float(np.mean(finite[-50:])) if finite else None,
             "skipped_steps": sum(1 for x in self.losses if not math.isfinite(x)),
+            "curve": self.curve,
             "per_view": ev["views"],
         }
         if "lpips_missing" in ev:
