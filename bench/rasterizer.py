@@ -7,7 +7,8 @@
 Identical inputs for both rasterizers in the same run: N random Gaussians (means uniform in a box
 in front of the camera, random rotations, scales uniform up to 0.02, opacities uniform in [0, 1], RGB
 colours), one pinhole camera (focal = image width). Times are means over --iters runs after warm-up,
-measured with CUDA events; forward+backward backpropagates a fixed random weighting of the image to
+measured with CUDA events; "warpgs" is the default deterministic backward (fixed-point sums),
+"warpgs_float_atomics" the float-atomic one (deterministic=False); forward+backward backpropagates a fixed random weighting of the image to
 means, quats, scales, opacities and colours. Peak memory is torch's allocator peak above the inputs
 plus Warp's memory-pool high-water mark (Warp's radix-sort scratch). The RGB agreement uses gsplat's
 alpha clamp (0.999) in warpgs so that the two compute the same function.
@@ -56,10 +57,10 @@ def grad_inputs(inp):
     return {k: inp[k].clone().requires_grad_(True) for k in ("means", "quats", "scales", "opacities", "colors")}
 
 
-def warpgs_fn(inp, width, height, alpha_max):
+def warpgs_fn(inp, width, height, alpha_max, deterministic=True):
     def fwd(p):
         out = rasterize(p["means"], p["quats"], p["scales"], p["opacities"], p["colors"], inp["viewmat"], inp["K"],
-                        width, height, alpha_max=alpha_max, check_finite=False)
+                        width, height, alpha_max=alpha_max, deterministic=deterministic, check_finite=False)
         return out.image
     return fwd
 
@@ -224,6 +225,8 @@ def main(argv=None):
         row = {"gaussians": n, "width": width, "height": height}
         if device == "cuda":
             row["warpgs"], img_w = measure("warpgs", warpgs_fn(inp, width, height, 0.999), inp, iters, warmup, device)
+            row["warpgs_float_atomics"], _ = measure("warpgs float+", warpgs_fn(inp, width, height, 0.999, False), inp,
+                                                     iters, warmup, device)
             row["gsplat"], img_g = measure("gsplat", gsplat_fn(inp, width, height), inp, iters, warmup, device)
             row["gsplat_rgb_ed"], _ = measure("gsplat RGB+ED", gsplat_fn(inp, width, height, "RGB+ED"), inp, iters,
                                               warmup, device)

@@ -53,6 +53,39 @@ def test_random_box_and_frustum_stay_inside():
     assert (uv[:, 1] >= -1e-3).all() and (uv[:, 1] <= 48 + 1e-3).all()
 
 
+def test_random_hull_lies_inside_every_silhouette():
+    """Silhouettes of a ball (radius 0.6) from three cameras that see the whole box: every initial point projects onto the ball's
+    silhouette in each view, and the points fill the hull (they reach the ball's centre and its rim)."""
+    from tiny_scene import look_at_c2w
+
+    w = h = 40
+    K = np.array([[40.0, 0, 20], [0, 40.0, 20], [0, 0, 1]])
+    viewmats, alphas = [], []
+    for eye in ((0, 0, -4.0), (4.0, 0, 0), (0, -4.0, 0.01)):
+        V = np.linalg.inv(look_at_c2w(eye))
+        # the ball's silhouette: pixels whose ray passes within 0.6 of the origin
+        u, v = np.meshgrid(np.arange(w) + 0.5, np.arange(h) + 0.5)
+        rays = np.stack([(u - 20) / 40, (v - 20) / 40, np.ones_like(u)], -1)
+        rays /= np.linalg.norm(rays, axis=-1, keepdims=True)
+        centre = V[:3, 3]  # the origin in camera coordinates
+        dist = np.linalg.norm(np.cross(rays, centre), axis=-1)
+        viewmats.append(V)
+        alphas.append((dist < 0.6).astype(np.float32))
+    g = torch.Generator().manual_seed(0)
+    m = GaussianModel.random_hull(500, [-1.0] * 3, [1.0] * 3, viewmats, [K] * 3, alphas, dilate=0, generator=g)
+    assert len(m) == 500
+    pts = m.means.detach().numpy().astype(np.float64)
+    for V, a in zip(viewmats, alphas):
+        pc = pts @ V[:3, :3].T + V[:3, 3]
+        uv = pc @ K.T
+        u, v = np.floor(uv[:, 0] / uv[:, 2]).astype(int), np.floor(uv[:, 1] / uv[:, 2]).astype(int)
+        assert (a[v, u] > 0.5).all()
+    r = np.linalg.norm(pts, axis=1)
+    assert r.max() < 0.6 * 1.5 and r.min() < 0.2 and r.max() > 0.55
+    with pytest.raises(ValueError, match="no point"):
+        GaussianModel.random_hull(10, [2.0] * 3, [3.0] * 3, viewmats, [K] * 3, alphas, generator=g)
+
+
 def test_from_points_rejects_bad_input():
     with pytest.raises(ValueError, match="non-empty"):
         GaussianModel.from_points(np.zeros((0, 3)))

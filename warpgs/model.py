@@ -124,6 +124,51 @@ class GaussianModel(nn.Module):
         return cls.from_points(pts, rgb, **kw)
 
     @classmethod
+    def random_hull(cls, num: int, lo, hi, viewmats, Ks, alphas, *, threshold: float = 0.5, dilate: int = 2,
+                    generator: torch.Generator | None = None, **kw) -> "GaussianModel":
+        """``num`` Gaussians uniform in the visual hull of the views' silhouettes inside the box [lo, hi]:
+        box samples kept when every view they project into (in front of it, inside the image) has
+        alpha > ``threshold`` within ``dilate`` pixels there. For object captures with an alpha channel
+        (Blender): the Gaussians start where the inputs say the object can be, not in empty space."""
+        lo = torch.as_tensor(lo, dtype=torch.float32).reshape(3)
+        hi = torch.as_tensor(hi, dtype=torch.float32).reshape(3)
+        if not bool((hi > lo).all()):
+            raise ValueError(f"random_hull: need hi > lo, got lo={lo.tolist()} hi={hi.tolist()}")
+        masks = []
+        for a in alphas:
+            m = torch.as_tensor(np.asarray(a), dtype=torch.float32)[None, None] > threshold
+            if dilate > 0:
+                m = torch.nn.functional.max_pool2d(m.float(), 2 * dilate + 1, stride=1, padding=dilate) > 0
+            masks.append(m[0, 0])
+        Vs = [torch.as_tensor(v, dtype=torch.float32) for v in viewmats]
+        Ks_t = [torch.as_tensor(k, dtype=torch.float32) for k in Ks]
+        kept, have = [], 0
+        for _ in range(200):
+            pts = lo + (hi - lo) * torch.rand(max(4 * num, 4096), 3, generator=generator)
+            ok = torch.ones(len(pts), dtype=torch.bool)
+            for V, K, m in zip(Vs, Ks_t, masks):
+                pc = pts @ V[:3, :3].T + V[:3, 3]
+                z = pc[:, 2]
+                uv = (pc @ K.T)[:, :2] / z.clamp_min(1e-9)[:, None]
+                u, v = uv[:, 0].floor().long(), uv[:, 1].floor().long()
+                seen = (z > 0) & (u >= 0) & (v >= 0) & (u < m.shape[1]) & (v < m.shape[0])
+                inside = torch.zeros_like(ok)
+                inside[seen] = m[v[seen], u[seen]]
+                ok &= ~seen | inside
+            kept.append(pts[ok])
+            have += int(ok.sum())
+            if have >= num:
+                break
+        if have == 0:
+            raise ValueError("random_hull: no point of the box lies inside every silhouette; check the alpha "
+                             "channels, the cameras and model.init_box")
+        pts = torch.cat(kept)[:num]
+        if len(pts) < num:
+            _warn(f"random_hull: the visual hull is a small part of the box; {len(pts)} of {num} points found")
+        rgb = torch.rand(len(pts), 3, generator=generator)
+        return cls.from_points(pts, rgb, **kw)
+
+    @classmethod
     def random_frustum(cls, num: int, viewmats, Ks, sizes, near: float, far: float, *,
                        generator: torch.Generator | None = None, **kw) -> "GaussianModel":
         """``num`` Gaussians inside the cameras' view frusta between depths ``near`` and ``far``: a random

@@ -167,7 +167,7 @@ class _nullcontext:
 class _Composite(torch.autograd.Function):
     @staticmethod
     def forward(ctx, means2d, conics, opac_eff, colors, depths, background, ranges, gauss_ids,
-                width, height, alpha_max):
+                width, height, alpha_max, deterministic):
         dev = device_of(means2d)
         stream = stream_of(dev)
         tiles_x = (width + TILE_SIZE - 1) // TILE_SIZE
@@ -189,29 +189,37 @@ class _Composite(torch.autograd.Function):
             dev, stream,
         )
         ctx.save_for_backward(splats, background, ranges, gauss_ids, depth, alpha, last)
-        ctx.cfg = (width, height, alpha_max)
+        ctx.cfg = (width, height, alpha_max, deterministic)
         return color, depth, alpha
 
     @staticmethod
     def backward(ctx, v_color, v_depth, v_alpha):
         splats, background, ranges, gauss_ids, depth, alpha, last = ctx.saved_tensors
-        width, height, alpha_max = ctx.cfg
+        width, height, alpha_max, deterministic = ctx.cfg
         dev = device_of(splats)
         tiles_x = (width + TILE_SIZE - 1) // TILE_SIZE
         n = splats.shape[0]
+        # the CPU backend runs one thread, so its float sums are deterministic already
+        fixed = bool(deterministic) and (dev != "cpu" or deterministic == "fixed")
         z = dict(device=splats.device, dtype=torch.float32)
-        v_means2d, v_conics, v_colors = torch.zeros(n, 2, **z), torch.zeros(n, 3, **z), torch.zeros(n, 3, **z)
-        v_opac, v_depths = torch.zeros(n, **z), torch.zeros(n, **z)
+        make = torch.empty if fixed else torch.zeros
+        v_means2d, v_conics, v_colors = make(n, 2, **z), make(n, 3, **z), make(n, 3, **z)
+        v_opac, v_depths = make(n, **z), make(n, **z)
+        v_fixed = torch.zeros(n if fixed else 0, 10, device=splats.device, dtype=torch.int64)
         launch(
             kr.rasterize_bwd if dev == "cpu" else kr.rasterize_bwd_cuda, ranges.shape[0] * kr.BLOCK,
             [arg(ranges), arg(gauss_ids), arg(splats, kr.splat), arg(background.reshape(1, 3), wp.vec3),
              width, height, tiles_x, alpha_max, arg(depth.view(-1)), arg(alpha.view(-1)), arg(last.view(-1)),
              arg(_zeros_like_or(v_color, alpha.new_empty(height, width, 3)).view(-1, 3), wp.vec3),
              arg(_zeros_like_or(v_depth, alpha).view(-1)), arg(_zeros_like_or(v_alpha, alpha).view(-1)),
+             int(fixed), arg(v_fixed),
              arg(v_means2d, wp.vec2), arg(v_conics, wp.vec3), arg(v_opac), arg(v_colors, wp.vec3), arg(v_depths)],
             dev, stream_of(dev),
         )
-        return v_means2d, v_conics, v_opac, v_colors, v_depths, None, None, None, None, None, None
+        if fixed and n:
+            launch(kr.fixed_to_grads, n, [arg(v_fixed), arg(v_means2d, wp.vec2), arg(v_conics, wp.vec3), arg(v_opac),
+                                          arg(v_colors, wp.vec3), arg(v_depths)], dev, stream_of(dev))
+        return v_means2d, v_conics, v_opac, v_colors, v_depths, None, None, None, None, None, None, None
 
 
 # ----------------------------------------------------------------------------------------------------
@@ -258,6 +266,7 @@ def rasterize(
     eps2d: float = 0.3,
     antialiased: bool = False,
     alpha_max: float = 0.99,
+    deterministic: bool | str = True,
     check_finite: bool = True,
 ) -> RenderOutput:
     """Render N 3D Gaussians from one pinhole camera.
@@ -273,6 +282,10 @@ def rasterize(
         eps2d: screen-space dilation added to the 2D covariance (0.3 px).
         antialiased: scale opacity by sqrt(det S / det(S + eps2d I)) (gsplat's antialiased mode).
         alpha_max: per-Gaussian alpha clamp (0.99 in 3D-GS, 0.999 in gsplat).
+        deterministic: on CUDA, sum the backward pass's per-Gaussian gradients in 64-bit fixed point
+            (2^-40 steps), so two runs give identical gradients; False: float atomics (as gsplat; a
+            little faster, but the order of additions varies run to run). The CPU backend is
+            deterministic either way; "fixed" forces the fixed-point path there too (tests).
         check_finite: raise a ValueError naming the argument that holds NaN or Inf.
     """
     if not isinstance(means, torch.Tensor):
@@ -331,7 +344,8 @@ def rasterize(
     ranges, gauss_ids, total = _bin_gaussians(means2d.detach(), radii, depths.detach(), tiles_touched,
                                               tiles_x, tiles_y)
     image, depth, alpha = _Composite.apply(
-        means2d, conics, opac_eff, rgb, depths, background, ranges, gauss_ids, width, height, alpha_max
+        means2d, conics, opac_eff, rgb, depths, background, ranges, gauss_ids, width, height, alpha_max,
+        deterministic
     )
     return RenderOutput(image, depth, alpha, means2d, radii, depths, total)
 

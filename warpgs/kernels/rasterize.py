@@ -175,20 +175,53 @@ def splat_backward(s: splat, px: float, py: float, alpha_max: float, T: float, S
     return int(1), T, S_c, S_d, g
 
 
+# Deterministic accumulation: each warp's sum is rounded to a 64-bit fixed-point number (2^-40 steps)
+# and added with an integer atomic, so the total does not depend on the order the warps arrive in
+# (float atomics do: two runs with one seed drift apart on CUDA). Terms are clamped to +-2^20 first,
+# so no sum of them can overflow; gradients of a mean-reduced image loss are many orders smaller.
+FIXED_SCALE = wp.constant(1099511627776.0)  # 2^40
+FIXED_CLAMP = wp.constant(1048576.0)  # 2^20
+
+
 @wp.func
-def accumulate_grad(valid: int, gid: int, g: grad10, v_means2d: wp.array(dtype=wp.vec2),
-                    v_conics: wp.array(dtype=wp.vec3), v_opacities: wp.array(dtype=float),
-                    v_colors: wp.array(dtype=wp.vec3), v_depths: wp.array(dtype=float)):
-    """Sums a Gaussian's gradient over the warp (CUDA) and adds it once; every lane must call this."""
+def to_fixed(v: float) -> wp.int64:
+    return wp.int64(wp.round(wp.clamp(v, -FIXED_CLAMP, FIXED_CLAMP) * FIXED_SCALE))
+
+
+@wp.func
+def accumulate_grad(valid: int, gid: int, g: grad10, fixed: int, v_fixed: wp.array2d(dtype=wp.int64),
+                    v_means2d: wp.array(dtype=wp.vec2), v_conics: wp.array(dtype=wp.vec3),
+                    v_opacities: wp.array(dtype=float), v_colors: wp.array(dtype=wp.vec3),
+                    v_depths: wp.array(dtype=float)):
+    """Sums a Gaussian's gradient over the warp (CUDA) and adds it once, as floats or (``fixed``) as
+    fixed-point integers into ``v_fixed`` [N, 10]; every lane must call this."""
     if warp_any(valid) != 0:
         r = grad10(warp_sum(g[0]), warp_sum(g[1]), warp_sum(g[2]), warp_sum(g[3]), warp_sum(g[4]),
                    warp_sum(g[5]), warp_sum(g[6]), warp_sum(g[7]), warp_sum(g[8]), warp_sum(g[9]))
         if warp_leader() != 0:
-            wp.atomic_add(v_means2d, gid, wp.vec2(r[0], r[1]))
-            wp.atomic_add(v_conics, gid, wp.vec3(r[2], r[3], r[4]))
-            wp.atomic_add(v_opacities, gid, r[5])
-            wp.atomic_add(v_colors, gid, wp.vec3(r[6], r[7], r[8]))
-            wp.atomic_add(v_depths, gid, r[9])
+            if fixed != 0:
+                for c in range(10):
+                    wp.atomic_add(v_fixed, gid, c, to_fixed(r[c]))
+            else:
+                wp.atomic_add(v_means2d, gid, wp.vec2(r[0], r[1]))
+                wp.atomic_add(v_conics, gid, wp.vec3(r[2], r[3], r[4]))
+                wp.atomic_add(v_opacities, gid, r[5])
+                wp.atomic_add(v_colors, gid, wp.vec3(r[6], r[7], r[8]))
+                wp.atomic_add(v_depths, gid, r[9])
+
+
+@wp.kernel
+def fixed_to_grads(v_fixed: wp.array2d(dtype=wp.int64), v_means2d: wp.array(dtype=wp.vec2),
+                   v_conics: wp.array(dtype=wp.vec3), v_opacities: wp.array(dtype=float),
+                   v_colors: wp.array(dtype=wp.vec3), v_depths: wp.array(dtype=float)):
+    """The fixed-point sums of ``accumulate_grad`` as float gradients (one thread per Gaussian)."""
+    i = wp.tid()
+    inv = 1.0 / FIXED_SCALE
+    v_means2d[i] = wp.vec2(float(v_fixed[i, 0]) * inv, float(v_fixed[i, 1]) * inv)
+    v_conics[i] = wp.vec3(float(v_fixed[i, 2]) * inv, float(v_fixed[i, 3]) * inv, float(v_fixed[i, 4]) * inv)
+    v_opacities[i] = float(v_fixed[i, 5]) * inv
+    v_colors[i] = wp.vec3(float(v_fixed[i, 6]) * inv, float(v_fixed[i, 7]) * inv, float(v_fixed[i, 8]) * inv)
+    v_depths[i] = float(v_fixed[i, 9]) * inv
 
 
 @wp.func
@@ -268,7 +301,10 @@ def rasterize_bwd(
     v_out_color: wp.array(dtype=wp.vec3),
     v_out_depth: wp.array(dtype=float),
     v_out_alpha: wp.array(dtype=float),
-    # gradients, accumulated with atomics (zero-initialised by the caller)
+    # gradients, accumulated with atomics (zero-initialised by the caller): floats, or with ``fixed``
+    # fixed-point integers in v_fixed [N, 10] (see accumulate_grad)
+    fixed: int,
+    v_fixed: wp.array2d(dtype=wp.int64),
     v_means2d: wp.array(dtype=wp.vec2),
     v_conics: wp.array(dtype=wp.vec3),
     v_opacities: wp.array(dtype=float),
@@ -307,7 +343,7 @@ def rasterize_bwd(
         grad = grad10()
         if inside and k < last:
             valid, T, S_c, S_d, grad = splat_backward(s, px, py, alpha_max, T, S_c, S_d, vC, vD, vA_bg, T_final)
-        accumulate_grad(valid, g, grad, v_means2d, v_conics, v_opacities, v_colors, v_depths)
+        accumulate_grad(valid, g, grad, fixed, v_fixed, v_means2d, v_conics, v_opacities, v_colors, v_depths)
 
 
 # ----------------------------------------------------------------------------------------------------
@@ -450,6 +486,8 @@ def rasterize_bwd_cuda(
     v_out_color: wp.array(dtype=wp.vec3),
     v_out_depth: wp.array(dtype=float),
     v_out_alpha: wp.array(dtype=float),
+    fixed: int,
+    v_fixed: wp.array2d(dtype=wp.int64),
     v_means2d: wp.array(dtype=wp.vec2),
     v_conics: wp.array(dtype=wp.vec3),
     v_opacities: wp.array(dtype=float),
@@ -492,4 +530,4 @@ def rasterize_bwd_cuda(
             grad = grad10()
             if inside and k < last:
                 valid, T, S_c, S_d, grad = splat_backward(s, px, py, alpha_max, T, S_c, S_d, vC, vD, vA_bg, T_final)
-            accumulate_grad(valid, float_bits(sg[10]), grad, v_means2d, v_conics, v_opacities, v_colors, v_depths)
+            accumulate_grad(valid, float_bits(sg[10]), grad, fixed, v_fixed, v_means2d, v_conics, v_opacities, v_colors, v_depths)
