@@ -455,7 +455,13 @@ def write_dl3dv(capture: SyntheticCapture, out_dir: str | Path, overwrite: bool 
     pts = colmap_io.ColmapPoints(np.arange(1, len(xyz) + 1), xyz, _to_png(rgb), np.full(len(xyz), 0.5), np.zeros(len(xyz), np.int64))
     colmap_io.write_model(tmp / "colmap" / "sparse" / "0", cams, imgs, pts, binary=True)
     (tmp / "synthetic.json").write_text(json.dumps({"format_version": FORMAT_VERSION, **asdict(cfg)}, indent=1))
-    os.replace(tmp, out)
+    try:
+        os.replace(tmp, out)
+    except OSError:
+        # another process (a parallel run) finished the same capture first: keep its copy
+        if not (out / "synthetic.json").is_file():
+            raise
+        shutil.rmtree(tmp, ignore_errors=True)
     return out
 
 
