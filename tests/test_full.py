@@ -76,3 +76,24 @@ def test_appended_gaussians_train_with_fresh_adam_state():
         assert float(st["exp_avg"][-2:].abs().max()) == 0.0
     tr.train(2)  # and training goes on
     assert tr.step == 2
+
+
+def test_compare_in_two_processes_matches_compare_in_turn(tmp_path, capsys):
+    """--jobs 2 trains the baseline in a second process: on the CPU (deterministic) its metrics are the
+    ones a run in turn gives, and the side-by-side table and report use them."""
+    from warpgs.pipelines.sparse import main
+
+    common = ["--iterations", "12", "--device", "cpu", "--no-progress", "--set", "model.init_num=300",
+              "--set", "full.n_frames=3", "--set", "full.pseudo={sampler: {steps: 2}}", "--set", "full.flythrough_frames=2",
+              "--set", "eval.fps_repeats=1", "--set", "eval.save_images=false",
+              "--set", f"eval.lpips_weights={tmp_path / 'none.pth'}"]
+    assert main(common + ["--jobs", "2", "--out", str(tmp_path / "par")]) == 0
+    assert main(common + ["--jobs", "1", "--out", str(tmp_path / "seq")]) == 0
+    par = json.loads((tmp_path / "par" / "comparison.json").read_text())
+    seq = json.loads((tmp_path / "seq" / "comparison.json").read_text())
+    for method in ("baseline", "full"):
+        for key in ("psnr", "ssim", "num_gaussians"):
+            assert par[method][key] == seq[method][key], (method, key)
+    assert (tmp_path / "par" / "baseline.log").read_text().strip()
+    report = (tmp_path / "par" / "full" / "report.md").read_text()
+    assert f"| baseline | {par['baseline']['psnr']:.2f} |" in report

@@ -7,43 +7,20 @@ import numpy as np
 import pytest
 import torch
 
-from tiny_scene import make_scene, write_nerfstudio
+from tiny_scene import make_scene, param_copy, same_params, tiny_config, write_nerfstudio
 from warpgs.config import CONFIG_DIR, Config, ConfigError, load_config, parse_override, read_yaml
 from warpgs.model import GaussianModel
 from warpgs.train import CHECKPOINT, Trainer, TrainingDiverged, TrainingInterrupted
 
 
 def _cfg(iterations=300, tmp_path=None, **train) -> Config:
-    cfg = Config()
-    cfg.train.device = "cpu"
-    cfg.train.progress = False
-    cfg.train.iterations = iterations
-    cfg.train.checkpoint_every = 0
-    cfg.train.sh_degree_interval = 100
-    for k, v in train.items():
-        setattr(cfg.train, k, v)
-    cfg.model.init = "box"
-    cfg.model.init_box = [-1.2, -1.2, -1.2, 1.2, 1.2, 1.2]
-    cfg.model.init_num = 300
-    s = cfg.strategy
-    s.refine_start_iter, s.refine_every, s.refine_stop_iter, s.reset_every = 30, 20, 250, 120
-    s.max_gaussians = 800
-    cfg.eval.fps_repeats = 1
-    cfg.eval.lpips_weights = str(tmp_path / "no-lpips-weights.pth") if tmp_path else "/nonexistent/alexnet.pth"
-    return cfg
+    return tiny_config(iterations, str(tmp_path / "no-lpips-weights.pth") if tmp_path else "/nonexistent/alexnet.pth",
+                       **train)
 
 
 @pytest.fixture(scope="module")
 def scene():
     return make_scene()
-
-
-def _params(tr):
-    return {k: v.detach().clone() for k, v in tr.model.params.items()}
-
-
-def _same(a, b):
-    return a.keys() == b.keys() and all(torch.equal(a[k], b[k]) for k in a)
 
 
 def test_training_lowers_loss_and_raises_test_psnr(scene, tmp_path):
@@ -95,10 +72,10 @@ def test_same_seed_same_numbers(scene):
     for seed in (0, 0, 1):
         tr = Trainer(_cfg(80, seed=seed), scene)
         tr.train()
-        runs.append((_params(tr), tr.losses, tr.evaluate(lpips=False)["mean"]))
+        runs.append((param_copy(tr), tr.losses, tr.evaluate(lpips=False)["mean"]))
     assert len(runs[0][0]["means"]) != 300  # densification ran (clone and split noise included)
-    assert _same(runs[0][0], runs[1][0]) and runs[0][1] == runs[1][1] and runs[0][2] == runs[1][2]
-    assert not _same(runs[0][0], runs[2][0])
+    assert same_params(runs[0][0], runs[1][0]) and runs[0][1] == runs[1][1] and runs[0][2] == runs[1][2]
+    assert not same_params(runs[0][0], runs[2][0])
 
 
 def test_resume_continues_exactly(scene, tmp_path):
@@ -111,7 +88,7 @@ def test_resume_continues_exactly(scene, tmp_path):
     second.load_checkpoint()
     assert second.step == 70 and len(second.model) == len(first.model)
     second.train()
-    assert _same(_params(straight), _params(second))
+    assert same_params(param_copy(straight), param_copy(second))
     assert straight.losses == second.losses
 
 
@@ -136,7 +113,7 @@ def test_ctrl_c_saves_a_checkpoint_then_resume(scene, tmp_path, monkeypatch):
     resumed.train()
     straight = Trainer(_cfg(60), scene)
     straight.train()
-    assert _same(_params(straight), _params(resumed))
+    assert same_params(param_copy(straight), param_copy(resumed))
 
 
 def test_nan_guard_skips_bad_steps_and_gives_up(scene, tmp_path, monkeypatch):
@@ -149,9 +126,9 @@ def test_nan_guard_skips_bad_steps_and_gives_up(scene, tmp_path, monkeypatch):
 
     monkeypatch.setattr(tr, "compute_loss", loss_nan_at_step_5)
     tr.train(5)
-    before = _params(tr)
+    before = param_copy(tr)
     tr.train(6)  # the NaN step changes nothing
-    assert _same(before, _params(tr)) and np.isnan(tr.losses[5])
+    assert same_params(before, param_copy(tr)) and np.isnan(tr.losses[5])
     tr.train()
     assert all(np.isfinite(tr.losses[6:])) and all(bool(torch.isfinite(p).all()) for p in tr.model.params.values())
     monkeypatch.setattr(tr, "compute_loss", lambda out, cam: (out.image.sum() * float("nan"), {}))
@@ -207,7 +184,7 @@ def test_repository_configs_load(name):
     cfg = load_config([CONFIG_DIR / "baseline.yaml", CONFIG_DIR / f"{name}.yaml"])
     assert cfg.method == "baseline" and cfg.train.iterations > 0
     if name == "blender":
-        assert cfg.model.init == "box" and 7000 <= cfg.train.iterations <= 10000
+        assert cfg.model.init == "hull" and len(cfg.model.init_box) == 6 and 7000 <= cfg.train.iterations <= 10000
 
 
 # ----------------------------------------------------------------------------------------------
@@ -239,3 +216,29 @@ def test_cli_runs_resumes_and_writes_outputs(tmp_path, capsys):
     assert main(["--resume", str(tmp_path / "nothing")]) == 2
     assert main(["--method", "nonsense"]) == 2
     assert "available methods" in capsys.readouterr().err
+
+
+def test_alpha_loss_is_the_mean_absolute_alpha_error():
+    """loss.alpha_weight adds weight x mean |rendered alpha - input alpha| for inputs with an alpha channel."""
+    import dataclasses
+
+    from warpgs.config import Config
+    from warpgs.train import Trainer
+
+    scene = make_scene()
+    for c in scene.train:
+        c.alpha = np.full((c.height, c.width), 0.5, np.float32)
+    cfg = Config()
+    cfg.train.device, cfg.model.init, cfg.model.init_num = "cpu", "box", 50
+    cfg.model.init_box = [-1.0, -1.0, -1.0, 1.0, 1.0, 1.0]
+    cfg.loss.alpha_weight = 0.7
+    tr = Trainer(cfg, scene)
+    cam = tr.train_cams[0]
+    out = tr.render(cam)
+    loss, parts = tr.compute_loss(out, cam)
+    expect = (out.alpha - 0.5).abs().mean()
+    assert torch.allclose(parts["alpha"], expect)
+    cfg0 = dataclasses.replace(cfg, loss=dataclasses.replace(cfg.loss, alpha_weight=0.0))
+    tr.cfg = cfg0
+    loss0, parts0 = tr.compute_loss(out, cam)
+    assert "alpha" not in parts0 and torch.allclose(loss - loss0, 0.7 * expect)

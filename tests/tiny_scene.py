@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from warpgs.config import Config
 from warpgs.data.scene import Camera, Scene, make_camera
 from warpgs.render import rasterize
 
@@ -91,3 +92,35 @@ def write_nerfstudio(folder: Path, n_frames: int = 10) -> Path:
             "frames": frames}
     (folder / "transforms.json").write_text(json.dumps(meta))
     return folder
+
+
+def tiny_config(iterations: int = 300, lpips_weights: str = "/nonexistent/alexnet.pth", **train) -> Config:
+    """The training config the tests use on the tiny scene: CPU, 300 random Gaussians in a box,
+    densification from step 30 every 20 (opacity resets every 120), a budget of 800 Gaussians;
+    ``train`` sets further ``train.*`` fields."""
+    cfg = Config()
+    cfg.train.device = "cpu"
+    cfg.train.progress = False
+    cfg.train.iterations = iterations
+    cfg.train.checkpoint_every = 0
+    cfg.train.sh_degree_interval = 100
+    for k, v in train.items():
+        setattr(cfg.train, k, v)
+    cfg.model.init = "box"
+    cfg.model.init_box = [-1.2, -1.2, -1.2, 1.2, 1.2, 1.2]
+    cfg.model.init_num = 300
+    s = cfg.strategy
+    s.refine_start_iter, s.refine_every, s.refine_stop_iter, s.reset_every = 30, 20, 250, 120
+    s.max_gaussians = 800
+    cfg.eval.fps_repeats = 1
+    cfg.eval.lpips_weights = lpips_weights
+    return cfg
+
+
+def param_copy(trainer) -> dict:
+    """A copy of a trainer's model parameters (to compare states)."""
+    return {k: v.detach().clone() for k, v in trainer.model.params.items()}
+
+
+def same_params(a: dict, b: dict) -> bool:
+    return a.keys() == b.keys() and all(torch.equal(a[k], b[k]) for k in a)

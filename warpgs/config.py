@@ -23,6 +23,7 @@ from typing import Any
 
 import yaml
 
+from warpgs.compact import CompactConfig
 from warpgs.strategy import DefaultStrategy
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
@@ -46,7 +47,7 @@ class DataConfig:
 @dataclass
 class ModelConfig:
     sh_degree: int = 3
-    init: str = "frustum"  # box | frustum | points | ply
+    init: str = "frustum"  # box | hull | frustum | points | ply (hull: the box carved by the inputs' alpha)
     init_num: int = 100_000  # random Gaussians for box / frustum
     init_box: list | None = None  # [xmin, ymin, zmin, xmax, ymax, zmax]; None: the training frusta's bounding box
     init_depth: list | None = None  # [near, far] for frustum / the automatic box; None: the scene's bounds
@@ -75,6 +76,7 @@ class LossConfig:
     ssim_weight: float = 0.2  # D-SSIM = 1 - SSIM
     depth_weight: float = 0.0  # Pearson depth term against the views' depth prior (0 = off)
     depth_prior: str = "scene"  # scene: Camera.depth from the loader
+    alpha_weight: float = 0.0  # L1 between rendered and input alpha, for inputs with an alpha channel (0 = off)
 
 
 @dataclass
@@ -89,7 +91,18 @@ class TrainConfig:
     random_background: bool = False  # views with an alpha channel: a random background each step (no floaters
                                      # that mimic the background colour); evaluation keeps ``background``
     compact: bool = False  # at the end, drop Gaussians no training view needs (costs novel-view PSNR)
-    max_nan_steps: int = 20  # give up after this many consecutive non-finite steps
+    # divergence (warpgs/train.py): a non-finite loss or gradient, or a loss above explode_factor x the median
+    # of the phase's last explode_window finite losses, skips the step; max_nan_steps skipped steps in a row,
+    # explode_patience exploding ones in a row, or non-finite parameters after the optimiser step roll back to
+    # the last good in-memory snapshot with the learning rates scaled by recovery_lr_factor; after
+    # max_recoveries rollbacks the run stops (TrainingDiverged), and the checkpoint on disk stays the last good one
+    max_nan_steps: int = 20  # consecutive skipped steps that count as a divergence
+    explode_factor: float = 10.0  # 0 = no exploding-loss check; healthy runs stayed below 6x (bench/stability.py)
+    explode_window: int = 100  # recent finite losses (of this phase) in the running median
+    explode_patience: int = 3  # consecutive exploding steps that count as a divergence (fewer are only skipped)
+    snapshot_every: int = 100  # steps between snapshots of the last good state (and one at each train() call)
+    max_recoveries: int = 3  # rollbacks before the run stops; 0 = stop at the first divergence
+    recovery_lr_factor: float = 0.5  # learning-rate scale applied at each rollback (recorded in metrics.json)
     cpu_threads: int = 1  # torch threads on the CPU (0: torch's default); Warp's CPU kernels use one anyway
     progress: bool = True
 
@@ -139,6 +152,7 @@ class Config:
     train: TrainConfig = field(default_factory=TrainConfig)
     eval: EvalConfig = field(default_factory=EvalConfig)
     full: FullConfig = field(default_factory=FullConfig)
+    compact: CompactConfig = field(default_factory=CompactConfig)  # compact mode (warpgs/compact.py, --compact)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -186,7 +200,12 @@ def _type_ok(value, tp) -> tuple[bool, Any]:
     return isinstance(value, base), value
 
 
-def _apply(obj, values: dict, where: str) -> None:
+def apply_values(obj, values: dict, where: str) -> None:
+    """Sets the fields of the dataclass ``obj`` (recursing into nested dataclasses) from ``values``,
+    coerced to their annotated types; unknown keys and wrong types raise ``ConfigError`` naming
+    ``where``. The one reader of every config section (training, pseudo views, densification)."""
+    if not isinstance(values, dict):
+        raise ConfigError(f"{where}: expected a mapping, got {type(values).__name__}")
     hints = typing.get_type_hints(type(obj))
     names = [f.name for f in dataclasses.fields(obj)]
     for key, value in values.items():
@@ -196,7 +215,7 @@ def _apply(obj, values: dict, where: str) -> None:
         if dataclasses.is_dataclass(cur):
             if not isinstance(value, dict):
                 raise ConfigError(f"{where}.{key}: expected a mapping of {type(cur).__name__} fields, got {value!r}")
-            _apply(cur, value, f"{where}.{key}")
+            apply_values(cur, value, f"{where}.{key}")
             continue
         ok, v = _type_ok(value, hints[key])
         if not ok:
@@ -254,7 +273,7 @@ def build_config(layers: list[dict]) -> Config:
     merged: dict = {}
     for layer in layers:
         merged = merge(merged, layer)
-    _apply(cfg, merged, "config")
+    apply_values(cfg, merged, "config")
     return cfg
 
 

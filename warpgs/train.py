@@ -10,16 +10,33 @@ exponentially decaying position rate; densification by ``DefaultStrategy``.
 
 Reproducibility: ``train.seed`` seeds the initialisation, the view order and the split noise (each
 its own generator, all saved in checkpoints, so a resumed run continues exactly as an uninterrupted
-one). On the CPU, Warp's kernels run on one thread, so two runs with one seed give identical numbers.
+one). On the CPU, Warp's kernels run on one thread, so two runs with one seed give identical numbers;
+on CUDA the rasterizer sums gradients in fixed point and cuDNN is set deterministic, for the same reason.
 
 Checkpoints (``checkpoint.pt`` in the output folder) are written every ``train.checkpoint_every``
 steps through a temporary file and a rename, so an interruption never leaves a broken one. Ctrl-C
 finishes the current step, writes a checkpoint and stops (``TrainingInterrupted``); a second Ctrl-C
 stops at once, keeping the last checkpoint.
+
+Divergence: a step is skipped (no update) when its loss or gradients are not finite, or when its loss
+explodes: above ``train.explode_factor`` x the median of the last ``train.explode_window`` finite
+losses (the statistic restarts with each ``train()`` call, i.e. each phase of the full method, and after
+an opacity reset, whose expected jumps are not divergence). A divergence is ``train.max_nan_steps``
+skipped steps in a row, ``train.explode_patience`` exploding ones in a row (one high loss alone, e.g. a
+hard view early in a phase, costs one step, never the run), or parameters that are not finite after
+the optimiser step. The trainer keeps an
+in-memory snapshot of the last good state (parameters, Adam moments, densification statistics, RNGs),
+taken at each ``train()`` call and every ``train.snapshot_every`` steps when all of it is finite; on a
+divergence it rolls back to it, scales every learning rate by ``train.recovery_lr_factor`` and goes on
+(each recovery is logged and listed in metrics.json). After ``train.max_recoveries`` recoveries the
+next divergence stops the run with ``TrainingDiverged``, naming the step, the cause and the last good
+checkpoint on disk; the model is left at the last good state. A checkpoint is never written from a
+state that is not finite, so the one on disk stays the last good one.
 """
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 import json
 import math
@@ -50,7 +67,15 @@ class TrainingInterrupted(Exception):
 
 
 class TrainingDiverged(RuntimeError):
-    pass
+    """Training stopped because it diverged and the recoveries did not help (see the module docstring).
+
+    ``step``: where the last divergence was found; ``cause``: what it was; ``checkpoint``: the last good
+    checkpoint on disk (None when none was written)."""
+
+    def __init__(self, message: str, step: int | None = None, cause: str | None = None,
+                 checkpoint: Path | None = None):
+        super().__init__(message)
+        self.step, self.cause, self.checkpoint = step, cause, checkpoint
 
 
 def resolve_device(name: str) -> torch.device:
@@ -91,7 +116,7 @@ def init_model(cfg: Config, scene, generator: torch.Generator) -> GaussianModel:
         return GaussianModel.random_frustum(m.init_num, [c.viewmat for c in cams], [c.K for c in cams],
                                             [(c.width, c.height) for c in cams], float(near), float(far),
                                             generator=generator, **kw)
-    if m.init == "box":
+    if m.init in ("box", "hull"):
         if m.init_box is not None:
             if len(m.init_box) != 6:
                 raise ValueError(f"model.init_box must be [xmin, ymin, zmin, xmax, ymax, zmax], got {m.init_box}")
@@ -106,14 +131,27 @@ def init_model(cfg: Config, scene, generator: torch.Generator) -> GaussianModel:
                         corners.append(c2w[:3, :3] @ p + c2w[:3, 3])
             corners = np.array(corners)
             lo, hi = corners.min(0), corners.max(0)
+        if m.init == "hull":
+            cams = scene.train
+            if any(c.alpha is None for c in cams):
+                raise ValueError(f"model.init=hull needs an alpha channel in every training view; {scene.name}'s "
+                                 f"view {next(c.name for c in cams if c.alpha is None)} has none (use box or frustum)")
+            return GaussianModel.random_hull(m.init_num, lo, hi, [c.viewmat for c in cams], [c.K for c in cams],
+                                             [c.alpha for c in cams], generator=generator, **kw)
         return GaussianModel.random_box(m.init_num, lo, hi, generator=generator, **kw)
-    raise ValueError(f"model.init={m.init!r}: expected box, frustum, points or ply")
+    raise ValueError(f"model.init={m.init!r}: expected box, hull, frustum, points or ply")
+
+
+def base_learning_rates(cfg: Config, scene_scale: float) -> dict[str, float]:
+    """Each parameter group's learning rate at the start (the means' then decays; see ``Trainer.means_lr``)."""
+    o = cfg.optim
+    return {"means": o.means_lr * scene_scale, "quats": o.quats_lr, "scales": o.scales_lr,
+            "opacities": o.opacities_lr, "sh0": o.sh0_lr, "shN": o.shN_lr}
 
 
 def make_optimizer(model: GaussianModel, cfg: Config, scene_scale: float) -> torch.optim.Adam:
     o = cfg.optim
-    lrs = {"means": o.means_lr * scene_scale, "quats": o.quats_lr, "scales": o.scales_lr,
-           "opacities": o.opacities_lr, "sh0": o.sh0_lr, "shN": o.shN_lr}
+    lrs = base_learning_rates(cfg, scene_scale)
     groups = [{"params": [model.params[k]], "lr": lrs[k], "name": k} for k in model.params.keys()]
     return torch.optim.Adam(groups, eps=o.eps)
 
@@ -123,6 +161,26 @@ def save_png(path: Path, image: np.ndarray) -> None:
 
     path.parent.mkdir(parents=True, exist_ok=True)
     Image.fromarray((np.clip(image, 0, 1) * 255 + 0.5).astype(np.uint8)).save(path)
+
+
+def _cpu_copy(obj):
+    """A deep copy of a (nested) state with every tensor copied to the CPU (snapshots keep no GPU memory)."""
+    if isinstance(obj, torch.Tensor):
+        return obj.detach().to("cpu", copy=True)
+    if isinstance(obj, dict):
+        return {k: _cpu_copy(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return type(obj)(_cpu_copy(v) for v in obj)
+    return copy.deepcopy(obj)
+
+
+def _all_finite(tensors) -> bool:
+    """Whether every tensor is finite, with one device sync."""
+    checks = [torch.isfinite(t).all() for t in tensors if isinstance(t, torch.Tensor) and t.is_floating_point()]
+    if not checks:
+        return True
+    dev = checks[0].device  # tensors may live on several devices (CPU-side state next to CUDA parameters)
+    return bool(torch.stack([c.to(dev) for c in checks]).all())
 
 
 def _atomic_torch_save(obj, path: Path) -> None:
@@ -141,6 +199,11 @@ class Trainer:
             # The images are small and Warp's CPU kernels run on one thread: more torch threads gain
             # little, and on a busy machine their synchronisation made small ops 50x slower.
             torch.set_num_threads(cfg.train.cpu_threads)
+        if self.device.type == "cuda":
+            # the rasterizer's backward is deterministic (fixed-point sums); cuDNN's convolutions (SSIM)
+            # must be too, so two runs with one seed give the same numbers
+            torch.backends.cudnn.deterministic = True
+            torch.backends.cudnn.benchmark = False
         if not scene.train:
             raise ValueError(f"{scene.name}: no training views")
         self.train_cams = [c.to_torch(self.device) for c in scene.train]
@@ -164,19 +227,32 @@ class Trainer:
         self.step = 0
         self.train_time = 0.0
         self.losses: list[float] = []
-        self.nan_steps = 0
+        self.nan_steps = 0  # consecutive skipped steps
+        self.explode_steps = 0  # consecutive steps with an exploding loss
+        # divergence handling (module docstring): learning-rate scale, recoveries so far, the last good state
+        self.lr_scale = 1.0
+        self.recoveries: list[dict] = []
+        self.max_loss_ratio = 0.0  # the largest loss / running median seen (how close a healthy run came)
+        self._snapshot: dict | None = None
+        self._stat_start = 0  # losses before this step do not enter the exploding-loss statistic
         self.curve: list[dict] = []  # test metrics every train.eval_every steps (PSNR against time)
         self.initial: dict | None = None
         self.n_before_compaction: int | None = None
         self._stop = False
         self._ema = {}
+        self.compact_report: dict | None = None
+        self.reserved_steps = 0  # compact mode: the last steps, taken by the search's fine-tunes (warpgs/compact.py)
+        if cfg.compact.enabled:  # compact mode: importance pruning during training (warpgs/compact.py)
+            from warpgs.compact import attach
+
+            attach(self)
 
     # ------------------------------------------------------------------------------------------
     # training
 
     @property
     def total_steps(self) -> int:
-        return self.cfg.train.iterations
+        return self.cfg.train.iterations - self.reserved_steps
 
     def means_lr(self, step: int) -> float:
         o = self.cfg.optim
@@ -198,6 +274,10 @@ class Trainer:
             ds = losses.dssim(out.image, cam.image)
             loss = loss + lc.ssim_weight * ds
             parts["dssim"] = ds
+        if lc.alpha_weight > 0 and cam.alpha is not None:
+            al = (out.alpha - cam.alpha).abs().mean()
+            loss = loss + lc.alpha_weight * al
+            parts["alpha"] = al
         if lc.depth_weight > 0 and lc.depth_prior == "scene" and cam.depth is not None:
             dl = losses.pearson_depth_loss(out.depth, cam.depth)
             loss = loss + lc.depth_weight * dl
@@ -205,12 +285,13 @@ class Trainer:
         return loss, parts
 
     def train_step(self) -> dict:
-        """One iteration at ``self.step`` (does not advance it)."""
+        """One iteration at ``self.step`` (does not advance it). On a divergence that a recovery handles it
+        rolls back (``self.step`` becomes the snapshot's) and returns ``{"rolled_back": 1, ...}``."""
         step = self.step
         self.model.active_sh_degree = min(step // max(self.cfg.train.sh_degree_interval, 1), self.model.max_sh_degree)
         for g in self.optimizer.param_groups:
             if g["name"] == "means":
-                g["lr"] = self.means_lr(step)
+                g["lr"] = self.means_lr(step) * self.lr_scale
         cam = self.train_cams[self.next_view()]
         bg = self.background
         if self.cfg.train.random_background and cam.alpha is not None:
@@ -227,9 +308,17 @@ class Trainer:
             bad = [n for n, p in self.model.params.items() if p.grad is not None and not bool(torch.isfinite(p.grad).all())]
             return self._skip(step, "the loss is not finite" if not bool(torch.isfinite(loss))
                               else f"the gradient of {', '.join(bad)} is not finite")
+        value = float(loss.detach())
+        exploding = self._exploding(value)
+        if exploding:
+            self.explode_steps += 1
+            if self.explode_steps >= self.cfg.train.explode_patience:
+                return self._diverge(step, f"{self.explode_steps} consecutive steps with an exploding loss "
+                                           f"(the last: {exploding})")
+            return self._skip(step, exploding)
         self.optimizer.step()
         self.optimizer.zero_grad(set_to_none=True)
-        self.nan_steps = 0
+        self.nan_steps = self.explode_steps = 0
         info = self.strategy.step_post_backward(self.model, self.optimizer, self.state, step, out,
                                                 cam.width, cam.height, self.scene_scale, generator=self.split_gen)
         s = self.strategy
@@ -237,8 +326,15 @@ class Trainer:
                 and len(self.model) >= s.max_gaussians):
             # the budget is spent: free what the training views do not use, so growth can go on where it helps
             info["compacted"] = s.compact(self.model, self.optimizer, self.state, self.train_cams, self.background)
-        value = float(loss.detach())
+        bad = self.nonfinite_parameters()
+        if bad:
+            return self._diverge(step, f"the parameters {', '.join(bad)} are not finite after the optimiser step")
+        if info.get("reset"):  # the opacity reset's jump in the loss is expected: restart the statistic
+            self._stat_start = step + 1
         self.losses.append(value)
+        every = self.cfg.train.snapshot_every
+        if every and (step + 1) % every == 0:
+            self.take_snapshot(step + 1)
         with torch.no_grad():
             mse = float(((out.image.detach().clamp(0, 1) - cam.image) ** 2).mean())
         return {"loss": value, "psnr": -10 * math.log10(max(mse, 1e-10)), **info}
@@ -248,11 +344,143 @@ class Trainer:
         self.nan_steps += 1
         self.log(f"warpgs: step {step} skipped: {why}")
         if self.nan_steps >= self.cfg.train.max_nan_steps:
-            where = f"; the last good checkpoint is {self.out / CHECKPOINT}" if self.out and (self.out / CHECKPOINT).exists() else ""
-            raise TrainingDiverged(f"training diverged: {self.nan_steps} consecutive steps without a finite loss "
-                                   f"and gradient (step {step}){where}")
+            return self._diverge(step, f"{self.nan_steps} consecutive steps without a usable loss and gradient "
+                                       f"(the last: {why})")
         self.losses.append(float("nan"))
         return {"loss": float("nan"), "psnr": float("nan"), "skipped": 1}
+
+    # ------------------------------------------------------------------------------------------
+    # divergence: exploding losses, snapshots of the last good state, rollback
+
+    def _exploding(self, value: float) -> str | None:
+        """Why ``value`` (a finite loss) counts as exploding, or None: it is above ``train.explode_factor``
+        x the median of the last ``train.explode_window`` finite losses of this phase (skipped steps are
+        not among them). From the phase's second step on, so that a run that blows up at once is caught
+        against its first loss."""
+        tc = self.cfg.train
+        if tc.explode_factor <= 0 or tc.explode_window <= 0:
+            return None
+        start = max(self._stat_start, len(self.losses) - tc.explode_window)
+        recent = [x for x in self.losses[start:] if math.isfinite(x)]
+        if not recent:
+            return None
+        median = float(np.median(recent))
+        if median <= 0:
+            return None
+        ratio = value / median
+        self.max_loss_ratio = max(self.max_loss_ratio, ratio)
+        if ratio > tc.explode_factor:
+            return (f"the loss {value:.4g} is {ratio:.3g}x the median {median:.4g} of the "
+                    f"{len(recent)} finite loss{'es' if len(recent) > 1 else ''} before it "
+                    f"(train.explode_factor={tc.explode_factor:g})")
+        return None
+
+    def nonfinite_parameters(self) -> list[str]:
+        """Names of the parameters that are not finite, or whose value as rendered is not (a log-scale
+        above ~88 is an infinite scale, which the rasterizer refuses); one device sync."""
+        p = self.model.params
+        checks = {n: torch.isfinite(t).all() for n, t in p.items()}
+        if "scales" in checks:
+            checks["scales"] = checks["scales"] & torch.isfinite(torch.exp(p["scales"].detach())).all()
+        flags = torch.stack(list(checks.values())).tolist()
+        return [n for n, ok in zip(checks, flags) if not ok]
+
+    def state_is_finite(self) -> bool:
+        """Whether the parameters (as rendered), the optimiser's moments and the densification statistics
+        are all finite."""
+        tensors = list(self.state.values())
+        for st in self.optimizer.state.values():
+            tensors += [v for v in st.values() if isinstance(v, torch.Tensor)]
+        return not self.nonfinite_parameters() and _all_finite(tensors)
+
+    def take_snapshot(self, step: int | None = None) -> bool:
+        """Keeps the current state in memory (on the CPU) as the last good one, if it is all finite;
+        returns whether it did. The full method's pseudo-view order is kept too, so a rollback replays it."""
+        if not self.state_is_finite():
+            return False
+        pseudo = ((copy.deepcopy(self.pseudo_rng.bit_generator.state), list(self.pseudo_order))
+                  if hasattr(self, "pseudo_rng") else None)
+        self._snapshot = {
+            "pseudo": pseudo,
+            "step": self.step if step is None else step,
+            "params": _cpu_copy(dict(self.model.params)),
+            "max_sh_degree": self.model.max_sh_degree,
+            "optimizer": _cpu_copy(self.optimizer.state_dict()),
+            "strategy_state": _cpu_copy(self.state),
+            "split_gen": self.split_gen.get_state(),
+            "view_rng": copy.deepcopy(self.view_rng.bit_generator.state),
+            "order": list(self.order),
+            "torch_rng": torch.get_rng_state(),
+            "stat_start": self._stat_start,
+        }
+        return True
+
+    def restore_snapshot(self) -> int:
+        """Puts the last good state back (the learning-rate scale stays as it is now); returns its step."""
+        snap = self._snapshot
+        for k, v in snap["params"].items():  # the model object stays (the strategy may hold it)
+            self.model.params[k] = torch.nn.Parameter(v.to(self.device, copy=True))
+        self.model.max_sh_degree = snap["max_sh_degree"]
+        self.optimizer = make_optimizer(self.model, self.cfg, self.scene_scale)
+        self.optimizer.load_state_dict(copy.deepcopy(snap["optimizer"]))
+        self.state = {k: v.to(self.device) for k, v in snap["strategy_state"].items()}
+        self.split_gen.set_state(snap["split_gen"])
+        self.view_rng.bit_generator.state = copy.deepcopy(snap["view_rng"])
+        self.order = list(snap["order"])
+        torch.set_rng_state(snap["torch_rng"])
+        if snap["pseudo"] is not None:
+            self.pseudo_rng.bit_generator.state = copy.deepcopy(snap["pseudo"][0])
+            self.pseudo_order = list(snap["pseudo"][1])
+        self.step = int(snap["step"])
+        self.apply_lr_scale()
+        del self.losses[self.step:]
+        self.curve = [row for row in self.curve if row["step"] <= self.step]
+        self._stat_start = snap["stat_start"]
+        self.nan_steps = self.explode_steps = 0
+        return self.step
+
+    def apply_lr_scale(self) -> None:
+        """Sets every group's learning rate to its base rate x ``lr_scale`` (the means' is set each step)."""
+        base = base_learning_rates(self.cfg, self.scene_scale)
+        for g in self.optimizer.param_groups:
+            g["lr"] = (self.means_lr(self.step) if g["name"] == "means" else base[g["name"]]) * self.lr_scale
+
+    def last_checkpoint(self) -> Path | None:
+        path = self.out / CHECKPOINT if self.out is not None else None
+        return path if path is not None and path.is_file() else None
+
+    def _diverge(self, step: int, cause: str) -> dict:
+        """A divergence at ``step``: rolls back to the last good state with lower learning rates, or, when
+        ``train.max_recoveries`` are spent (or there is no good state), stops with ``TrainingDiverged``."""
+        tc = self.cfg.train
+        self.optimizer.zero_grad(set_to_none=True)
+        if self._snapshot is None or len(self.recoveries) >= tc.max_recoveries:
+            if self._snapshot is not None:
+                self.restore_snapshot()  # leave the model at the last good state, never at the diverged one
+            ck = self.last_checkpoint()
+            if self._snapshot is None:
+                tried = "there was no finite state to roll back to"
+            elif tc.max_recoveries <= 0:
+                tried = "recovery is off (train.max_recoveries=0)"
+            else:
+                tried = (f"{len(self.recoveries)} recoveries (each a rollback to the last good state with the learning "
+                         f"rates x{tc.recovery_lr_factor:g}, now x{self.lr_scale:g}) did not help")
+            if ck is not None:
+                saved = torch.load(ck, map_location="cpu", weights_only=False).get("step")
+                where = f"The last good checkpoint is {ck} (step {saved}); it was not overwritten."
+            else:
+                where = ("No checkpoint was written before it "
+                         f"({'no output folder' if self.out is None else f'train.checkpoint_every={tc.checkpoint_every}'}), "
+                         "so there is nothing on disk to resume from.")
+            raise TrainingDiverged(f"training diverged at step {step}: {cause}; {tried}. {where} Lower the learning "
+                                   f"rates (--set optim.NAME_lr=...) or check the inputs (poses, images).",
+                                   step=step, cause=cause, checkpoint=ck)
+        self.lr_scale *= tc.recovery_lr_factor
+        back_to = self.restore_snapshot()
+        self.recoveries.append({"step": step, "cause": cause, "rolled_back_to": back_to, "lr_scale": self.lr_scale})
+        self.log(f"warpgs: step {step}: {cause}; rolled back to step {back_to} (the last good state) with the learning "
+                 f"rates x{self.lr_scale:g} (recovery {len(self.recoveries)} of {tc.max_recoveries})")
+        return {"loss": float("nan"), "psnr": float("nan"), "rolled_back": 1}
 
     def train(self, iterations: int | None = None) -> None:
         """Trains until ``iterations`` (default ``train.iterations``) steps are done."""
@@ -261,6 +489,12 @@ class Trainer:
         total = self.total_steps if iterations is None else iterations
         if self.initial is None and self.step == 0 and self.test_cams:
             self.initial = self.evaluate(save_dir=None, lpips=False)["mean"]
+        # a new phase (the full method's cycles, a resume): its losses make their own statistic, and its
+        # start is a good state to come back to
+        self._stat_start = self.step
+        if not self.take_snapshot():  # e.g. what was added between phases is not finite: back to the last good state
+            self._diverge(self.step, f"the model is not finite at the start of training (step {self.step}: "
+                                     f"{', '.join(self.nonfinite_parameters()) or 'optimiser state'})")
         restore = self._install_sigint()
         bar = tqdm(total=total, initial=self.step, desc=f"{self.cfg.method} {self.scene.name}", unit="it",
                    dynamic_ncols=True, disable=not self.cfg.train.progress, file=sys.stderr)
@@ -270,6 +504,10 @@ class Trainer:
         try:
             while self.step < total:
                 info = self.train_step()
+                if info.get("rolled_back"):
+                    bar.n = self.step
+                    bar.refresh()
+                    continue
                 self.step += 1
                 bar.update(1)
                 self._update_bar(bar, info)
@@ -347,17 +585,26 @@ class Trainer:
             "torch_rng": torch.get_rng_state(),
             "train_time": self.train_time,
             "losses": list(self.losses),
+            "lr_scale": self.lr_scale,
+            "recoveries": list(self.recoveries),
             "curve": list(self.curve),
             "initial": self.initial,
             "n_before_compaction": self.n_before_compaction,
         }
 
     def save_checkpoint(self, path: str | Path | None = None) -> Path | None:
+        """Writes a checkpoint (atomically); returns its path, or None when there is no output folder or
+        the state is not finite (a checkpoint is never written from a diverged state: the one on disk
+        stays the last good one)."""
         if path is None:
             if self.out is None:
                 return None
             path = self.out / CHECKPOINT
         path = Path(path)
+        if not self.state_is_finite():
+            self.log(f"warpgs: step {self.step}: the model or optimiser state is not finite; {path} is not written "
+                     "(the checkpoint there, if any, is the last good one)")
+            return None
         path.parent.mkdir(parents=True, exist_ok=True)
         _atomic_torch_save(self.checkpoint_state(), path)
         return path
@@ -385,6 +632,9 @@ class Trainer:
         self.model.active_sh_degree = min(self.step // max(self.cfg.train.sh_degree_interval, 1), self.model.max_sh_degree)
         self.train_time = float(ck["train_time"])
         self.losses = list(ck["losses"])
+        self.lr_scale = float(ck.get("lr_scale", 1.0))
+        self.recoveries = list(ck.get("recoveries", []))
+        self.apply_lr_scale()
         self.curve = list(ck.get("curve", []))
         self.initial = ck.get("initial")
         self.n_before_compaction = ck.get("n_before_compaction")
@@ -439,6 +689,10 @@ class Trainer:
             removed = self.compact()
             if removed:
                 self.log(f"warpgs: compaction removed {removed} of {self.n_before_compaction} Gaussians")
+        if self.cfg.compact.enabled:  # compact mode: the smallest model within tolerance (warpgs/compact.py)
+            from warpgs.compact import finish_hook
+
+            self.compact_report = finish_hook(self)
         ev = self.evaluate(save_dir=(out / "test") if out is not None and self.cfg.eval.save_images else None)
         train_ev = self.evaluate(self.train_cams, lpips=False)
         fps = render_fps(lambda i: self.render(self.test_cams[i] if self.test_cams else self.train_cams[i]),
@@ -467,11 +721,20 @@ class Trainer:
             "seed": self.cfg.train.seed,
             "final_loss": float(np.mean(finite[-50:])) if finite else None,
             "skipped_steps": sum(1 for x in self.losses if not math.isfinite(x)),
+            "recoveries": self.recoveries,  # divergences survived: step, cause, step rolled back to, lr scale after
+            "lr_scale": self.lr_scale,
+            "max_loss_ratio": round(self.max_loss_ratio, 3),  # largest loss / running median (train.explode_factor)
             "curve": self.curve,
             "per_view": ev["views"],
         }
         if "lpips_missing" in ev:
             metrics["lpips_missing"] = ev["lpips_missing"]
+        from warpgs.compact import size_report
+
+        size = size_report(self.model)  # SH degree stored, float32 parameter bytes, PLY file bytes
+        metrics.update(sh_degree=size["sh_degree"], param_bytes=size["param_bytes"], ply_bytes=size["ply_bytes"])
+        if self.compact_report is not None:
+            metrics["compact"] = self.compact_report
         if out is not None:
             out.mkdir(parents=True, exist_ok=True)
             self.export_ply()

@@ -22,8 +22,6 @@ Stages, each usable on its own (plain tensors in and out):
 
 from __future__ import annotations
 
-import dataclasses
-import typing
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import NamedTuple
@@ -32,6 +30,7 @@ import numpy as np
 import torch
 import yaml
 
+from warpgs.config import ConfigError, apply_values
 from warpgs.viz import ORIGIN_ADDED, ORIGIN_KEPT, ORIGIN_NAMES, ORIGIN_REMOVED, save_origin_ply
 
 from .filter import FilterConfig, FilterResult, filter_cloud, statistical_outliers, voxel_downsample
@@ -74,32 +73,7 @@ class DensifyConfig:
     auto_radius: float = 0.005  # insert.radius null: this fraction of the cloud's bounding-box diagonal
 
 
-class DensifyConfigError(ValueError):
-    pass
-
-
-def _apply(obj, values: dict, where: str) -> None:
-    hints = typing.get_type_hints(type(obj))
-    names = [f.name for f in dataclasses.fields(obj)]
-    for key, value in (values or {}).items():
-        if key not in names:
-            raise DensifyConfigError(f"{where}: unknown key {key!r}; valid keys: {', '.join(names)}")
-        cur = getattr(obj, key)
-        if dataclasses.is_dataclass(cur):
-            if not isinstance(value, dict):
-                raise DensifyConfigError(f"{where}.{key}: expected a mapping, got {value!r}")
-            _apply(cur, value, f"{where}.{key}")
-            continue
-        tp = hints[key]
-        allowed = typing.get_args(tp) or (tp,)
-        if value is None and type(None) in allowed:
-            setattr(obj, key, None)
-        elif float in allowed and isinstance(value, (int, float)) and not isinstance(value, bool):
-            setattr(obj, key, float(value))
-        elif any(isinstance(value, t) and not (t is int and isinstance(value, bool)) for t in allowed if isinstance(t, type)):
-            setattr(obj, key, value)
-        else:
-            raise DensifyConfigError(f"{where}.{key}: {value!r} is not a valid {tp}")
+DensifyConfigError = ConfigError  # the one config error type (warpgs.config)
 
 
 def load_densify_config(path: str | Path | None = DEFAULT_CONFIG, overrides: dict | None = None) -> DensifyConfig:
@@ -112,9 +86,9 @@ def load_densify_config(path: str | Path | None = DEFAULT_CONFIG, overrides: dic
             raise DensifyConfigError(f"{p}: densify config file not found")
         data = yaml.safe_load(p.read_text()) or {}
         data = data.get("densify", data)
-        _apply(cfg, data, str(p))
+        apply_values(cfg, data, str(p))
     if overrides:
-        _apply(cfg, overrides, "overrides")
+        apply_values(cfg, overrides, "overrides")
     return cfg
 
 

@@ -28,6 +28,7 @@ import numpy as np
 import torch
 from warpgs import losses
 from warpgs.config import FullConfig
+from warpgs.config import merge as merge_dicts
 from warpgs.model import rgb_to_sh
 from warpgs.train import CHECKPOINT, Trainer
 
@@ -50,13 +51,6 @@ def check_settings(s: FullConfig) -> FullConfig:
     if s.cycles < 0 or not 0.0 <= s.baseline_fraction < 1.0:
         raise ValueError("full.cycles must be >= 0 and full.baseline_fraction in [0, 1)")
     return s
-
-
-def _merge(base: dict, over: dict) -> dict:
-    out = dict(base)
-    for k, v in over.items():
-        out[k] = _merge(out[k], v) if isinstance(v, dict) and isinstance(out.get(k), dict) else v
-    return out
 
 
 def append_gaussians(trainer: Trainer, means, colors, scales, opacity: float) -> int:
@@ -169,10 +163,10 @@ class GenerativeTrainer(Trainer):
         from warpgs.pseudo.views import PseudoConfig
 
         s = self.settings
-        over = _merge({"trajectory": {"n_frames": s.n_frames},
+        over = merge_dicts({"trajectory": {"n_frames": s.n_frames},
                        "uncertainty": {"geometric": s.geometric, "photometric": s.photometric}}, s.pseudo)
         if s.guidance == "render":
-            over = _merge(over, {"sampler": {"guided": False}})
+            over = merge_dicts(over, {"sampler": {"guided": False}})
         return PseudoConfig.load(overrides=over)
 
     def update_pseudo_views(self, cycle: int) -> dict:

@@ -14,6 +14,7 @@ Examples:
     python -m warpgs.pipelines.sparse --data blender --iterations 10000 --out outputs/lego
     python -m warpgs.pipelines.sparse --data /path/to/scene --set strategy.max_gaussians=200000
     python -m warpgs.pipelines.sparse --resume outputs/lego             # continue an interrupted run
+    python -m warpgs.pipelines.sparse --method baseline --data blender --compact   # fewest Gaussians (issue #8)
 
 Config layers (later wins): configs/<method>.yaml, configs/<dataset>.yaml, --config files, --set
 key=value, explicit flags. With --resume the checkpoint's config replaces the first two.
@@ -50,6 +51,9 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--cycles", type=int, default=None, help="pseudo-view cycles of the full method")
     g.add_argument("--ablation", action="append", default=[], metavar="NAME",
                    help="switch of the paper's Table 4 (repeatable): " + ", ".join(ABLATIONS))
+    g.add_argument("--compact", action="store_true",
+                   help="compact mode: the fewest Gaussians and lowest SH degree within 0.1 dB of the best "
+                        "training-view PSNR (configs/compact.yaml, warpgs/compact.py)")
     g.add_argument("--config", action="append", default=[], metavar="FILE", help="extra YAML config (repeatable)")
     g.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                    help="override a config value, e.g. --set strategy.max_gaussians=20000 (repeatable)")
@@ -60,6 +64,8 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--resume", nargs="?", const="", default=None, metavar="DIR",
                    help="continue from DIR/checkpoint.pt (DIR defaults to --out)")
     g.add_argument("--no-progress", action="store_true", help="no progress bar")
+    g.add_argument("--jobs", type=int, default=None, metavar="N",
+                   help="compare: 2 trains baseline and full method at once (default on a multi-core CPU), 1 in turn")
     return ap
 
 
@@ -130,6 +136,8 @@ def make_config(args):
         overlay = dataset_overlay(args.data or "synthetic")
         if overlay is not None:
             base.append(read_yaml(overlay))
+    if getattr(args, "compact", False):
+        base.append(read_yaml(CONFIG_DIR / "compact.yaml"))
     layers = base + [read_yaml(f) for f in args.config] + [parse_override(s) for s in args.set] + [flag_layer(args)]
     return build_config(layers), resume_dir
 
@@ -157,6 +165,13 @@ def print_metrics(m: dict, out: Path) -> None:
     mem = m.get("peak_cuda_allocated_mb", m.get("peak_rss_mb"))
     print(f"  {m['num_gaussians']} Gaussians, training {m['train_time_s']:.1f} s, {m['render_fps']:.1f} FPS, "
           f"peak memory {mem:.0f} MB")
+    c = m.get("compact")
+    if c and c.get("after"):
+        b, k = c["before"], c["after"]
+        print(f"  compact: {k['num_gaussians']} of {b['num_gaussians']} Gaussians kept at SH degree {k['sh_degree']}, "
+              f"{k['param_bytes'] / 2**20:.2f} MiB of parameters (was {b['param_bytes'] / 2**20:.2f}), PLY "
+              f"{k['ply_bytes'] / 2**20:.2f} MiB; train PSNR {k['train_psnr']:.2f} (best {c['best_train_psnr']:.2f}, "
+              f"tolerance {c['tolerance_db']} dB)")
     print(f"  wrote {out / 'metrics.json'}, {out / 'point_cloud.ply'}, {out / 'test'}/")
 
 
@@ -192,11 +207,20 @@ def run_method(method: str, cfg, scene, out: Path, resume: bool, baseline_metric
         print(f"\nwarpgs: stopped; the last checkpoint in {out} is intact ({resume_hint})", file=sys.stderr)
         return 130
     except TrainingDiverged as e:
-        print(f"error: {e}", file=sys.stderr)
+        print("\n" + diverged_message(method, e, out), file=sys.stderr)
         return 1
     metrics = finish_full(trainer, baseline_metrics) if method == "full" else trainer.finish()
     print_metrics(metrics, out)
     return metrics
+
+
+def diverged_message(method: str, e, out: Path) -> str:
+    """One paragraph (no traceback) for a run that stopped because training diverged (``TrainingDiverged``)."""
+    import textwrap
+
+    return textwrap.fill(f"warpgs: the {method} run stopped: {e} Its outputs in {out} (metrics.json, renders, "
+                         "point_cloud.ply) were not written.", width=100,
+                         break_long_words=False, break_on_hyphens=False)
 
 
 def print_side_by_side(base: dict, full: dict, out: Path) -> None:
@@ -232,7 +256,7 @@ def main(argv=None) -> int:
         print(f"error: {e}", file=sys.stderr)
         return 2
     if args.out is None and resume_dir is None and cfg.out == "outputs/sparse":
-        cfg.out = f"outputs/{cfg.method}/{scene.name}_{len(scene.train)}v"
+        cfg.out = f"outputs/{cfg.method}{'-compact' if cfg.compact.enabled else ''}/{scene.name}_{len(scene.train)}v"
     out = Path(cfg.out)
     resume = resume_dir is not None
     print(f"warpgs: {scene.summary()}", file=sys.stderr)
@@ -242,14 +266,77 @@ def main(argv=None) -> int:
     out.mkdir(parents=True, exist_ok=True)
     save_config(cfg, out / "config.yaml")
     hint = f"--resume {out}"
-    base = run_method("baseline", cfg, scene, out / "baseline", resume, resume_hint=hint)
-    if isinstance(base, int):
-        return base
-    full = run_method("full", cfg, scene, out / "full", resume, baseline_metrics=base, resume_hint=hint)
-    if isinstance(full, int):
-        return full
+    if compare_in_parallel(args, cfg):
+        base, full = compare_parallel(cfg, scene, out, resume, hint)
+    else:
+        base = run_method("baseline", cfg, scene, out / "baseline", resume, resume_hint=hint)
+        if isinstance(base, int):
+            return base
+        full = run_method("full", cfg, scene, out / "full", resume, baseline_metrics=base, resume_hint=hint)
+    for result in (base, full):
+        if isinstance(result, int):
+            return result
     print_side_by_side(base, full, out)
     return 0
+
+
+def compare_in_parallel(args, cfg) -> bool:
+    """``--jobs 2`` (or the default on a CPU with two or more cores): the baseline trains in a second
+    process while the full method trains in this one. Warp's CPU kernels use one thread each, so on a
+    2-core machine this nearly halves the wall time; on a GPU the two would only take turns."""
+    import os
+
+    from warpgs.train import resolve_device
+
+    if args.jobs is not None:
+        return args.jobs >= 2
+    return resolve_device(cfg.train.device).type == "cpu" and (os.cpu_count() or 1) >= 2
+
+
+def _baseline_process(cfg, scene, out: Path, resume: bool, hint: str, log_path: Path) -> None:
+    """Entry point of the second process: the baseline run, its output into ``log_path``."""
+    import os
+
+    log = open(log_path, "a", buffering=1)
+    os.dup2(log.fileno(), 1)
+    os.dup2(log.fileno(), 2)
+    sys.stdout = sys.stderr = log
+    result = run_method("baseline", cfg, scene, out, resume, resume_hint=hint)
+    log.flush()
+    sys.exit(result if isinstance(result, int) else 0)
+
+
+def compare_parallel(cfg, scene, out: Path, resume: bool, hint: str):
+    """Baseline (second process) and full method (this process) at once -> (baseline, full) metrics or
+    exit codes. Ctrl-C reaches both; each keeps its checkpoint, and --resume continues both."""
+    import multiprocessing as mp
+
+    from warpgs.pipelines.full import write_report
+
+    bcfg = copy.deepcopy(cfg)
+    bcfg.train.progress = False
+    log_path = out / "baseline.log"
+    proc = mp.get_context("spawn").Process(target=_baseline_process,
+                                           args=(bcfg, scene, out / "baseline", resume, hint, log_path))
+    proc.start()
+    print(f"warpgs: the baseline trains in a second process (progress in {log_path}); the full method here",
+          file=sys.stderr)
+    try:
+        full = run_method("full", cfg, scene, out / "full", resume, resume_hint=hint)
+    finally:
+        try:
+            proc.join()
+        except KeyboardInterrupt:
+            proc.join()
+    if proc.exitcode != 0:
+        print(f"warpgs: the baseline process stopped (exit code {proc.exitcode}); see {log_path}", file=sys.stderr)
+        return (130 if proc.exitcode in (130, -2) else proc.exitcode or 1), full
+    base = json.loads((out / "baseline" / "metrics.json").read_text())
+    print(f"\nbaseline: test PSNR {base['psnr']:.2f}  SSIM {base['ssim']:.3f}  ({base['num_gaussians']} Gaussians, "
+          f"training {base['train_time_s']:.1f} s; full log {log_path})")
+    if not isinstance(full, int):  # the report's PSNR chart gets the baseline line now that it is known
+        write_report(out / "full", full, full.get("cycles", []), base)
+    return base, full
 
 
 if __name__ == "__main__":

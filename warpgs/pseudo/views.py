@@ -21,9 +21,6 @@ Command line (a trained model and its scene)::
 from __future__ import annotations
 
 import argparse
-import dataclasses
-import types
-import typing
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable, Sequence
@@ -31,6 +28,8 @@ from typing import Callable, Sequence
 import numpy as np
 import torch
 import yaml
+
+from warpgs.config import apply_values
 
 from .backends import DefaultBackendConfig, SVDConfig, make_backend
 from .guidance import UncertaintyConfig, WarpResult, guidance_and_uncertainty
@@ -68,7 +67,7 @@ class PseudoConfig:
         Unknown keys are errors naming the valid ones."""
         cfg = cls()
         if path is not None and Path(path).is_file():
-            _merge(cfg, yaml.safe_load(Path(path).read_text()) or {}, str(path))
+            apply_values(cfg, yaml.safe_load(Path(path).read_text()) or {}, str(path))
         if overrides:
             items = overrides.items() if isinstance(overrides, dict) else (_split(o) for o in overrides)
             for key, value in items:
@@ -78,7 +77,7 @@ class PseudoConfig:
                 for p in parts[:-1]:
                     node = node.setdefault(p, {})
                 node[parts[-1]] = value
-                _merge(cfg, d, f"override {key}")
+                apply_values(cfg, d, f"override {key}")
         return cfg
 
 
@@ -87,41 +86,6 @@ def _split(item: str) -> tuple[str, object]:
         raise ValueError(f"override {item!r}: expected section.key=value")
     k, v = item.split("=", 1)
     return k.strip(), yaml.safe_load(v)
-
-
-def _merge(obj, data: dict, source: str) -> None:
-    if not isinstance(data, dict):
-        raise ValueError(f"{source}: expected a mapping, got {type(data).__name__}")
-    fields = {f.name: f for f in dataclasses.fields(obj)}
-    hints = typing.get_type_hints(type(obj))
-    for k, v in data.items():
-        if k not in fields:
-            raise ValueError(f"{source}: unknown key {k!r} in {type(obj).__name__} (valid: {', '.join(fields)})")
-        cur = getattr(obj, k)
-        if dataclasses.is_dataclass(cur):
-            _merge(cur, v, f"{source}: {k}")
-        else:
-            setattr(obj, k, _coerce(v, hints[k], f"{source}: {k}"))
-
-
-def _coerce(v, tp, where: str):
-    args = typing.get_args(tp)
-    optional = type(None) in args or tp is type(None)
-    if v is None:
-        if optional:
-            return None
-        raise ValueError(f"{where}: may not be null")
-    base = [a for a in args if a is not type(None)] if isinstance(tp, types.UnionType) or args else [tp]
-    for b in base:
-        if b is bool and isinstance(v, bool):
-            return v
-        if b is float and isinstance(v, (int, float)) and not isinstance(v, bool):
-            return float(v)
-        if b is int and isinstance(v, int) and not isinstance(v, bool):
-            return v
-        if b is str and isinstance(v, str):
-            return v
-    raise ValueError(f"{where}: {v!r} is not a {tp}")
 
 
 def backend_from_config(cfg: PseudoConfig, device="cpu"):

@@ -1,0 +1,475 @@
+"""Compact mode (``compact.enabled``, ``--compact``): the fewest Gaussians and the lowest SH degree a scene needs.
+
+Three parts, in the spirit of LightGaussian (global significance pruning, SH distillation) and
+Mini-Splatting (pruning by blending weight):
+
+1. **Importance.** A Gaussian's importance is its total blending weight ``sum_pixels alpha_i T_i`` over
+   the importance views (``warpgs.strategy.contribution``: the training views, optionally poses
+   interpolated between them and, for the full method, its pseudo views), optionally multiplied by its
+   volume ``prod(scales) ** volume_power`` (LightGaussian's global significance; ``importance:
+   weight_volume``). A Gaussian that covers no pixel of any of those views has importance 0.
+2. **Pruning during training.** At the fractions ``prune_at`` of ``train.iterations`` the share
+   ``prune_ratio`` of Gaussians with the lowest importance goes, and training goes on so that the rest
+   compensate. ``cap_after_prune`` keeps densification from growing the count back above what each
+   pruning left (it can still move Gaussians: the budget's compaction frees room), and
+   ``stop_densify_at`` stops densification altogether. This runs inside the trainer's densification step (``ScheduledPruning`` wraps the strategy),
+   so it works for the baseline and the full method alike and survives checkpoints.
+3. **The search, in the run's last ``finetune_steps`` steps** (``Trainer.finish``; the trainer stops
+   that many steps early, so the kept model has had ``train.iterations`` steps like a default run).
+   Every point of the search starts from the trained model, removes the share ``ratio`` of the least important Gaussians, keeps the SH
+   coefficients up to a degree, and is fine-tuned for ``finetune_steps`` steps on the training loss
+   (no densification); the unpruned model at its full degree gets the same fine-tune and is the
+   reference. Ratios are searched by bisection over ``ratios`` (quality is assumed to fall as the
+   ratio rises) and the smallest model whose training-view PSNR is within ``tolerance_db`` of the best
+   evaluated point is kept. Then the SH degree at that count: from 0 upwards, the first degree whose
+   point is still within ``tolerance_db`` of the same best is kept (a degree at or above the one the
+   model was rendered at during training costs nothing and needs no fine-tune). So the final model as a
+   whole stays within the tolerance of the best point, every point having had the same extra steps.
+   The kept model stores only the coefficients of its degree, so the PLY and the byte counts shrink.
+
+**Only the training views judge.** The choice never looks at the test views; with ``report_test`` the
+test PSNR of each point of the search is recorded for the report (metrics.json, bench/compact.py's
+chart), after the fact, and is not used. On sparse views the training-view PSNR is an imperfect
+proxy for novel views: pruning what the inputs barely see can lose (or gain) test PSNR that the
+training views cannot show; ``importance_views: [train, virtual]`` also counts what poses between the
+inputs see (on the synthetic room it did not help). Where the training views are fitted very closely (lego: 41.5 dB) any further pruning or a
+lower SH degree costs more than 0.1 dB there, so the search keeps its reference and the reduction comes
+from the pruning during training (lego: -64% Gaussians at +0.46 dB test PSNR; README).
+
+Sizes (``size_report``): ``param_bytes`` = float32 parameters at the kept SH degree, per Gaussian
+``(3 + 4 + 3 + 1 + 3 (d + 1)^2) x 4`` bytes (236 at degree 3, 56 at degree 0); ``ply_bytes`` = the
+size of the 3D-GS PLY that ``GaussianModel.save_ply`` writes (it also stores three unused normals).
+"""
+
+from __future__ import annotations
+
+import copy
+import dataclasses
+from dataclasses import dataclass, field
+from types import SimpleNamespace
+
+import numpy as np
+import torch
+from torch import nn
+
+from warpgs.model import GaussianModel, num_sh_coeffs
+from warpgs.strategy import _update, contribution, remove
+
+IMPORTANCE_VIEWS = ("train", "virtual", "pseudo")
+
+
+@dataclass
+class CompactConfig:
+    enabled: bool = False
+    importance: str = "weight"  # weight (total blending weight) | weight_volume (x volume^volume_power, LightGaussian)
+    volume_power: float = 0.1
+    importance_views: list = field(default_factory=lambda: ["train", "pseudo"])  # of train, virtual, pseudo
+    virtual_frames: int = 3  # virtual: poses interpolated between each pair of neighbouring training views
+    prune_at: list = field(default_factory=lambda: [0.5, 0.65, 0.8])  # fractions of the run; [] = none
+    prune_ratio: float = 0.3  # share of the Gaussians pruned at each of prune_at
+    cap_after_prune: bool = False  # densification may not grow the count back above what each pruning left
+    stop_densify_at: float | None = None  # fraction of train.iterations after which densification stops (None: the strategy's)
+    tolerance_db: float = 0.1  # training-view PSNR the final model may lose against the best evaluated
+    ratios: list = field(default_factory=lambda: [0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9])  # searched; [] = no search
+    finetune_steps: int = 300  # per point of the search
+    sh_search: bool = True  # try lower SH degrees (0 first)
+    report_test: bool = True  # record each point's test PSNR (reported only; never used to choose)
+    seed: int = 0
+
+
+def check_config(c: CompactConfig) -> CompactConfig:
+    if c.importance not in ("weight", "weight_volume"):
+        raise ValueError(f"compact.importance={c.importance!r}: expected weight or weight_volume")
+    bad = [v for v in c.importance_views if v not in IMPORTANCE_VIEWS]
+    if bad or not c.importance_views:
+        raise ValueError(f"compact.importance_views={c.importance_views!r}: a non-empty list of {', '.join(IMPORTANCE_VIEWS)}")
+    for name in ("prune_at", "ratios"):
+        vals = getattr(c, name)
+        if any(not isinstance(v, (int, float)) or not 0 < float(v) < 1 for v in vals):
+            raise ValueError(f"compact.{name}={vals!r}: values must lie strictly between 0 and 1")
+    if not 0 <= c.prune_ratio < 1:
+        raise ValueError(f"compact.prune_ratio={c.prune_ratio}: expected 0 <= ratio < 1")
+    if c.tolerance_db < 0 or c.finetune_steps < 0:
+        raise ValueError("compact: tolerance_db and finetune_steps must be >= 0")
+    if c.stop_densify_at is not None and not 0 < c.stop_densify_at <= 1:
+        raise ValueError(f"compact.stop_densify_at={c.stop_densify_at}: expected a fraction in (0, 1] or null")
+    return c
+
+
+# ----------------------------------------------------------------------------------------------
+# sizes
+
+
+def floats_per_gaussian(sh_degree: int) -> int:
+    """means 3 + quats 4 + scales 3 + opacity 1 + SH 3 (d + 1)^2."""
+    return 3 + 4 + 3 + 1 + 3 * num_sh_coeffs(sh_degree)
+
+
+def param_bytes(num: int, sh_degree: int) -> int:
+    return 4 * num * floats_per_gaussian(sh_degree)
+
+
+def ply_bytes(num: int, sh_degree: int) -> int:
+    """Size of the file ``GaussianModel.save_ply`` writes (header + float32 rows with three normals)."""
+    n_rest = 3 * (num_sh_coeffs(sh_degree) - 1)
+    names = (["x", "y", "z", "nx", "ny", "nz", "f_dc_0", "f_dc_1", "f_dc_2"] + [f"f_rest_{i}" for i in range(n_rest)]
+             + ["opacity", "scale_0", "scale_1", "scale_2", "rot_0", "rot_1", "rot_2", "rot_3"])
+    header = "ply\nformat binary_little_endian 1.0\n" + f"element vertex {num}\n"
+    header += "".join(f"property float {name}\n" for name in names) + "end_header\n"
+    return len(header.encode("ascii")) + 4 * num * len(names)
+
+
+def size_report(model: GaussianModel) -> dict:
+    n, d = len(model), model.max_sh_degree
+    return {"num_gaussians": n, "sh_degree": d, "param_bytes": param_bytes(n, d), "ply_bytes": ply_bytes(n, d)}
+
+
+# ----------------------------------------------------------------------------------------------
+# importance and pruning
+
+
+def virtual_cameras(cams, frames: int) -> list:
+    """``frames`` poses strictly between each pair of neighbouring cameras along their nearest-neighbour
+    path (warpgs.pseudo.trajectory), each with the intrinsics and size of the pair's first camera."""
+    from warpgs.pseudo.trajectory import path_trajectories
+
+    if len(cams) < 2 or frames <= 0:
+        return []
+    V = np.stack([c.viewmat.detach().cpu().double().numpy() for c in cams])
+    out = []
+    for traj in path_trajectories(V, frames + 2):
+        ref = cams[traj.start]
+        for M in traj.viewmats[1:-1]:
+            out.append(SimpleNamespace(viewmat=torch.tensor(M, dtype=torch.float32, device=ref.viewmat.device),
+                                       K=ref.K, width=ref.width, height=ref.height))
+    return out
+
+
+def importance_cameras(trainer, cfg: CompactConfig) -> list:
+    cams = []
+    if "train" in cfg.importance_views:
+        cams += list(trainer.train_cams)
+    if "virtual" in cfg.importance_views:
+        cams += virtual_cameras(trainer.train_cams, cfg.virtual_frames)
+    if "pseudo" in cfg.importance_views:
+        cams += list(getattr(trainer, "pseudo_cams", None) or [])
+    return cams
+
+
+def importance(model: GaussianModel, cameras, background=None, kind: str = "weight",
+               volume_power: float = 0.1) -> torch.Tensor:
+    """Per-Gaussian importance [N]: total blending weight over ``cameras`` (x volume^volume_power for
+    ``weight_volume``)."""
+    w = contribution(model, cameras, background)
+    if kind == "weight_volume":
+        with torch.no_grad():
+            vol = model.scales.detach().prod(dim=-1)
+            w = w * (vol / vol.max().clamp_min(1e-30)).clamp_min(0) ** volume_power
+    elif kind != "weight":
+        raise ValueError(f"importance kind {kind!r}: expected weight or weight_volume")
+    return w
+
+
+def lowest_mask(scores: torch.Tensor, ratio: float) -> torch.Tensor:
+    """Mask of the ``round(ratio N)`` lowest scores (ties: the lower index goes first); at least one stays."""
+    n = scores.shape[0]
+    k = min(int(round(ratio * n)), max(n - 1, 0))
+    mask = torch.zeros(n, dtype=torch.bool, device=scores.device)
+    if k > 0:
+        mask[torch.argsort(scores, stable=True)[:k]] = True
+    return mask
+
+
+def prune_lowest(model, optimizer, state, scores: torch.Tensor, ratio: float) -> int:
+    """Removes the ``ratio`` share of Gaussians with the lowest ``scores`` (with their Adam moments and
+    strategy statistics); returns how many went."""
+    mask = lowest_mask(scores, ratio)
+    k = int(mask.sum())
+    if k:
+        remove(model, optimizer, state if state is not None else {}, mask)
+    return k
+
+
+def truncate_sh(model: GaussianModel, degree: int, optimizer=None) -> GaussianModel:
+    """Keeps only the SH coefficients of ``degree`` (in place, with the Adam moments): the model then
+    renders, and saves, exactly as the full model rendered at ``sh_degree=degree``."""
+    if not 0 <= degree <= model.max_sh_degree:
+        raise ValueError(f"truncate_sh: degree {degree} outside 0..{model.max_sh_degree}")
+    k = num_sh_coeffs(degree) - 1
+    _update(model, optimizer, lambda n, p: p[:, :k].contiguous(), lambda key, v: v[:, :k].contiguous(), names=["shN"])
+    model.max_sh_degree = degree
+    model.active_sh_degree = min(model.active_sh_degree, degree)
+    return model
+
+
+# ----------------------------------------------------------------------------------------------
+# pruning during training
+
+
+class ScheduledPruning:
+    """The trainer's strategy plus importance pruning at scheduled steps. Every other attribute is the
+    wrapped strategy's (``Trainer.train_step`` reads ``compact_when_full`` etc. through it). It wraps a
+    copy, so the run's config is untouched. With ``cap_after_prune`` the count after each pruning becomes
+    the copy's ``max_gaussians``: densification can still move Gaussians to where the views need them
+    (the budget's compaction frees room), but cannot grow back what was pruned."""
+
+    def __init__(self, base, trainer, cfg: CompactConfig):
+        self.base, self.trainer, self.compact_cfg = copy.copy(base), trainer, cfg
+        self.budget = base.max_gaussians  # the configured one (0: none)
+        self.cap: int | None = None
+        total = trainer.total_steps
+        self.prune_steps = sorted({int(round(f * total)) for f in cfg.prune_at} - {0}) if cfg.prune_ratio > 0 else []
+        self.stop_step = int(round(cfg.stop_densify_at * total)) if cfg.stop_densify_at is not None else None
+        self.log: list[dict] = []
+
+    def __getattr__(self, name):
+        return getattr(self.__dict__["base"], name)
+
+    def step_post_backward(self, model, optimizer, state, step, out, width, height, scene_scale, generator=None):
+        c = self.compact_cfg
+        if c.cap_after_prune and self.cap is None and self.prune_steps and step >= self.prune_steps[0]:
+            self._set_cap(len(model))  # resumed after a pruning: the count now is within the lost cap
+        if self.stop_step is not None and step >= self.stop_step:  # densification (and opacity resets) over
+            info = {"cloned": 0, "split": 0, "pruned": 0, "reset": 0}
+        else:
+            info = self.base.step_post_backward(model, optimizer, state, step, out, width, height, scene_scale,
+                                                generator=generator)
+        if step + 1 in self.prune_steps:  # after step + 1 steps
+            tr = self.trainer
+            scores = importance(model, importance_cameras(tr, c), tr.background, c.importance, c.volume_power)
+            n0 = len(model)
+            k = prune_lowest(model, optimizer, state, scores, c.prune_ratio)
+            info["pruned"] = info.get("pruned", 0) + k
+            self.log.append({"step": step + 1, "before": n0, "after": len(model)})
+            if c.cap_after_prune:
+                self._set_cap(len(model))
+            tr.log(f"warpgs: compact: step {step + 1}: pruned {k} of {n0} Gaussians by importance"
+                   + (f"; at most {self.base.max_gaussians} from now on" if c.cap_after_prune else ""))
+        return info
+
+    def _set_cap(self, n: int) -> None:
+        self.cap = n
+        self.base.max_gaussians = n if self.budget <= 0 else min(self.budget, n)
+
+
+def attach(trainer) -> None:
+    """Installs the compact mode's pruning schedule on a trainer (called by ``Trainer.__init__``)."""
+    cfg = check_config(trainer.cfg.compact)
+    if (cfg.ratios or cfg.sh_search) and cfg.finetune_steps > 0:
+        # the search's fine-tunes are the run's last steps, so the kept model has had train.iterations
+        # steps, as the default run has (fairer than extra steps: on sparse views more steps overfit)
+        trainer.reserved_steps = min(cfg.finetune_steps, trainer.cfg.train.iterations // 2)
+    if ((cfg.prune_at and cfg.prune_ratio > 0) or cfg.stop_densify_at is not None) \
+            and not isinstance(trainer.strategy, ScheduledPruning):
+        trainer.strategy = ScheduledPruning(trainer.strategy, trainer, cfg)
+
+
+# ----------------------------------------------------------------------------------------------
+# the search
+
+
+def _snapshot(trainer) -> dict:
+    snap = {
+        "params": {k: v.detach().clone() for k, v in trainer.model.params.items()},
+        "max_sh_degree": trainer.model.max_sh_degree,
+        "active_sh_degree": trainer.model.active_sh_degree,
+        "optimizer": copy.deepcopy(trainer.optimizer.state_dict()),
+        "state": {k: v.clone() for k, v in trainer.state.items()},
+    }
+    if hasattr(trainer, "pseudo_rng"):
+        snap["pseudo"] = (copy.deepcopy(trainer.pseudo_rng.bit_generator.state), list(trainer.pseudo_order))
+    return snap
+
+
+def _restore(trainer, snap: dict, device=None) -> None:
+    from warpgs.train import make_optimizer
+
+    dev = trainer.device if device is None else device
+    m = trainer.model
+    for k, v in snap["params"].items():
+        m.params[k] = nn.Parameter(v.to(dev).clone())
+    m.max_sh_degree, m.active_sh_degree = snap["max_sh_degree"], snap["active_sh_degree"]
+    opt = make_optimizer(m, trainer.cfg, trainer.scene_scale)
+    opt.load_state_dict(copy.deepcopy(snap["optimizer"]))
+    trainer.optimizer = opt
+    trainer.state = {k: v.to(dev).clone() for k, v in snap["state"].items()}
+    if "pseudo" in snap:
+        trainer.pseudo_rng.bit_generator.state = copy.deepcopy(snap["pseudo"][0])
+        trainer.pseudo_order = list(snap["pseudo"][1])
+
+
+def _to_cpu(snap: dict) -> dict:
+    out = dict(snap)
+    out["params"] = {k: v.cpu() for k, v in snap["params"].items()}
+    out["state"] = {k: v.cpu() for k, v in snap["state"].items()}
+    out["optimizer"] = {"state": {i: {k: (v.cpu() if isinstance(v, torch.Tensor) else v) for k, v in s.items()}
+                                  for i, s in snap["optimizer"]["state"].items()},
+                        "param_groups": snap["optimizer"]["param_groups"]}
+    return out
+
+
+def finetune(trainer, steps: int, seed: int = 0) -> int:
+    """``steps`` steps of the trainer's loss on the training views (its ``compute_loss``, so the full
+    method's pseudo views too), no densification, learning rates as at the end of training. The view order
+    and random backgrounds come from ``seed``, so every candidate sees the same sequence. Returns the
+    number of steps skipped for a non-finite loss or gradient."""
+    if steps <= 0:
+        return 0
+    model, opt = trainer.model, trainer.optimizer
+    for g in opt.param_groups:
+        if g.get("name") == "means":
+            g["lr"] = trainer.means_lr(trainer.total_steps)
+    rng = np.random.default_rng(seed)
+    gen = torch.Generator(device=trainer.device).manual_seed(seed)
+    order: list[int] = []
+    skipped = 0
+    for _ in range(steps):
+        if not order:
+            order = rng.permutation(len(trainer.train_cams)).tolist()
+        cam = trainer.train_cams[order.pop()]
+        bg = trainer.background
+        if trainer.cfg.train.random_background and cam.alpha is not None:
+            bg = torch.rand(3, device=trainer.device, generator=gen)
+            cam = dataclasses.replace(cam, image=cam.image + (1 - cam.alpha)[..., None] * (bg - trainer.background))
+        out = model.render(cam.viewmat, cam.K, cam.width, cam.height, background=bg)
+        loss, _ = trainer.compute_loss(out, cam)
+        loss.backward()
+        checks = [torch.isfinite(loss)] + [torch.isfinite(p.grad).all() for p in model.params.values()
+                                           if p.grad is not None]
+        if bool(torch.stack(checks).all()):
+            opt.step()
+        else:
+            skipped += 1
+        opt.zero_grad(set_to_none=True)
+    return skipped
+
+
+def _psnr(trainer, cams) -> float:
+    return float(trainer.evaluate(cams, lpips=False)["mean"]["psnr"])
+
+
+def search(trainer, cfg: CompactConfig | None = None) -> dict:
+    """The search after training (see the module docstring). Leaves the trainer holding the chosen model
+    (with its optimizer state) and returns the report that goes into metrics.json under ``compact``."""
+    import time
+
+    cfg = check_config(cfg if cfg is not None else trainer.cfg.compact)
+    t0 = time.perf_counter()
+    model = trainer.model
+    test = cfg.report_test and bool(trainer.test_cams)
+    before = {**size_report(model), "train_psnr": _psnr(trainer, trainer.train_cams)}
+    if test:
+        before["test_psnr"] = _psnr(trainer, trainer.test_cams)
+    start = _snapshot(trainer)
+    steps = trainer.reserved_steps or cfg.finetune_steps  # compact mode reserved the run's last steps for them
+    cams = importance_cameras(trainer, cfg)
+    scores = importance(model, cams, trainer.background, cfg.importance, cfg.volume_power).to(trainer.device)
+    points: list[dict] = []
+    kept: dict[int, dict] = {}  # point index -> snapshot (on the CPU)
+
+    def run_point(kind: str, ratio: float, degree: int) -> dict:
+        """One point: from the trained model, prune ``ratio``, truncate to ``degree``, fine-tune, measure."""
+        _restore(trainer, start)
+        if ratio > 0:
+            prune_lowest(trainer.model, trainer.optimizer, trainer.state, scores, ratio)
+        if degree < trainer.model.max_sh_degree:
+            truncate_sh(trainer.model, degree, trainer.optimizer)
+        skipped = finetune(trainer, steps, seed=cfg.seed + trainer.cfg.train.seed)
+        row = {"kind": kind, "ratio": ratio, **size_report(trainer.model),
+               "train_psnr": _psnr(trainer, trainer.train_cams), "finetune_steps": steps}
+        if skipped:
+            row["skipped_steps"] = skipped
+        if test:
+            row["test_psnr"] = _psnr(trainer, trainer.test_cams)
+        kept[len(points)] = _to_cpu(_snapshot(trainer))
+        points.append(row)
+        trainer.log(f"warpgs: compact: {kind} ratio {ratio:.2f} degree {row['sh_degree']}: {row['num_gaussians']} "
+                    f"Gaussians, train PSNR {row['train_psnr']:.3f}"
+                    + (f", test PSNR {row['test_psnr']:.3f} (reported only)" if test else ""))
+        return row
+
+    def best() -> float:
+        return max(p["train_psnr"] for p in points)
+
+    def ok(row) -> bool:
+        return row["train_psnr"] >= best() - cfg.tolerance_db
+
+    # 1. the count: the unpruned reference, then bisection over the ratios, all at the full degree
+    max_deg = model.max_sh_degree
+    run_point("prune", 0.0, max_deg)
+    ratios = sorted(float(r) for r in cfg.ratios)
+    lo, hi = -1, len(ratios)
+    while hi - lo > 1:
+        mid = (lo + hi) // 2
+        if ok(run_point("prune", ratios[mid], max_deg)):
+            lo = mid
+        else:
+            hi = mid
+    chosen = min((i for i, p in enumerate(points) if ok(p)),
+                 key=lambda i: (points[i]["num_gaussians"], -points[i]["train_psnr"]))
+    # 2. the SH degree at that count, lowest first, within the same tolerance of the best PSNR (each point
+    # is pruned, truncated and fine-tuned from the trained model alike, so all had the same extra steps)
+    if cfg.sh_search and max_deg > 0:
+        ratio = points[chosen]["ratio"]
+        active = start["active_sh_degree"]
+        for d in range(max_deg):
+            if d >= active:  # the model never rendered above ``active``: dropping the rest changes nothing
+                _restore(trainer, kept[chosen])
+                truncate_sh(trainer.model, d, trainer.optimizer)
+                kept[len(points)] = _to_cpu(_snapshot(trainer))
+                points.append({**points[chosen], "kind": "sh", **size_report(trainer.model),
+                               "note": f"the active SH degree was {active}: same model, fewer stored coefficients"})
+                chosen = len(points) - 1
+                break
+            if ok(run_point("sh", ratio, d)):
+                chosen = len(points) - 1
+                break
+    chosen = min((i for i, p in enumerate(points) if ok(p) and p["num_gaussians"] == points[chosen]["num_gaussians"]),
+                 key=lambda i: (points[i]["param_bytes"], -points[i]["train_psnr"]))
+    _restore(trainer, kept[chosen])
+    for p in points:
+        p["within_tolerance"] = ok(p)
+    final = points[chosen]
+    report = {
+        "tolerance_db": cfg.tolerance_db,
+        "judged_on": "train views",
+        "best_train_psnr": best(),
+        "importance": cfg.importance,
+        "importance_views": list(cfg.importance_views),
+        "num_importance_views": len(cams),
+        "before": before,
+        "after": {k: final[k] for k in ("num_gaussians", "sh_degree", "param_bytes", "ply_bytes", "train_psnr")
+                  if k in final} | ({"test_psnr": final["test_psnr"]} if "test_psnr" in final else {}),
+        "chosen": chosen,
+        "reduction": 1.0 - final["num_gaussians"] / max(before["num_gaussians"], 1),
+        "bytes_reduction": 1.0 - final["param_bytes"] / max(before["param_bytes"], 1),
+        "points": points,
+        "search_time_s": round(time.perf_counter() - t0, 2),
+    }
+    if isinstance(trainer.strategy, ScheduledPruning):
+        report["pruned_during_training"] = trainer.strategy.log
+    if trainer.n_before_compaction is None:
+        trainer.n_before_compaction = before["num_gaussians"]
+    trainer.log(f"warpgs: compact: kept {final['num_gaussians']} of {before['num_gaussians']} Gaussians at SH degree "
+                f"{final['sh_degree']} ({final['param_bytes'] / 2**20:.2f} MiB of parameters), train PSNR "
+                f"{final['train_psnr']:.3f} (best {best():.3f}, tolerance {cfg.tolerance_db} dB)")
+    return report
+
+
+def finish_hook(trainer) -> dict | None:
+    """Called by ``Trainer.finish`` before evaluation: runs the search when compact mode is on."""
+    cfg = trainer.cfg.compact
+    if not cfg.enabled:
+        return None
+    if not cfg.ratios and not cfg.sh_search:
+        return {"before": size_report(trainer.model), "points": []}
+    report = search(trainer, cfg)
+    report["trained_steps_before_search"] = trainer.step
+    trainer.step += trainer.reserved_steps  # the kept model took the reserved last steps in its fine-tune
+    trainer.reserved_steps = 0
+    return report
+
+
+__all__ = ["CompactConfig", "ScheduledPruning", "attach", "finetune", "importance", "importance_cameras",
+           "lowest_mask", "param_bytes", "ply_bytes", "prune_lowest", "search", "size_report", "truncate_sh",
+           "virtual_cameras"]
