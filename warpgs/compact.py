@@ -50,7 +50,6 @@ from types import SimpleNamespace
 
 import numpy as np
 import torch
-from torch import nn
 
 from warpgs.model import GaussianModel, num_sh_coeffs
 from warpgs.strategy import _update, contribution, remove
@@ -268,46 +267,6 @@ def attach(trainer) -> None:
 # the search
 
 
-def _snapshot(trainer) -> dict:
-    snap = {
-        "params": {k: v.detach().clone() for k, v in trainer.model.params.items()},
-        "max_sh_degree": trainer.model.max_sh_degree,
-        "active_sh_degree": trainer.model.active_sh_degree,
-        "optimizer": copy.deepcopy(trainer.optimizer.state_dict()),
-        "state": {k: v.clone() for k, v in trainer.state.items()},
-    }
-    if hasattr(trainer, "pseudo_rng"):
-        snap["pseudo"] = (copy.deepcopy(trainer.pseudo_rng.bit_generator.state), list(trainer.pseudo_order))
-    return snap
-
-
-def _restore(trainer, snap: dict, device=None) -> None:
-    from warpgs.train import make_optimizer
-
-    dev = trainer.device if device is None else device
-    m = trainer.model
-    for k, v in snap["params"].items():
-        m.params[k] = nn.Parameter(v.to(dev).clone())
-    m.max_sh_degree, m.active_sh_degree = snap["max_sh_degree"], snap["active_sh_degree"]
-    opt = make_optimizer(m, trainer.cfg, trainer.scene_scale)
-    opt.load_state_dict(copy.deepcopy(snap["optimizer"]))
-    trainer.optimizer = opt
-    trainer.state = {k: v.to(dev).clone() for k, v in snap["state"].items()}
-    if "pseudo" in snap:
-        trainer.pseudo_rng.bit_generator.state = copy.deepcopy(snap["pseudo"][0])
-        trainer.pseudo_order = list(snap["pseudo"][1])
-
-
-def _to_cpu(snap: dict) -> dict:
-    out = dict(snap)
-    out["params"] = {k: v.cpu() for k, v in snap["params"].items()}
-    out["state"] = {k: v.cpu() for k, v in snap["state"].items()}
-    out["optimizer"] = {"state": {i: {k: (v.cpu() if isinstance(v, torch.Tensor) else v) for k, v in s.items()}
-                                  for i, s in snap["optimizer"]["state"].items()},
-                        "param_groups": snap["optimizer"]["param_groups"]}
-    return out
-
-
 def finetune(trainer, steps: int, seed: int = 0) -> int:
     """``steps`` steps of the trainer's loss on the training views (its ``compute_loss``, so the full
     method's pseudo views too), no densification, learning rates as at the end of training. The view order
@@ -360,7 +319,7 @@ def search(trainer, cfg: CompactConfig | None = None) -> dict:
     before = {**size_report(model), "train_psnr": _psnr(trainer, trainer.train_cams)}
     if test:
         before["test_psnr"] = _psnr(trainer, trainer.test_cams)
-    start = _snapshot(trainer)
+    start = trainer.model_state()
     steps = trainer.reserved_steps or cfg.finetune_steps  # compact mode reserved the run's last steps for them
     cams = importance_cameras(trainer, cfg)
     scores = importance(model, cams, trainer.background, cfg.importance, cfg.volume_power).to(trainer.device)
@@ -369,7 +328,7 @@ def search(trainer, cfg: CompactConfig | None = None) -> dict:
 
     def run_point(kind: str, ratio: float, degree: int) -> dict:
         """One point: from the trained model, prune ``ratio``, truncate to ``degree``, fine-tune, measure."""
-        _restore(trainer, start)
+        trainer.load_model_state(start)
         if ratio > 0:
             prune_lowest(trainer.model, trainer.optimizer, trainer.state, scores, ratio)
         if degree < trainer.model.max_sh_degree:
@@ -381,7 +340,7 @@ def search(trainer, cfg: CompactConfig | None = None) -> dict:
             row["skipped_steps"] = skipped
         if test:
             row["test_psnr"] = _psnr(trainer, trainer.test_cams)
-        kept[len(points)] = _to_cpu(_snapshot(trainer))
+        kept[len(points)] = trainer.model_state()
         points.append(row)
         trainer.log(f"warpgs: compact: {kind} ratio {ratio:.2f} degree {row['sh_degree']}: {row['num_gaussians']} "
                     f"Gaussians, train PSNR {row['train_psnr']:.3f}"
@@ -414,9 +373,9 @@ def search(trainer, cfg: CompactConfig | None = None) -> dict:
         active = start["active_sh_degree"]
         for d in range(max_deg):
             if d >= active:  # the model never rendered above ``active``: dropping the rest changes nothing
-                _restore(trainer, kept[chosen])
+                trainer.load_model_state(kept[chosen])
                 truncate_sh(trainer.model, d, trainer.optimizer)
-                kept[len(points)] = _to_cpu(_snapshot(trainer))
+                kept[len(points)] = trainer.model_state()
                 points.append({**points[chosen], "kind": "sh", **size_report(trainer.model),
                                "note": f"the active SH degree was {active}: same model, fewer stored coefficients"})
                 chosen = len(points) - 1
@@ -426,7 +385,7 @@ def search(trainer, cfg: CompactConfig | None = None) -> dict:
                 break
     chosen = min((i for i, p in enumerate(points) if ok(p) and p["num_gaussians"] == points[chosen]["num_gaussians"]),
                  key=lambda i: (points[i]["param_bytes"], -points[i]["train_psnr"]))
-    _restore(trainer, kept[chosen])
+    trainer.load_model_state(kept[chosen])
     for p in points:
         p["within_tolerance"] = ok(p)
     final = points[chosen]

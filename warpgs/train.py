@@ -393,20 +393,42 @@ class Trainer:
             tensors += [v for v in st.values() if isinstance(v, torch.Tensor)]
         return not self.nonfinite_parameters() and _all_finite(tensors)
 
+    def model_state(self) -> dict:
+        """A CPU copy of what training changes besides the step and the RNGs: the parameters (and SH
+        degrees), Adam's moments, the densification statistics and the full method's pseudo-view order.
+        ``load_model_state`` puts it back: the state to return to of a divergence rollback and of compact
+        mode's search (warpgs/compact.py)."""
+        st = {
+            "params": _cpu_copy(dict(self.model.params)),
+            "max_sh_degree": self.model.max_sh_degree,
+            "active_sh_degree": self.model.active_sh_degree,
+            "optimizer": _cpu_copy(self.optimizer.state_dict()),
+            "strategy_state": _cpu_copy(self.state),
+        }
+        if hasattr(self, "pseudo_rng"):
+            st["pseudo"] = (copy.deepcopy(self.pseudo_rng.bit_generator.state), list(self.pseudo_order))
+        return st
+
+    def load_model_state(self, st: dict) -> None:
+        """Puts back a ``model_state`` (copies of it: ``st`` stays usable); learning rates as saved in it."""
+        for k, v in st["params"].items():  # the model object stays (the strategy may hold it)
+            self.model.params[k] = torch.nn.Parameter(v.to(self.device, copy=True))
+        self.model.max_sh_degree, self.model.active_sh_degree = st["max_sh_degree"], st["active_sh_degree"]
+        self.optimizer = make_optimizer(self.model, self.cfg, self.scene_scale)
+        self.optimizer.load_state_dict(copy.deepcopy(st["optimizer"]))
+        self.state = {k: v.to(self.device, copy=True) for k, v in st["strategy_state"].items()}
+        if "pseudo" in st:
+            self.pseudo_rng.bit_generator.state = copy.deepcopy(st["pseudo"][0])
+            self.pseudo_order = list(st["pseudo"][1])
+
     def take_snapshot(self, step: int | None = None) -> bool:
         """Keeps the current state in memory (on the CPU) as the last good one, if it is all finite;
         returns whether it did. The full method's pseudo-view order is kept too, so a rollback replays it."""
         if not self.state_is_finite():
             return False
-        pseudo = ((copy.deepcopy(self.pseudo_rng.bit_generator.state), list(self.pseudo_order))
-                  if hasattr(self, "pseudo_rng") else None)
         self._snapshot = {
-            "pseudo": pseudo,
+            **self.model_state(),
             "step": self.step if step is None else step,
-            "params": _cpu_copy(dict(self.model.params)),
-            "max_sh_degree": self.model.max_sh_degree,
-            "optimizer": _cpu_copy(self.optimizer.state_dict()),
-            "strategy_state": _cpu_copy(self.state),
             "split_gen": self.split_gen.get_state(),
             "view_rng": copy.deepcopy(self.view_rng.bit_generator.state),
             "order": list(self.order),
@@ -418,19 +440,11 @@ class Trainer:
     def restore_snapshot(self) -> int:
         """Puts the last good state back (the learning-rate scale stays as it is now); returns its step."""
         snap = self._snapshot
-        for k, v in snap["params"].items():  # the model object stays (the strategy may hold it)
-            self.model.params[k] = torch.nn.Parameter(v.to(self.device, copy=True))
-        self.model.max_sh_degree = snap["max_sh_degree"]
-        self.optimizer = make_optimizer(self.model, self.cfg, self.scene_scale)
-        self.optimizer.load_state_dict(copy.deepcopy(snap["optimizer"]))
-        self.state = {k: v.to(self.device) for k, v in snap["strategy_state"].items()}
+        self.load_model_state(snap)
         self.split_gen.set_state(snap["split_gen"])
         self.view_rng.bit_generator.state = copy.deepcopy(snap["view_rng"])
         self.order = list(snap["order"])
         torch.set_rng_state(snap["torch_rng"])
-        if snap["pseudo"] is not None:
-            self.pseudo_rng.bit_generator.state = copy.deepcopy(snap["pseudo"][0])
-            self.pseudo_order = list(snap["pseudo"][1])
         self.step = int(snap["step"])
         self.apply_lr_scale()
         del self.losses[self.step:]
