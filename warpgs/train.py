@@ -302,9 +302,7 @@ class Trainer:
         loss, parts = self.compute_loss(out, cam)
         loss.backward()
         # one device sync for the whole guard: the loss and every gradient must be finite
-        checks = [torch.isfinite(loss)] + [torch.isfinite(p.grad).all() for p in self.model.params.values()
-                                           if p.grad is not None]
-        if not bool(torch.stack(checks).all()):
+        if not _all_finite([loss.detach()] + [p.grad for p in self.model.params.values()]):
             bad = [n for n, p in self.model.params.items() if p.grad is not None and not bool(torch.isfinite(p.grad).all())]
             return self._skip(step, "the loss is not finite" if not bool(torch.isfinite(loss))
                               else f"the gradient of {', '.join(bad)} is not finite")
