@@ -199,6 +199,8 @@ def test_split_rules():
     rest = [i for i in range(30) if i % 8]
     assert test == [0, 8, 16, 24] and train == [rest[int(round(x))] for x in np.linspace(0, len(rest) - 1, 9)]
     assert every_nth_split(10, None)[0] == [1, 2, 3, 4, 5, 6, 7, 9]
+    # test_rest: the same training views, every other frame a test view
+    assert every_nth_split(20, 3, test_rest=True) == ([1, 10, 19], [i for i in range(20) if i not in (1, 10, 19)])
     with pytest.raises(SceneError):
         every_nth_split(10, 9)
     assert dtu_split(49, 6)[0] == [25, 22, 28, 40, 44, 48]

@@ -338,6 +338,54 @@ def test_fused_cloud_matches_the_depth_maps(room, room_result):
     assert set(sub.cloud.view.tolist()) == {0} and torch.equal(sub.mask[0], res.mask[0])
 
 
+def billboard_view(images, Ks, vms, src: int, dst: int, depth: float) -> torch.Tensor:
+    """View ``dst`` as a generator that trusts a wrong model would fill it: image ``src`` warped as if
+    the whole scene were the plane z = ``depth`` in front of ``dst`` (bilinear; black outside)."""
+    H, W = images.shape[1:3]
+    K, Kinv = Ks[dst].double(), torch.linalg.inv(Ks[dst].double())
+    ii, jj = torch.meshgrid(torch.arange(H, dtype=torch.float64), torch.arange(W, dtype=torch.float64), indexing="ij")
+    rays = torch.stack([jj + 0.5, ii + 0.5, torch.ones_like(ii)], -1) @ Kinv.T
+    c2w = torch.linalg.inv(vms[dst].double())
+    X = (rays * depth) @ c2w[:3, :3].T + c2w[:3, 3]
+    x = X @ vms[src, :3, :3].double().T + vms[src, :3, 3].double()
+    uv = x @ Ks[src].double().T
+    u, v = uv[..., 0] / uv[..., 2] - 0.5, uv[..., 1] / uv[..., 2] - 0.5
+    grid = torch.stack([2 * (u + 0.5) / W - 1, 2 * (v + 0.5) / H - 1], -1)[None].float()
+    img = torch.nn.functional.grid_sample(images[src].permute(2, 0, 1)[None], grid, align_corners=False)
+    return img[0].permute(1, 2, 0)
+
+
+def test_stereo_against_the_inputs_ignores_pseudo_views_that_echo_a_wrong_model(room):
+    """The full method's ``stereo_sources: inputs``: two 'pseudo views' (3, 4) are filled from input 0
+    through a wrong flat depth, so they agree with each other and with input 0 at that depth. Matched
+    against every view they vouch for each other and the wrong depth becomes points; matched against the
+    inputs (0, 1, 2) only, the consistency check against the inputs' own depth maps rejects it."""
+    from warpgs.densify import densify_gaussians, load_densify_config
+
+    images, Ks, vms, gt = room
+    wrong = 0.6 * float(gt[3][gt[3] > 0].median())
+    fake = images.clone()
+    for v in (3, 4):
+        fake[v] = billboard_view(images, Ks, vms, 0, v, wrong)
+    cfg = load_densify_config()
+
+    def points_of_view_3(neighbours):
+        d = densify_gaussians(torch.zeros(0, 3), fake, Ks, vms, (1.2, 9.0), config=cfg, references=[0, 1, 2, 3],
+                              neighbours=neighbours)
+        m = d.stereo.mask[3]
+        rel = ((d.stereo.depth[3] - gt[3]).abs() / gt[3])[m & (gt[3] > 0)]
+        return int(m.sum()), rel
+
+    n_all, rel_all = points_of_view_3(neighbour_views(vms, 4))
+    n_in, rel_in = points_of_view_3(neighbour_views(vms, 2, candidates=[0, 1, 2]))
+    print(f"view 3 against all views: {n_all} points, {float((rel_all > 0.05).float().mean()):.0%} off by > 5%; "
+          f"against the inputs: {n_in} points, {float((rel_in > 0.05).float().mean()) if n_in else 0:.0%} off")
+    assert n_all > 0.3 * gt[3].numel() and float((rel_all > 0.05).float().mean()) > 0.5  # the echo becomes geometry
+    wrong_all, wrong_in = int((rel_all > 0.05).sum()), int((rel_in > 0.05).sum())
+    assert wrong_in < 0.05 * wrong_all  # the inputs' depth maps veto the echo (measured: 105 against 4847)
+    assert n_in == 0 or float(rel_in.median()) < 0.05  # what survives is mostly where the true surface is
+
+
 # ----------------------------------------------------------------------------------------------
 # learned stereo interface
 

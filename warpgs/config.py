@@ -132,6 +132,8 @@ class FullConfig:
     photometric: bool = True  # uncertainty's photometric term (ablation: false)
     densify: bool = True  # densification from pseudo views (ablation: false)
     point_filter: bool = True  # statistical outlier removal of the stereo cloud (ablation: false)
+    stereo_sources: str = "inputs"  # inputs: every stereo reference (input or pseudo view) is matched against the
+    #   input views only | all: against its nearest views, pseudo views included (SYN3R)
     n_frames: int = 9  # poses per trajectory, both inputs included (SVD: 25)
     init_opacity: float = 0.1  # opacity of the Gaussians densification adds
     max_new: int = 0  # cap on Gaussians added per cycle (0: none)

@@ -174,6 +174,7 @@ def load_nerfstudio(
     views: int | None = None,
     downscale: int | None = None,
     test_every: int = 8,
+    test_rest: bool = False,
     white_background: bool = False,
     undistort: bool = True,
     load_depth: bool = True,
@@ -184,6 +185,7 @@ def load_nerfstudio(
 
     ``views``: training views (None = every non-test frame). ``downscale``: 1, 2, 4, 8 selects the
     ``images_d`` folder (intrinsics scaled to the images found); None uses the files as named.
+    ``test_rest``: every frame not trained on is a test view (see ``every_nth_split``).
     ``load_points``: also return the COLMAP points (triangulated from all frames, so they see the
     test views: use them for checking, not to initialise a sparse-view run).
     """
@@ -207,7 +209,7 @@ def load_nerfstudio(
         dup = sorted({n for n in names if names.count(n) > 1})
         raise SceneError(f"{tf}: frames listed more than once: {dup[:5]}")
 
-    train_idx, test_idx = every_nth_split(len(frames), views, test_every)
+    train_idx, test_idx = every_nth_split(len(frames), views, test_every, test_rest)
 
     A = np.eye(4)
     if "applied_transform" in meta:

@@ -20,10 +20,13 @@ DTU_EXCLUDED_TEST_IDS = (3, 4, 5, 6, 7, 16, 17, 18, 19, 20, 21, 36, 37, 38, 39)
 BLENDER_TRAIN_IDS = (26, 86, 2, 55, 75, 93, 16, 73)
 
 
-def every_nth_split(num: int, n_train: int | None, test_every: int = 8) -> tuple[list[int], list[int]]:
+def every_nth_split(num: int, n_train: int | None, test_every: int = 8,
+                    test_rest: bool = False) -> tuple[list[int], list[int]]:
     """LLFF/DL3DV rule over ``num`` frames already sorted by name -> (train, test) indices.
 
-    ``n_train=None`` takes every non-test frame; ``test_every=0`` makes no test views.
+    ``n_train=None`` takes every non-test frame; ``test_every=0`` makes no test views. ``test_rest``:
+    the training views are chosen by the same rule, but every frame not trained on is a test view (a
+    denser test set where ground truth is free, as for the synthetic scene).
     """
     if num <= 0:
         raise SceneError("the scene has no frames")
@@ -38,7 +41,10 @@ def every_nth_split(num: int, n_train: int | None, test_every: int = 8) -> tuple
     if n_train < 1 or n_train > len(rest):
         raise SceneError(f"asked for {n_train} training views but only {len(rest)} frames are not test frames")
     pick = np.round(np.linspace(0, len(rest) - 1, n_train)).astype(int)
-    return [rest[i] for i in pick], test
+    train = [rest[i] for i in pick]
+    if test_rest:
+        test = [int(i) for i in idx if int(i) not in train]
+    return train, test
 
 
 def dtu_split(num: int, n_train: int | None) -> tuple[list[int], list[int]]:

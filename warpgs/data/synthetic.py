@@ -523,12 +523,14 @@ def load_synthetic(
     device: str | None = None,
     load_points: bool = False,
     test_every: int = 8,
+    test_rest: bool = False,
 ) -> Scene:
     """Generates (once, cached) and loads the synthetic walk-through through the DL3DV loader."""
     from .nerfstudio import load_nerfstudio
 
     cfg = SyntheticConfig(seed=seed, width=width, height=height, frames=frames, kind=kind, samples_per_side=samples_per_side)
     path = ensure_synthetic(cfg, out_dir, device)
-    scene = load_nerfstudio(path, views=views, downscale=downscale, test_every=test_every, load_points=load_points, name=f"synthetic-{kind}-{seed}")
+    scene = load_nerfstudio(path, views=views, downscale=downscale, test_every=test_every, test_rest=test_rest,
+                           load_points=load_points, name=f"synthetic-{kind}-{seed}")
     scene.metadata["synthetic"] = asdict(cfg)
     return scene

@@ -127,17 +127,19 @@ def _np(a) -> np.ndarray:
 
 def densify_gaussians(existing_means: torch.Tensor, images: torch.Tensor, Ks: torch.Tensor, viewmats: torch.Tensor,
                       depth_range: tuple[float, float], config: DensifyConfig | None = None, references=None,
-                      fixed=(), network: StereoNetwork | None = None) -> Densification:
+                      fixed=(), network: StereoNetwork | None = None, neighbours=None) -> Densification:
     """The four stages on pseudo views ``images`` [V, H, W, 3] with ``Ks`` [V, 3, 3] and ``viewmats``
     [V, 4, 4]: ``references`` (default: ``config.select.views`` chosen by farthest-point sampling,
-    continuing from ``fixed``) are matched against their nearest views, the cloud is cleaned, and new
-    Gaussians are proposed around ``existing_means`` [N, 3]."""
+    continuing from ``fixed``) are matched against their nearest views (or ``neighbours`` [V, m]: the
+    source views of every view), the cloud is cleaned, and new Gaussians are proposed around
+    ``existing_means`` [N, 3]."""
     cfg = config or DensifyConfig()
     if references is None:
         references = select_views(viewmats, cfg.select.views, fixed=fixed,
                                   translation_scale=cfg.select.translation_scale, rotation_weight=cfg.select.rotation_weight)
     references = [int(r) for r in references]
-    st = stereo_point_cloud(images, Ks, viewmats, depth_range, cfg.stereo, references=references, network=network)
+    st = stereo_point_cloud(images, Ks, viewmats, depth_range, cfg.stereo, references=references, network=network,
+                            neighbours=neighbours)
     flt = filter_cloud(st.cloud.points, st.cloud.colors, cfg.filter)
     radius = cfg.insert.radius
     if radius is None:
