@@ -203,7 +203,10 @@ def test_default_data_is_synthetic_and_fast(tmp_path, monkeypatch):
     s = load_scene_from_args(args, device="cpu")
     elapsed = time.perf_counter() - t0
     assert s.metadata["format"] == "nerfstudio" and s.metadata["synthetic"]["width"] == 256
-    assert (s.train[0].width, s.train[0].height) == (256, 192) and len(s.train) == 9 and len(s.test) == 3
+    assert (s.train[0].width, s.train[0].height) == (256, 192) and len(s.train) == 9
+    # test views: every frame not trained on (configs/data/synthetic.yaml: test_rest)
+    names = sorted(c.name for c in s.train + s.test)
+    assert len(s.test) == 15 and len(set(names)) == 24 and names == [f"frame_{i:05d}" for i in range(1, 25)]
     assert all(c.depth is not None for c in s.cameras)
     assert elapsed < 60, f"default synthetic scene took {elapsed:.1f}s"
     assert (tmp_path / "cache" / "synthetic").is_dir()

@@ -76,13 +76,16 @@ def stress_scene(case: str, *, views: int = 3, downscale: int = 2, seed: int = 0
 
 def base_scene(views: int, downscale: int, seed: int = 0, kind: str = "room", root=None,
                device: str | None = "cpu") -> Scene:
-    """``load_scene("synthetic", views=views)`` at 1/``downscale`` of the capture (1, 2, or 2 x 2^k)."""
+    """``load_scene("synthetic", views=views)`` at 1/``downscale`` of the capture (1, 2, or 2 x 2^k), with
+    the LLFF rule's test views (every 8th frame) rather than every frame not trained on, so that the
+    ``views_N`` cases share one test set."""
     from .registry import load_scene
 
     if downscale < 1 or (downscale > 2 and downscale % 2):
         raise SceneError(f"downscale {downscale}: use 1, 2 or an even factor (4 = 64x48 of the 256x192 capture)")
     stored = 1 if downscale == 1 else 2
-    scene = load_scene("synthetic", views=views, downscale=stored, root=root, device=device, seed=seed, kind=kind)
+    scene = load_scene("synthetic", views=views, downscale=stored, root=root, device=device, seed=seed, kind=kind,
+                       test_rest=False)
     if downscale > stored:
         f = downscale // stored
         scene.train = [shrink(c, f) for c in scene.train]
