@@ -159,3 +159,16 @@ def test_lpips_rejects_a_wrong_file(tmp_path):
     junk.write_bytes(b"not a torch file")
     with pytest.raises(losses.LPIPSUnavailable, match="cannot read"):
         losses.LPIPS(junk)
+
+
+def test_lpips_unavailable_message_fits_one_line(tmp_path):
+    """The summary line says what is missing and how to get it, without the searched paths."""
+    import pytest
+
+    from warpgs import losses
+
+    with pytest.raises(losses.LPIPSUnavailable) as e:
+        losses.LPIPS(tmp_path / "none.pth")
+    line = losses.one_line(e.value)
+    assert "\n" not in line and "alexnet-owt-7be5be79.pth" in line and "Download" in line
+    assert str(tmp_path) not in line and "looked at" not in line

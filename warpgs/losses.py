@@ -96,6 +96,16 @@ def _missing_weights_message(looked: list[Path]) -> str:
             f"(or anywhere, and set {LPIPS_ENV}=/path/to/{ALEXNET_FILE}).")
 
 
+def one_line(message: str) -> str:
+    """An LPIPSUnavailable message on one line for summaries: what is missing and what to do (without
+    the list of places searched)."""
+    lines = [ln.strip() for ln in str(message).splitlines() if ln.strip()]
+    if not lines:
+        return ""
+    head = lines[0].removesuffix("warpgs looked at:").strip()
+    return head if len(lines) == 1 else f"{head} {lines[-1]}"
+
+
 def _alexnet_features() -> nn.Sequential:
     """torchvision's AlexNet ``features`` (same layer indices, so its state dict loads)."""
     return nn.Sequential(

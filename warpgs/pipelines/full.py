@@ -102,7 +102,7 @@ class GenerativeTrainer(Trainer):
             try:
                 self._lpips = losses.LPIPS(cfg.eval.lpips_weights).to(self.device)
             except Exception as e:  # LPIPSUnavailable or a broken install
-                self.lpips_missing = str(e).splitlines()[0]
+                self.lpips_missing = losses.one_line(e)
                 self.log("warpgs: LPIPS weights are not available, so pseudo views are trained with L1 in place of "
                          f"LPIPS (the paper's 'L1 instead of LPIPS' ablation). Reason: {self.lpips_missing}")
 

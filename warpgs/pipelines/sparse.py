@@ -33,6 +33,7 @@ from pathlib import Path
 
 import torch
 
+from warpgs import losses
 from warpgs.config import CONFIG_DIR, ConfigError, build_config, parse_override, read_yaml, save_config
 from warpgs.pipelines.full import ABLATIONS
 
@@ -161,7 +162,7 @@ def print_metrics(m: dict, out: Path) -> None:
     print(f"  test{masked}: PSNR {f(m['psnr'], '.2f')}  SSIM {f(m['ssim'], '.3f')}  LPIPS {f(m['lpips'], '.3f')}"
           f"   (initial PSNR {f(m['initial_psnr'], '.2f')}, train PSNR {f(m['train_psnr'], '.2f')})")
     if m.get("lpips_missing"):
-        print("  LPIPS not computed: " + m["lpips_missing"].splitlines()[0])
+        print("  LPIPS not computed: " + losses.one_line(m["lpips_missing"]))
     mem = m.get("peak_cuda_allocated_mb", m.get("peak_rss_mb"))
     print(f"  {m['num_gaussians']} Gaussians, training {m['train_time_s']:.1f} s, {m['render_fps']:.1f} FPS, "
           f"peak memory {mem:.0f} MB")
