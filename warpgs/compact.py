@@ -45,7 +45,6 @@ size of the 3D-GS PLY that ``GaussianModel.save_ply`` writes (it also stores thr
 from __future__ import annotations
 
 import copy
-import dataclasses
 from dataclasses import dataclass, field
 from types import SimpleNamespace
 
@@ -273,6 +272,8 @@ def finetune(trainer, steps: int, seed: int = 0) -> int:
     method's pseudo views too), no densification, learning rates as at the end of training. The view order
     and random backgrounds come from ``seed``, so every candidate sees the same sequence. Returns the
     number of steps skipped for a non-finite loss or gradient."""
+    from warpgs.train import _all_finite  # (warpgs.train imports this module's config through warpgs.config)
+
     if steps <= 0:
         return 0
     model, opt = trainer.model, trainer.optimizer
@@ -286,17 +287,11 @@ def finetune(trainer, steps: int, seed: int = 0) -> int:
     for _ in range(steps):
         if not order:
             order = rng.permutation(len(trainer.train_cams)).tolist()
-        cam = trainer.train_cams[order.pop()]
-        bg = trainer.background
-        if trainer.cfg.train.random_background and cam.alpha is not None:
-            bg = torch.rand(3, device=trainer.device, generator=gen)
-            cam = dataclasses.replace(cam, image=cam.image + (1 - cam.alpha)[..., None] * (bg - trainer.background))
+        cam, bg = trainer.with_training_background(trainer.train_cams[order.pop()], gen)
         out = model.render(cam.viewmat, cam.K, cam.width, cam.height, background=bg)
         loss, _ = trainer.compute_loss(out, cam)
         loss.backward()
-        checks = [torch.isfinite(loss)] + [torch.isfinite(p.grad).all() for p in model.params.values()
-                                           if p.grad is not None]
-        if bool(torch.stack(checks).all()):
+        if _all_finite([loss.detach()] + [p.grad for p in model.params.values()]):
             opt.step()
         else:
             skipped += 1

@@ -284,6 +284,15 @@ class Trainer:
             parts["depth"] = dl
         return loss, parts
 
+    def with_training_background(self, cam, generator: torch.Generator):
+        """(camera, background) for one training step: with ``train.random_background`` and an alpha
+        channel, a random colour from ``generator`` and the target composited over it; else as they are."""
+        if not (self.cfg.train.random_background and cam.alpha is not None):
+            return cam, self.background
+        # target over a random colour: image = rgb a + bg (1 - a)  ->  image + (1 - a) (new_bg - bg)
+        bg = torch.rand(3, device=self.device, generator=generator)
+        return dataclasses.replace(cam, image=cam.image + (1 - cam.alpha)[..., None] * (bg - self.background)), bg
+
     def train_step(self) -> dict:
         """One iteration at ``self.step`` (does not advance it). On a divergence that a recovery handles it
         rolls back (``self.step`` becomes the snapshot's) and returns ``{"rolled_back": 1, ...}``."""
@@ -293,11 +302,7 @@ class Trainer:
             if g["name"] == "means":
                 g["lr"] = self.means_lr(step) * self.lr_scale
         cam = self.train_cams[self.next_view()]
-        bg = self.background
-        if self.cfg.train.random_background and cam.alpha is not None:
-            # target over a random colour: image = rgb a + bg (1 - a)  ->  image + (1 - a) (new_bg - bg)
-            bg = torch.rand(3, device=self.device, generator=self.split_gen)
-            cam = dataclasses.replace(cam, image=cam.image + (1 - cam.alpha)[..., None] * (bg - self.background))
+        cam, bg = self.with_training_background(cam, self.split_gen)
         out = self.model.render(cam.viewmat, cam.K, cam.width, cam.height, background=bg)
         loss, parts = self.compute_loss(out, cam)
         loss.backward()

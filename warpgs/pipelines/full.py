@@ -201,7 +201,7 @@ class GenerativeTrainer(Trainer):
         return times
 
     def densify(self, cams, cycle_dir: Path | None) -> int:
-        from warpgs.densify import densify_gaussians, load_densify_config
+        from warpgs.densify import densify_gaussians, load_densify_config, neighbour_views, select_views
         from warpgs.viz import save_origin_ply
 
         s = self.settings
@@ -216,21 +216,16 @@ class GenerativeTrainer(Trainer):
         # error 19% against 0.8% with the inputs as the only sources).
         views = list(self.train_cams) + list(cams)
         n_in = len(self.train_cams)
-        neighbours = None
-        if s.stereo_sources == "inputs":
-            if n_in < 2:
-                self.log("warpgs: densification skipped: stereo against the inputs needs at least 2 input views")
-                return 0
-            from warpgs.densify import neighbour_views
-
-            neighbours = neighbour_views(torch.stack([c.viewmat for c in views]).float(),
-                                         min(dcfg.stereo.neighbours, n_in - 1),
-                                         translation_scale=dcfg.stereo.translation_scale, candidates=range(n_in))
+        if s.stereo_sources == "inputs" and n_in < 2:
+            self.log("warpgs: densification skipped: stereo against the inputs needs at least 2 input views")
+            return 0
         images = torch.stack([c.image for c in views]).float()
         viewmats = torch.stack([c.viewmat for c in views]).float()
         Ks = torch.stack([c.K for c in views]).float()
-        from warpgs.densify import select_views
-
+        neighbours = None
+        if s.stereo_sources == "inputs":
+            neighbours = neighbour_views(viewmats, min(dcfg.stereo.neighbours, n_in - 1),
+                                         translation_scale=dcfg.stereo.translation_scale, candidates=range(n_in))
         refs = list(range(n_in)) + [int(i) for i in select_views(
             viewmats, dcfg.select.views, fixed=list(range(n_in)), translation_scale=dcfg.select.translation_scale,
             rotation_weight=dcfg.select.rotation_weight)]
