@@ -14,7 +14,7 @@ from pathlib import Path
 
 KEYS = ("method", "scene", "train_views", "iterations", "psnr", "ssim", "lpips", "num_gaussians", "train_time_s",
         "render_fps", "peak_cuda_allocated_mb", "peak_rss_mb", "seed", "device", "curve", "cycles", "compact",
-        "recoveries")
+        "recoveries", "initial_psnr", "train_psnr", "init", "stage_times_s", "stopped_early")
 
 
 def gather(runs: Path) -> dict:
@@ -48,8 +48,11 @@ def main(argv=None):
     for name, row in gather(a.runs).items():
         for sub, m in row.items():
             if isinstance(m, dict) and "psnr" in m:
-                print(f"{name:>12} {sub:<10} PSNR {m['psnr']:.3f} SSIM {m['ssim']:.4f} n {m.get('num_gaussians')} "
-                      f"t {m.get('train_time_s')}")
+                init = m.get("init") or {}
+                print(f"{name:>14} {sub:<9} PSNR {m['psnr']:.3f} SSIM {m['ssim']:.4f} (initial "
+                      f"{m.get('initial_psnr') or 0:.2f}, train {m.get('train_psnr') or 0:.2f}) n {m.get('num_gaussians')} "
+                      f"t {m.get('train_time_s')} init {init.get('method', '-')}:{init.get('points', '-')} "
+                      f"{init.get('times', '')}" + (" STOPPED" if m.get("stopped_early") else ""))
 
 
 if __name__ == "__main__":

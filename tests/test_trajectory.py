@@ -121,6 +121,17 @@ def test_collinear_equally_spaced_inputs_give_a_straight_uniform_path():
     assert np.allclose(centers[:, 0], np.linspace(0, 3, 13)) and np.allclose(centers[:, 1:], 0)
 
 
+def test_capture_order_follows_the_inputs_as_given():
+    """A walk-through's inputs in capture order: the path goes 0 -> 1 -> 2 -> 3 even where a
+    nearest-neighbour tour would not (here it would visit 0, 2, 1, 3 along the line)."""
+    V = np.stack([pose(np.eye(3), [x, 0.0, 0.0]) for x in (0.0, 2.0, 1.0, 3.0)])
+    assert [(t.start, t.end) for t in path_trajectories(V, 5, "capture")] == [(0, 1), (1, 2), (2, 3)]
+    assert [(t.start, t.end) for t in path_trajectories(V, 5, "nearest")] == [(0, 2), (2, 1), (1, 3)]
+    assert [(t.start, t.end) for t in path_trajectories(V, 5)] == [(0, 2), (2, 1), (1, 3)]
+    with pytest.raises(ValueError, match="capture, nearest"):
+        path_trajectories(V, 5, "spiral")
+
+
 def test_path_trajectories_rejects_bad_input():
     with pytest.raises(ValueError):
         path_trajectories(np.eye(4)[None], 5)

@@ -24,6 +24,7 @@ from typing import Any
 import yaml
 
 from warpgs.compact import CompactConfig
+from warpgs.points import GeometryConfig
 from warpgs.strategy import DefaultStrategy
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
@@ -47,8 +48,10 @@ class DataConfig:
 @dataclass
 class ModelConfig:
     sh_degree: int = 3
-    init: str = "frustum"  # box | hull | frustum | points | ply (hull: the box carved by the inputs' alpha)
+    init: str = "frustum"  # sfm | stereo | sfm+stereo (points found between the training views, warpgs/points)
+    #   | box | hull | frustum | points | ply (hull: the box carved by the inputs' alpha)
     init_num: int = 100_000  # random Gaussians for box / frustum
+    init_random: int = 0  # sfm / stereo: this many random Gaussians in the training frusta besides the points
     init_box: list | None = None  # [xmin, ymin, zmin, xmax, ymax, zmax]; None: the training frusta's bounding box
     init_depth: list | None = None  # [near, far] for frustum / the automatic box; None: the scene's bounds
     init_ply: str | None = None  # point cloud (any vertex PLY) for init: ply
@@ -155,6 +158,7 @@ class Config:
     eval: EvalConfig = field(default_factory=EvalConfig)
     full: FullConfig = field(default_factory=FullConfig)
     compact: CompactConfig = field(default_factory=CompactConfig)  # compact mode (warpgs/compact.py, --compact)
+    geometry: GeometryConfig = field(default_factory=GeometryConfig)  # model.init sfm / stereo (warpgs/points)
 
 
 # ----------------------------------------------------------------------------------------------

@@ -19,7 +19,7 @@ finishes the current step, writes a checkpoint and stops (``TrainingInterrupted`
 stops at once, keeping the last checkpoint.
 
 Divergence: a step is skipped (no update) when its loss or gradients are not finite, or when its loss
-explodes: above ``train.explode_factor`` x the median of the last ``train.explode_window`` finite
+on the input views (``parts["inputs"]`` of ``compute_loss``; pseudo views are left out) explodes: above ``train.explode_factor`` x the median of the last ``train.explode_window`` finite
 losses (the statistic restarts with each ``train()`` call, i.e. each phase of the full method, and after
 an opacity reset, whose expected jumps are not divergence). A divergence is ``train.max_nan_steps``
 skipped steps in a row, ``train.explode_patience`` exploding ones in a row (one high loss alone, e.g. a
@@ -53,7 +53,7 @@ import torch
 from warpgs import losses
 from warpgs.config import Config, config_from_dict, save_config, to_dict
 from warpgs.metrics import LPIPSMetric, mean_or_none, peak_memory_mb, psnr, render_fps, ssim
-from warpgs.model import GaussianModel, read_point_cloud
+from warpgs.model import PARAM_NAMES, GaussianModel, read_point_cloud
 
 CHECKPOINT = "checkpoint.pt"
 
@@ -96,11 +96,48 @@ def scene_scale_of(cameras) -> float:
     return 1.1 * (r if r > 1e-6 else 1.0)
 
 
+def prepare_geometry(cfg: Config, scene, log=None):
+    """For ``model.init`` sfm / stereo / sfm+stereo: the points found between the training views
+    (``warpgs.points.initial_geometry``), once per scene and settings (kept on ``scene.geometry``), and the
+    scene's depth bounds measured on them (the loader's are kept in ``scene.metadata['loader_bounds']``).
+    Returns the ``Geometry``, or None for the other initialisations."""
+    from warpgs.points import METHODS, initial_geometry
+
+    if cfg.model.init not in METHODS:
+        return None
+    key = (cfg.model.init, repr(to_dict(cfg.geometry)))
+    geo = getattr(scene, "geometry", None)
+    if geo is None or getattr(geo, "key", None) != key:
+        log = log or (lambda msg: print(msg, file=sys.stderr))
+        geo = initial_geometry(scene.train, cfg.model.init, cfg.geometry, device=resolve_device(cfg.train.device),
+                               log=log)
+        geo.key = key
+        scene.geometry = geo
+        scene.metadata.setdefault("loader_bounds", tuple(scene.bounds))
+        if geo.bounds is not None:
+            scene.bounds = geo.bounds
+        log(f"warpgs: init {geo.method}: {len(geo.xyz)} points"
+            + "".join(f", {k[:-2]} {v:.1f} s" for k, v in geo.times.items())
+            + (f"; scene depth {geo.bounds[0]:.3g}..{geo.bounds[1]:.3g}" if geo.bounds else ""))
+    return geo
+
+
 def init_model(cfg: Config, scene, generator: torch.Generator) -> GaussianModel:
     """The initial Gaussians (on the CPU) as ``cfg.model.init`` says."""
     m = cfg.model
     kw = dict(sh_degree=m.sh_degree, init_opacity=m.init_opacity, init_scale=m.init_scale)
+    geo = prepare_geometry(cfg, scene)
     near, far = (m.init_depth if m.init_depth is not None else scene.bounds)
+    if geo is not None:
+        if len(geo.xyz) == 0:  # nothing found (said in one line): random points between the measured bounds
+            return init_model(dataclasses.replace(cfg, model=dataclasses.replace(m, init="frustum")), scene, generator)
+        model = GaussianModel.from_points(geo.xyz, geo.rgb, **kw)
+        if m.init_random > 0:  # plus random Gaussians in the frusta, for what no method matched (sky, blank walls)
+            extra = init_model(dataclasses.replace(cfg, model=dataclasses.replace(m, init="frustum", init_num=m.init_random)),
+                               scene, generator)
+            model = GaussianModel(*(torch.cat([model.params[n], extra.params[n]]) for n in PARAM_NAMES),
+                                  max_sh_degree=m.sh_degree)
+        return model
     if m.init == "points":
         if scene.points3d is None or len(scene.points3d) == 0:
             raise ValueError("model.init=points, but the scene has no points (the loaders read them with "
@@ -139,7 +176,7 @@ def init_model(cfg: Config, scene, generator: torch.Generator) -> GaussianModel:
             return GaussianModel.random_hull(m.init_num, lo, hi, [c.viewmat for c in cams], [c.K for c in cams],
                                              [c.alpha for c in cams], generator=generator, **kw)
         return GaussianModel.random_box(m.init_num, lo, hi, generator=generator, **kw)
-    raise ValueError(f"model.init={m.init!r}: expected box, hull, frustum, points or ply")
+    raise ValueError(f"model.init={m.init!r}: expected sfm, stereo, sfm+stereo, box, hull, frustum, points or ply")
 
 
 def base_learning_rates(cfg: Config, scene_scale: float) -> dict[str, float]:
@@ -241,6 +278,7 @@ class Trainer:
         self._stop = False
         self._ema = {}
         self.compact_report: dict | None = None
+        self.stopped_early: dict | None = None  # set by the caller when training stopped before the end
         self.reserved_steps = 0  # compact mode: the last steps, taken by the search's fine-tunes (warpgs/compact.py)
         if cfg.compact.enabled:  # compact mode: importance pruning during training (warpgs/compact.py)
             from warpgs.compact import attach
@@ -311,7 +349,9 @@ class Trainer:
             bad = [n for n, p in self.model.params.items() if p.grad is not None and not bool(torch.isfinite(p.grad).all())]
             return self._skip(step, "the loss is not finite" if not bool(torch.isfinite(loss))
                               else f"the gradient of {', '.join(bad)} is not finite")
-        value = float(loss.detach())
+        # the guard judges the input views' loss: extra views (the full method's pseudo views) change what is
+        # optimised and can be far off at first without anything diverging
+        value = float(parts.get("inputs", loss).detach())
         exploding = self._exploding(value)
         if exploding:
             self.explode_steps += 1
@@ -744,6 +784,13 @@ class Trainer:
             "curve": self.curve,
             "per_view": ev["views"],
         }
+        geo = getattr(self.scene, "geometry", None)
+        if geo is not None:
+            metrics["init"] = geo.summary()
+        metrics["stage_times_s"] = {**{f"init_{k}": round(v, 2) for k, v in (geo.times.items() if geo else [])},
+                                    "train_s": round(self.train_time, 2)}
+        if self.stopped_early:
+            metrics["stopped_early"] = self.stopped_early
         if "lpips_missing" in ev:
             metrics["lpips_missing"] = ev["lpips_missing"]
         from warpgs.compact import size_report
@@ -755,6 +802,10 @@ class Trainer:
         if out is not None:
             out.mkdir(parents=True, exist_ok=True)
             self.export_ply()
+            if geo is not None and len(geo.xyz):  # the initial points, for open3d / python -m warpgs.viz
+                from warpgs.viz import save_origin_ply
+
+                save_origin_ply(out / "init_points.ply", geo.xyz, geo.rgb)
             self.save_checkpoint()
             save_config(self.cfg, out / "config.yaml")
             tmp = out / "metrics.json.tmp"

@@ -118,6 +118,7 @@ class Scene:
     white_background: bool = False
     eval_masked: bool = False  # evaluate test views inside Camera.mask only (DTU protocol)
     metadata: dict[str, Any] = field(default_factory=dict)
+    geometry: Any = None  # warpgs.points.Geometry found from the training views (model.init sfm / stereo)
 
     @property
     def cameras(self) -> list[Camera]:

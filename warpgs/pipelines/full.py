@@ -150,6 +150,7 @@ class GenerativeTrainer(Trainer):
                 dl = losses.pearson_depth_loss(out.depth, prior, valid)
                 loss = loss + self.settings.input_depth_weight * dl
                 parts["input_depth"] = dl
+        parts["inputs"] = loss  # what the divergence guard judges (warpgs/train.py)
         if self.pseudo_cams and self.settings.pseudo_weight > 0:
             pc = self.pseudo_cams[self.next_pseudo()]
             po = self.model.render(pc.viewmat, pc.K, pc.width, pc.height, background=self.background)
@@ -349,7 +350,8 @@ def write_flythrough(trainer: Trainer, path: Path, frames_per_segment: int = 24)
     cam0 = cams[0]
     frames = []
     with torch.no_grad():
-        for traj in path_trajectories(V, max(frames_per_segment, 2)):
+        order = trainer.pseudo_config().trajectory.order if hasattr(trainer, "pseudo_config") else None
+        for traj in path_trajectories(V, max(frames_per_segment, 2), order):
             for vm in traj.viewmats:
                 v = torch.as_tensor(vm, dtype=torch.float32, device=trainer.device)
                 img = trainer.model.render(v, cam0.K, cam0.width, cam0.height, background=trainer.background).image

@@ -208,8 +208,9 @@ def run_method(method: str, cfg, scene, out: Path, resume: bool, baseline_metric
         print(f"\nwarpgs: stopped; the last checkpoint in {out} is intact ({resume_hint})", file=sys.stderr)
         return 130
     except TrainingDiverged as e:
+        # the model is at its last good state: its metrics, renders and PLY are written all the same
         print("\n" + diverged_message(method, e, out), file=sys.stderr)
-        return 1
+        trainer.stopped_early = {"reason": "diverged", "step": e.step, "cause": e.cause}
     metrics = finish_full(trainer, baseline_metrics) if method == "full" else trainer.finish()
     print_metrics(metrics, out)
     return metrics
@@ -219,8 +220,8 @@ def diverged_message(method: str, e, out: Path) -> str:
     """One paragraph (no traceback) for a run that stopped because training diverged (``TrainingDiverged``)."""
     import textwrap
 
-    return textwrap.fill(f"warpgs: the {method} run stopped: {e} Its outputs in {out} (metrics.json, renders, "
-                         "point_cloud.ply) were not written.", width=100,
+    return textwrap.fill(f"warpgs: the {method} run stopped early: {e} Its outputs in {out} (metrics.json with "
+                         "'stopped_early', renders, point_cloud.ply) are those of the last good state.", width=100,
                          break_long_words=False, break_on_hyphens=False)
 
 
@@ -248,6 +249,7 @@ def print_side_by_side(base: dict, full: dict, out: Path) -> None:
 
 def main(argv=None) -> int:
     from warpgs.data.scene import SceneError
+    from warpgs.train import prepare_geometry
 
     args = build_parser().parse_args(argv)
     try:
@@ -261,9 +263,14 @@ def main(argv=None) -> int:
     out = Path(cfg.out)
     resume = resume_dir is not None
     print(f"warpgs: {scene.summary()}", file=sys.stderr)
+    try:
+        prepare_geometry(cfg, scene)  # once for both methods of a compare run
+    except (SceneError, ValueError) as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 2
     if cfg.method != "compare":
         result = run_method(cfg.method, cfg, scene, out, resume)
-        return result if isinstance(result, int) else 0
+        return result if isinstance(result, int) else (1 if result.get("stopped_early") else 0)
     out.mkdir(parents=True, exist_ok=True)
     save_config(cfg, out / "config.yaml")
     hint = f"--resume {out}"
@@ -278,7 +285,7 @@ def main(argv=None) -> int:
         if isinstance(result, int):
             return result
     print_side_by_side(base, full, out)
-    return 0
+    return 1 if base.get("stopped_early") or full.get("stopped_early") else 0
 
 
 def compare_in_parallel(args, cfg) -> bool:

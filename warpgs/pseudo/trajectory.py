@@ -29,6 +29,9 @@ class TrajectoryConfig:
     # nearest: the closest input camera (paper); halves: first half from the start input (SYN3R);
     # best: per pixel, the less uncertain of the trajectory's two inputs (warps both)
     guidance_source: str = "nearest"
+    # capture: the inputs in the order given (a walk-through's frames sorted by name: the capture path, as the
+    # paper does for DL3DV); nearest: a nearest-neighbour path through the camera centres (any capture)
+    order: str = "nearest"
 
 
 @dataclass
@@ -189,17 +192,23 @@ def chord_knots(centers: np.ndarray) -> np.ndarray:
     return np.concatenate([[0.0], np.cumsum(d)])
 
 
-def path_trajectories(viewmats: np.ndarray, n_frames: int, order: list[int] | None = None) -> list[Trajectory]:
+def path_trajectories(viewmats: np.ndarray, n_frames: int, order: list[int] | str | None = None) -> list[Trajectory]:
     """One trajectory of ``n_frames`` poses between each pair of neighbours along the path.
 
-    ``order`` defaults to ``nearest_neighbour_path`` of the camera centres; Trajectory.start/end index
-    ``viewmats``."""
+    ``order``: a list of indices, ``"capture"`` (the order given), or ``"nearest"`` / None (the
+    ``nearest_neighbour_path`` of the camera centres); Trajectory.start/end index ``viewmats``."""
     V = np.asarray(viewmats, np.float64).reshape(-1, 4, 4)
     if n_frames < 2:
         raise ValueError(f"a trajectory needs at least 2 frames, got {n_frames}")
     if len(V) < 2:
         raise ValueError("pseudo-view trajectories need at least two input views")
-    order = nearest_neighbour_path(camera_centers(V)) if order is None else list(order)
+    if order is None or order == "nearest":
+        order = nearest_neighbour_path(camera_centers(V))
+    elif order == "capture":
+        order = list(range(len(V)))
+    elif isinstance(order, str):
+        raise ValueError(f"trajectory order must be capture, nearest or a list of indices, got {order!r}")
+    order = list(order)
     C = camera_centers(V[order])
     knots = chord_knots(C)
     spline = natural_cubic_spline(knots, C)

@@ -196,7 +196,7 @@ def generate_pseudo_views(
     centers = camera_centers(src_V.double().cpu().numpy())
 
     if trajectories is None:
-        trajectories = path_trajectories(src_V.double().cpu().numpy(), tc.n_frames)
+        trajectories = path_trajectories(src_V.double().cpu().numpy(), tc.n_frames, tc.order)
     if tc.guidance_source not in ("nearest", "halves", "best"):
         raise ValueError(f"trajectory.guidance_source must be nearest, halves or best, got {tc.guidance_source!r}")
     out = []

@@ -1,0 +1,158 @@
+"""Initial geometry from the sparse inputs: points found between the training views with their known
+poses, and the scene's depth bounds measured on those points.
+
+    geo = initial_geometry(scene.train, "sfm+stereo", GeometryConfig())
+    geo.xyz, geo.rgb        (N, 3) float32 points and colours in [0, 1]
+    geo.bounds              (near, far): per-camera depth percentiles of the points, over the training views
+    geo.method              what produced the points, after any fallback ("none" when nothing did)
+    geo.stats, geo.times    per method: counts, seconds
+
+Methods (``model.init``):
+
+- ``sfm``: SIFT features and exhaustive matching on the training views, points triangulated with the
+  poses held fixed (pycolmap; ``warpgs/points/sfm.py``). Precise, but wide baselines leave few points.
+- ``stereo``: Warp plane-sweep stereo between neighbouring training views, fused and cleaned with
+  open3d (``warpgs/points/stereo.py``). Dense where there is texture and overlap.
+- ``sfm+stereo``: both; the SfM points fix the sweep's depth range, and the two clouds are merged.
+
+A method that finds fewer than ``min_points`` gives way to the next of its chain (sfm+stereo -> stereo,
+sfm -> stereo; after stereo the caller falls back to random points in the frusta), and one line says so. Only the cameras passed in are used: callers
+pass the training views, never test views.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .sfm import SfmError, SfmOptions, triangulate
+from .stereo import StereoInitOptions, StereoPoints, resolvable_depth_range, stereo_points
+
+METHODS = ("sfm", "stereo", "sfm+stereo")
+CHAIN = {"sfm": ["sfm", "stereo"], "stereo": ["stereo"], "sfm+stereo": ["sfm+stereo", "stereo"]}
+
+
+@dataclass
+class GeometryConfig:
+    min_points: int = 100  # a method that finds fewer gives way to the next (module docstring)
+    max_points: int = 150_000  # larger clouds are subsampled to this many (seeded)
+    near_percentile: float = 1.0  # per-camera depth percentiles of the points that bound the scene ...
+    far_percentile: float = 99.0
+    bounds_margin: float = 0.2  # ... widened by this fraction: near x (1 - m), far x (1 + m)
+    seed: int = 0
+    sfm: SfmOptions = field(default_factory=SfmOptions)
+    stereo: StereoInitOptions = field(default_factory=StereoInitOptions)
+
+
+@dataclass
+class Geometry:
+    xyz: np.ndarray
+    rgb: np.ndarray
+    bounds: tuple[float, float] | None  # None when no points were found
+    method: str  # what produced the points ("none": nothing did)
+    asked: str  # the method asked for
+    stats: dict = field(default_factory=dict)
+    times: dict = field(default_factory=dict)  # seconds per stage: sfm_s, stereo_s
+    notes: list = field(default_factory=list)  # the one-line fallback messages
+
+    def summary(self) -> dict:
+        return {"asked": self.asked, "method": self.method, "points": int(len(self.xyz)),
+                "bounds": None if self.bounds is None else [round(b, 6) for b in self.bounds],
+                "times": {k: round(v, 2) for k, v in self.times.items()}, "stats": self.stats, "notes": self.notes}
+
+
+def depth_bounds(cameras, xyz: np.ndarray, near_percentile: float = 1.0, far_percentile: float = 99.0,
+                 margin: float = 0.2) -> tuple[float, float] | None:
+    """(near, far) over the cameras: for each, the percentiles of the z-depths of the points in front of
+    it that project into its image, widened by ``margin``; the smallest near and largest far. None
+    when no camera sees 10 points."""
+    nears, fars = [], []
+    for c in cameras:
+        uv, z = c.project(xyz)
+        inside = (z > 0) & (uv[:, 0] >= 0) & (uv[:, 1] >= 0) & (uv[:, 0] < c.width) & (uv[:, 1] < c.height)
+        if int(inside.sum()) < 10:
+            continue
+        lo, hi = np.percentile(z[inside], [near_percentile, far_percentile])
+        nears.append(lo * (1 - margin))
+        fars.append(hi * (1 + margin))
+    if not nears:
+        return None
+    near, far = max(float(min(nears)), 1e-6), float(max(fars))
+    return (near, far) if far > near else None
+
+
+def _subsample(xyz, rgb, n: int, seed: int):
+    if len(xyz) <= n:
+        return xyz, rgb
+    idx = np.sort(np.random.default_rng(seed).choice(len(xyz), n, replace=False))
+    return xyz[idx], rgb[idx]
+
+
+def initial_geometry(cameras, method: str, config: GeometryConfig | None = None, *, device=None,
+                     log=print) -> Geometry:
+    """Points for ``method`` (``sfm``, ``stereo``, ``sfm+stereo``) from ``cameras`` with fallbacks
+    (module docstring). Bad input that no fallback can help (one view, pycolmap missing) raises."""
+    cfg = config or GeometryConfig()
+    if method not in METHODS:
+        raise ValueError(f"model.init={method!r}: the geometry methods are {', '.join(METHODS)}")
+    geo = Geometry(np.zeros((0, 3), np.float32), np.zeros((0, 3), np.float32), None, "none", method)
+    sfm_result: list = []  # [SfmPoints or None, why it is not enough or None], filled once
+
+    def note(text: str) -> None:
+        geo.notes.append(text)
+        log(f"warpgs: {text}")
+
+    def sfm():
+        if not sfm_result:
+            t0 = time.perf_counter()
+            try:
+                pts = triangulate(cameras, cfg.sfm, log=lambda *_: None)
+                geo.stats["sfm"] = pts.stats
+                why = f"{len(pts.xyz)} points" if len(pts.xyz) < cfg.min_points else None
+            except SfmError as e:
+                if len(cameras) < 2 or "not installed" in str(e):
+                    raise
+                pts, why = None, str(e)
+            geo.times["sfm_s"] = time.perf_counter() - t0
+            sfm_result.extend([pts, why])
+        return sfm_result
+
+    def stereo():
+        pts = sfm_result[0] if sfm_result else None
+        rng = None  # the SfM points, even too few to start from, bound the sweep
+        if pts is not None and len(pts.xyz) >= 10:
+            rng = depth_bounds(cameras, pts.xyz, cfg.near_percentile, cfg.far_percentile, cfg.bounds_margin)
+        t0 = time.perf_counter()
+        st = stereo_points(cameras, cfg.stereo, rng, device=device)
+        geo.times["stereo_s"] = time.perf_counter() - t0
+        geo.stats["stereo"] = st.stats
+        return st
+
+    for m in CHAIN[method]:
+        if m in ("sfm", "sfm+stereo"):
+            pts, why = sfm()
+            if why is not None:
+                note(f"init {m}: triangulation found too few points ({why}); using stereo")
+                continue
+            xyz, rgb = pts.xyz, pts.rgb
+            if m == "sfm+stereo":
+                st = stereo()
+                xyz, rgb = np.concatenate([xyz, st.xyz]), np.concatenate([rgb, st.rgb])
+        else:
+            st = stereo()
+            xyz, rgb = st.xyz, st.rgb
+            if len(xyz) < cfg.min_points:
+                note(f"init {m}: stereo found too few points ({len(xyz)}); using random points in the training frusta")
+                continue
+        geo.xyz, geo.rgb, geo.method = xyz.astype(np.float32), rgb.astype(np.float32), m
+        break
+    if len(geo.xyz):
+        geo.xyz, geo.rgb = _subsample(geo.xyz, geo.rgb, cfg.max_points, cfg.seed)
+        geo.bounds = depth_bounds(cameras, geo.xyz, cfg.near_percentile, cfg.far_percentile, cfg.bounds_margin)
+    return geo
+
+
+__all__ = ["CHAIN", "METHODS", "Geometry", "GeometryConfig", "SfmError", "SfmOptions", "StereoInitOptions",
+           "StereoPoints", "depth_bounds", "initial_geometry", "resolvable_depth_range", "stereo_points", "triangulate"]
