@@ -10,7 +10,7 @@ poses, and the scene's depth bounds measured on those points.
 Methods (``model.init``):
 
 - ``sfm``: SIFT features and exhaustive matching on the training views, points triangulated with the
-  poses held fixed (pycolmap; ``warpgs/points/sfm.py``). Precise, but wide baselines leave few points.
+  poses held fixed (pycolmap; ``warpgs/points/sfm.py``). Precise; wide baselines leave it a few hundred points.
 - ``stereo``: Warp plane-sweep stereo between neighbouring training views, fused and cleaned with
   open3d (``warpgs/points/stereo.py``). Dense where there is texture and overlap.
 - ``sfm+stereo``: both; the SfM points fix the sweep's depth range, and the two clouds are merged.
