@@ -3,7 +3,11 @@
 # /tmp/site and the scenes in $D (castle_p30, herz_jesus_p25, llff_fern, dtu_scan65, blender_lego):
 #   bash bench/gpu_session5.sh PHASE D RUNS
 #   a: images_8, 3000 it: initialisations (frustum / sfm / stereo / sfm+stereo / + random) x castle, herz x 3, 9
-#      views, the full method with the capture default; fern and DTU with frustum vs sfm+stereo
+#      views, the full method with the capture default; fern and DTU with frustum vs sfm+stereo (29 runs at once:
+#      too many for 16 cores, none finished; b-d are its runs in smaller groups)
+#   b, c, d: exploration at images_8, 3000 it (bench/results/real_captures/session5_explore_{b,c,d}.json)
+#   e1, e2, e3: the acceptance runs (images_4, 10k it, resumed across calls) and the regressions
+#      (bench/results/real_captures/session5_final.json; README table: bench/real_captures_table.py)
 # Runs go in parallel on the one GPU; each writes RUNS/<name>/metrics.json (gather: bench/gather_runs.py).
 set -u
 export PYTHONPATH=/tmp/site:$PWD PYTHONUNBUFFERED=1 OMP_NUM_THREADS=1 MKL_NUM_THREADS=1  # many runs share 16 cores
