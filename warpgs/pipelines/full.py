@@ -436,9 +436,11 @@ def finish_full(trainer: GenerativeTrainer, baseline: dict | None = None) -> dic
     if trainer.lpips_missing:
         metrics["lpips_fallback_reason"] = trainer.lpips_missing
     if trainer.out is not None:
-        write_flythrough(trainer, trainer.out / "flythrough.gif", trainer.settings.flythrough_frames)
-        write_report(trainer.out, metrics, trainer.history, baseline)
+        # the method's records go into metrics.json before the slower fly-through and report, so a run
+        # stopped while those are written keeps them
         tmp = trainer.out / "metrics.json.tmp"
         tmp.write_text(json.dumps(metrics, indent=2))
         tmp.replace(trainer.out / "metrics.json")
+        write_flythrough(trainer, trainer.out / "flythrough.gif", trainer.settings.flythrough_frames)
+        write_report(trainer.out, metrics, trainer.history, baseline)
     return metrics
