@@ -337,8 +337,9 @@ def train_full(trainer: GenerativeTrainer) -> None:
 # outputs beside the baseline's: fly-through, charts, report
 
 
-def write_flythrough(trainer: Trainer, path: Path, frames_per_segment: int = 24) -> Path | None:
-    """A GIF along the interpolated path through the inputs (the trajectories the pseudo views use)."""
+def write_flythrough(trainer: Trainer, path: Path, frames_per_segment: int = 24, order: str | None = None) -> Path | None:
+    """A GIF along the interpolated path through the inputs (the trajectories the pseudo views use;
+    ``order`` as ``trajectory.order``)."""
     from PIL import Image
 
     from warpgs.pseudo.trajectory import path_trajectories
@@ -350,7 +351,6 @@ def write_flythrough(trainer: Trainer, path: Path, frames_per_segment: int = 24)
     cam0 = cams[0]
     frames = []
     with torch.no_grad():
-        order = trainer.pseudo_config().trajectory.order if hasattr(trainer, "pseudo_config") else None
         for traj in path_trajectories(V, max(frames_per_segment, 2), order):
             for vm in traj.viewmats:
                 v = torch.as_tensor(vm, dtype=torch.float32, device=trainer.device)
@@ -441,6 +441,7 @@ def finish_full(trainer: GenerativeTrainer, baseline: dict | None = None) -> dic
         tmp = trainer.out / "metrics.json.tmp"
         tmp.write_text(json.dumps(metrics, indent=2))
         tmp.replace(trainer.out / "metrics.json")
-        write_flythrough(trainer, trainer.out / "flythrough.gif", trainer.settings.flythrough_frames)
+        write_flythrough(trainer, trainer.out / "flythrough.gif", trainer.settings.flythrough_frames,
+                         trainer.pseudo_config().trajectory.order)
         write_report(trainer.out, metrics, trainer.history, baseline)
     return metrics

@@ -27,7 +27,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .sfm import SfmError, SfmOptions, triangulate
+from .sfm import SfmError, SfmInputError, SfmOptions, triangulate
 from .stereo import StereoInitOptions, StereoPoints, resolvable_depth_range, stereo_points
 
 METHODS = ("sfm", "stereo", "sfm+stereo")
@@ -56,6 +56,7 @@ class Geometry:
     stats: dict = field(default_factory=dict)
     times: dict = field(default_factory=dict)  # seconds per stage: sfm_s, stereo_s
     notes: list = field(default_factory=list)  # the one-line fallback messages
+    key: tuple | None = None  # the settings it was found with (warpgs.train.prepare_geometry's cache key)
 
     def summary(self) -> dict:
         return {"asked": self.asked, "method": self.method, "points": int(len(self.xyz)),
@@ -111,9 +112,9 @@ def initial_geometry(cameras, method: str, config: GeometryConfig | None = None,
                 pts = triangulate(cameras, cfg.sfm, log=lambda *_: None)
                 geo.stats["sfm"] = pts.stats
                 why = f"{len(pts.xyz)} points" if len(pts.xyz) < cfg.min_points else None
-            except SfmError as e:
-                if len(cameras) < 2 or "not installed" in str(e):
-                    raise
+            except SfmInputError:
+                raise
+            except SfmError as e:  # too few matches or points: the next method may do better
                 pts, why = None, str(e)
             geo.times["sfm_s"] = time.perf_counter() - t0
             sfm_result.extend([pts, why])
@@ -154,5 +155,5 @@ def initial_geometry(cameras, method: str, config: GeometryConfig | None = None,
     return geo
 
 
-__all__ = ["CHAIN", "METHODS", "Geometry", "GeometryConfig", "SfmError", "SfmOptions", "StereoInitOptions",
+__all__ = ["CHAIN", "METHODS", "Geometry", "GeometryConfig", "SfmError", "SfmInputError", "SfmOptions", "StereoInitOptions",
            "StereoPoints", "depth_bounds", "initial_geometry", "resolvable_depth_range", "stereo_points", "triangulate"]

@@ -40,6 +40,11 @@ class SfmError(ValueError):
     """Triangulation cannot give points for these views; the one-line message says why."""
 
 
+class SfmInputError(SfmError):
+    """The input cannot be triangulated at all (fewer than 2 views, a bad option, image or matrix, pycolmap
+    missing): unlike too few matches or points, no other initialisation helps, so callers do not fall back."""
+
+
 @dataclass
 class SfmOptions:
     """Every threshold of the pipeline. Pixel thresholds are in pixels of the extraction images."""
@@ -77,14 +82,14 @@ class SfmOptions:
 
     def check(self) -> None:
         if self.verification not in ("poses", "ransac"):
-            raise SfmError(f"sfm verification={self.verification!r}: use 'poses' or 'ransac'")
+            raise SfmInputError(f"sfm verification={self.verification!r}: use 'poses' or 'ransac'")
         positive = ("max_image_size", "max_features", "peak_threshold", "max_ratio", "max_distance",
                     "max_epipolar_error", "max_angle_error", "max_reproj_error")
         for name in positive:
             if not getattr(self, name) > 0:
-                raise SfmError(f"sfm option {name}={getattr(self, name)!r} must be positive")
+                raise SfmInputError(f"sfm option {name}={getattr(self, name)!r} must be positive")
         if self.min_track_length < 2:
-            raise SfmError(f"sfm option min_track_length={self.min_track_length} must be at least 2")
+            raise SfmInputError(f"sfm option min_track_length={self.min_track_length} must be at least 2")
 
 
 @dataclass
@@ -106,7 +111,7 @@ def _import_pycolmap():
     try:
         import pycolmap  # noqa: PLC0415 (optional dependency)
     except ImportError as e:
-        raise SfmError(PIP_HINT) from e
+        raise SfmInputError(PIP_HINT) from e
     return pycolmap
 
 
@@ -139,14 +144,14 @@ def _folder(workdir):
 def _check_cameras(cameras: Sequence) -> None:
     """At least two views, each with an image of its camera's size and finite matrices."""
     if len(cameras) < 2:
-        raise SfmError(f"sfm needs at least 2 training views, got {len(cameras)}")
+        raise SfmInputError(f"sfm needs at least 2 training views, got {len(cameras)}")
     for k, c in enumerate(cameras):
         img = np.asarray(c.image)
         if img.ndim != 3 or img.shape[2] < 3 or img.shape[:2] != (c.height, c.width):
-            raise SfmError(f"sfm view {k} ({c.name}): image of shape {img.shape} does not match its {c.width}x{c.height} camera")
+            raise SfmInputError(f"sfm view {k} ({c.name}): image of shape {img.shape} does not match its {c.width}x{c.height} camera")
         V, K = np.asarray(c.viewmat, np.float64), np.asarray(c.K, np.float64)
         if V.shape != (4, 4) or K.shape != (3, 3) or not (np.all(np.isfinite(V)) and np.all(np.isfinite(K))):
-            raise SfmError(f"sfm view {k} ({c.name}): viewmat must be a finite 4x4 and K a finite 3x3 matrix")
+            raise SfmInputError(f"sfm view {k} ({c.name}): viewmat must be a finite 4x4 and K a finite 3x3 matrix")
 
 
 def _write_images(cameras, folder: Path, max_size: int) -> tuple[list[str], list[np.ndarray], list[list[int]]]:
@@ -456,4 +461,4 @@ def triangulate(cameras: Sequence, options: SfmOptions | None = None, *, workdir
     return SfmPoints(xyz, rgb, track, err, stats, obs)
 
 
-__all__ = ["SfmError", "SfmOptions", "SfmPoints", "triangulate"]
+__all__ = ["SfmError", "SfmInputError", "SfmOptions", "SfmPoints", "triangulate"]
