@@ -140,6 +140,11 @@ class FullConfig:
     n_frames: int = 9  # poses per trajectory, both inputs included (SVD: 25)
     init_opacity: float = 0.1  # opacity of the Gaussians densification adds
     max_new: int = 0  # cap on Gaussians added per cycle (0: none)
+    restart_lr: bool = True  # the means' learning-rate schedule restarts at each pseudo-view update (the paper);
+    #   false: one schedule over the whole run, as the baseline's
+    pseudo_mask: str = "seen"  # pixels of a pseudo view that supervise: seen (U < 1: an input sees them) |
+    #   reliable (U < the sampler's delta: where guidance was fused)
+    growth_budget: float = 0.0  # > 0: at most this x the baseline phase's Gaussians during the cycles (0: no cap)
     flythrough_frames: int = 24  # frames per trajectory in flythrough.gif
     pseudo: dict = field(default_factory=dict)  # overrides of configs/pseudo.yaml, e.g. {sampler: {steps: 10}}
     densify_config: dict = field(default_factory=dict)  # overrides of configs/densify.yaml

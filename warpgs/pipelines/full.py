@@ -18,6 +18,7 @@ included), so the two are compared at equal iterations.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import time
@@ -50,6 +51,10 @@ def check_settings(s: FullConfig) -> FullConfig:
         raise ValueError(f"full.stereo_sources must be inputs or all, got {s.stereo_sources!r}")
     if s.guidance not in ("warped", "render"):
         raise ValueError(f"full.guidance must be warped or render, got {s.guidance!r}")
+    if s.pseudo_mask not in ("seen", "reliable"):
+        raise ValueError(f"full.pseudo_mask must be seen or reliable, got {s.pseudo_mask!r}")
+    if s.growth_budget < 0:
+        raise ValueError(f"full.growth_budget must be >= 0, got {s.growth_budget}")
     if s.cycles < 0 or not 0.0 <= s.baseline_fraction < 1.0:
         raise ValueError("full.cycles must be >= 0 and full.baseline_fraction in [0, 1)")
     return s
@@ -183,8 +188,9 @@ class GenerativeTrainer(Trainer):
                                      device=self.device)
         times["pseudo_views_s"] = time.perf_counter() - t0
         cams = []
+        limit = pcfg.sampler.delta if self.settings.pseudo_mask == "reliable" else 1.0
         for seq in seqs:
-            cams += seq.pseudo_cameras(prefix=f"c{cycle}_{seq.start}_{seq.end}")
+            cams += seq.pseudo_cameras(prefix=f"c{cycle}_{seq.start}_{seq.end}", max_uncertainty=limit)
         cycle_dir = self.out / f"cycle_{cycle}" if self.out is not None else None
         if cycle_dir is not None:
             for seq in seqs:
@@ -196,10 +202,18 @@ class GenerativeTrainer(Trainer):
         times["densify_s"] = time.perf_counter() - t0
         self.pseudo_cams = cams
         self.pseudo_order = []
+        self.apply_growth_budget()
         self.log(f"warpgs: cycle {cycle}: {len(cams)} pseudo views ({times['pseudo_views_s']:.1f} s), "
                  f"{added} Gaussians added by densification ({times['densify_s']:.1f} s), {len(self.model)} in all")
         times["added"] = added
         return times
+
+    def apply_growth_budget(self) -> None:
+        """With ``growth_budget``: the cycles grow the model to at most that x the Gaussians the baseline
+        phase ended with (or what it has now, if more)."""
+        if self.settings.growth_budget > 0 and self.history:
+            cap = int(self.settings.growth_budget * self.history[0]["num_gaussians"])
+            self.strategy = dataclasses.replace(self.strategy, max_gaussians=max(cap, len(self.model)))
 
     def densify(self, cams, cycle_dir: Path | None) -> int:
         from warpgs.densify import densify_gaussians, load_densify_config, neighbour_views, select_views
@@ -285,6 +299,8 @@ class GenerativeTrainer(Trainer):
         self.pseudo_order = list(ck["pseudo_order"])
         dev = self.device
         self.input_depths = {k: v.to(dev) for k, v in ck.get("input_depths", {}).items()}
+        if self.cycles_done or self.pseudo_cams:
+            self.apply_growth_budget()
         self.pseudo_cams = [CameraTensors(name=c["name"], viewmat=c["viewmat"].to(dev), K=c["K"].to(dev),
                                           width=c["width"], height=c["height"], image=c["image"].to(dev),
                                           mask=None if c["mask"] is None else c["mask"].to(dev),
@@ -306,7 +322,7 @@ def train_full(trainer: GenerativeTrainer) -> None:
     s = trainer.settings
     bounds = phase_boundaries(trainer.total_steps, s)
     if trainer.phase_len is None:
-        trainer.phase_start, trainer.phase_len = 0, bounds[0]
+        trainer.phase_start, trainer.phase_len = 0, bounds[0] if s.restart_lr else trainer.total_steps
     trainer.train(bounds[0])
     if not trainer.history:  # the baseline phase, as cycle 0 of the PSNR-per-cycle chart
         ev = trainer.evaluate(lpips=False)["mean"] if trainer.test_cams else {}
@@ -316,7 +332,8 @@ def train_full(trainer: GenerativeTrainer) -> None:
         start, end = bounds[c], bounds[c + 1]
         if trainer.step <= start:  # this cycle's pseudo views are not made yet
             times = trainer.update_pseudo_views(c + 1)
-            trainer.phase_start, trainer.phase_len = start, end - start  # learning-rate schedule restarts
+            if s.restart_lr:  # the means' learning-rate schedule restarts (the paper)
+                trainer.phase_start, trainer.phase_len = start, end - start
             trainer.save_checkpoint()
         else:
             times = {}

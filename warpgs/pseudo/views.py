@@ -118,14 +118,15 @@ class PseudoSequence:
     def __len__(self) -> int:
         return int(self.frames.shape[0])
 
-    def pseudo_cameras(self, prefix: str | None = None):
-        """The interior frames as ``CameraTensors`` (image = pseudo view, mask = U < 1) for training."""
+    def pseudo_cameras(self, prefix: str | None = None, max_uncertainty: float = 1.0):
+        """The interior frames as ``CameraTensors`` (image = pseudo view, mask = U < ``max_uncertainty``;
+        1: every pixel an input sees) for training."""
         from warpgs.data.scene import CameraTensors
 
         prefix = prefix or f"pseudo_{self.start}_{self.end}"
         return [
             CameraTensors(name=f"{prefix}_{i:03d}", viewmat=self.viewmats[i], K=self.K, width=self.width,
-                          height=self.height, image=self.frames[i], mask=self.uncertainty[i] < 1.0)
+                          height=self.height, image=self.frames[i], mask=self.uncertainty[i] < max_uncertainty)
             for i in range(1, len(self) - 1)
         ]
 

@@ -1,0 +1,73 @@
+#!/usr/bin/env bash
+# GPU runs of session 6 (issue #13: the full method on real walk-around captures), on a lent 2-GPU host after
+# the packed wheels are in /tmp/site and the scenes in $D:  bash bench/gpu_session6.sh PHASE D RUNS
+#   x: exploration at images_8, 3000 it, castle_p30 / herz_jesus_p25 x 3 / 9 views: the full method without the
+#      learning-rate restart, then with a pseudo-view mask, growth budget, no or stricter densification, no depth
+#      prior; bench/select_variant.py picks the acceptance settings from them by a rule fixed beforehand
+#   (later phases: the acceptance runs with the settings x chose)
+# Runs are spread over the GPUs (GPUS, default 2) and share the cores (OMP_NUM_THREADS=1); each writes
+# RUNS/<name>/metrics.json (gather: bench/gather_runs.py).
+set -u
+export PYTHONPATH=/tmp/site:$PWD PYTHONUNBUFFERED=1 OMP_NUM_THREADS=1 MKL_NUM_THREADS=1
+P=$1; D=$2; R=$3; mkdir -p "$R"
+GPUS=${GPUS:-2}; rm -f "$R/.k"
+gpu() { flock "$R/.k.lock" bash -c "n=\$(cat '$R/.k' 2>/dev/null || echo 0); echo \$((n + 1)) > '$R/.k'; echo \$((n % $GPUS))"; }
+sp() { local name=$1; shift; local g; g=$(gpu)
+       CUDA_VISIBLE_DEVICES=$g python3 -m warpgs.pipelines.sparse --no-progress --device cuda --out "$R/$name" "$@" \
+       > "$R/$name.log" 2>&1 && echo "$name ok" || echo "$name rc=$?"; }
+spt() { local t=$1 name=$2; shift 2; local g; g=$(gpu)
+        CUDA_VISIBLE_DEVICES=$g timeout -s INT "$t" python3 -m warpgs.pipelines.sparse --no-progress \
+        --device cuda --out "$R/$name" "$@" >> "$R/$name.log" 2>&1; echo "$name rc=$?"; }
+case $P in
+x)
+  NL="--set full.restart_lr=false"
+  ST="--set full.densify_config.stereo.min_score=0.8 --set full.densify_config.stereo.min_consistent=2"
+  for sc in castle_p30 herz_jesus_p25; do for v in 3 9; do
+    A="--data $D/$sc --downscale 8 --views $v --iterations 3000 --set train.checkpoint_every=0"
+    n=${sc:0:1}$v
+    sp "${n}_b" $A --method baseline &
+    sp "${n}_f_nl" $A --method full $NL &
+    sp "${n}_f_nl_rel" $A --method full $NL --set full.pseudo_mask=reliable &
+    sp "${n}_f_nl_gb" $A --method full $NL --set full.growth_budget=1.5 &
+    sp "${n}_f_nl_nd" $A --method full $NL --set full.densify=false &
+    sp "${n}_f_nl_strict" $A --method full $NL $ST &
+    sp "${n}_f_nl_nodepth" $A --method full $NL --set full.input_depth_weight=0 --set full.depth_weight=0 &
+    sp "${n}_f_combo" $A --method full $NL --set full.pseudo_mask=reliable --set full.growth_budget=1.5 $ST &
+  done; done
+  ;;
+e1)  # acceptance with the settings x chose (bench/select_variant.py on x's runs in $X): images_4, 10,000 it, 3/6/9
+    # views, baseline and full (SIGINT at T s, checkpointed, resumed by e2/e3); images_8, 3000 it, seed 0; lego
+  T=${T:-540}; X=${X:-/tmp/runs_x}
+  python3 bench/select_variant.py "$X" > "$R/flags.txt"; cp "$X/choice.json" "$OUT/choice.json"
+  BF=""; FF=$(sed -n 1p "$R/flags.txt"); echo "full: $FF"
+  for sc in castle_p30 herz_jesus_p25; do for v in 3 6 9; do
+    n=${sc:0:1}$v
+    spt "$T" "${n}_baseline_i4" --data "$D/$sc" --downscale 4 --views $v --method baseline --iterations 10000 $BF &
+    spt "$T" "${n}_full_i4" --data "$D/$sc" --downscale 4 --views $v --method full --iterations 10000 $BF $FF &
+  done; done
+  for sc in castle_p30 herz_jesus_p25; do for v in 3 9; do
+    n=${sc:0:1}$v
+    sp "${n}_baseline_i8_s0" --data "$D/$sc" --downscale 8 --views $v --method baseline --iterations 3000 $BF &
+    sp "${n}_full_i8_s0" --data "$D/$sc" --downscale 8 --views $v --method full --iterations 3000 $BF $FF &
+  done; done
+  sp lego --data blender --data-root "$D" --method baseline &
+  ;;
+e2)  # resume e1's images_4 runs; images_8 seeds 1 and 2; fern and the synthetic room (baselines: unchanged configs)
+  T=${T:-540}
+  BF=""; FF=$(sed -n 1p "$R/flags.txt")
+  for d in "$R"/*_i4; do [ -f "$d/metrics.json" ] || spt "$T" "$(basename "$d")" --resume "$d" & done
+  for s in 1 2; do for sc in castle_p30 herz_jesus_p25; do for v in 3 9; do
+    n=${sc:0:1}$v
+    sp "${n}_baseline_i8_s$s" --data "$D/$sc" --downscale 8 --views $v --method baseline --iterations 3000 --seed $s $BF &
+    sp "${n}_full_i8_s$s" --data "$D/$sc" --downscale 8 --views $v --method full --iterations 3000 --seed $s $BF $FF &
+  done; done; done
+  sp fern --data llff --data-root "$D" --iterations 3000 --method baseline &
+  sp synth --method baseline &
+  ;;
+e3)  # whatever e2 left unfinished
+  T=${T:-540}
+  for d in "$R"/*_i4; do [ -f "$d/metrics.json" ] || spt "$T" "$(basename "$d")" --resume "$d" & done
+  ;;
+esac
+wait
+python3 bench/gather_runs.py "$R" "$OUT/runs_$P.json" --logs "$OUT/logs_$P.txt"
