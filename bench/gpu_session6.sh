@@ -35,6 +35,38 @@ x)
     sp "${n}_f_combo" $A --method full $NL --set full.pseudo_mask=reliable --set full.growth_budget=1.5 $ST &
   done; done
   ;;
+y1)  # acceptance with the capture defaults x led to (configs/nerfstudio.yaml: one learning-rate schedule, stricter
+    # densification stereo; DropGaussian 0.2 in the full method): images_4, 10,000 it, 3/6/9 views, baseline and
+    # full (SIGINT at T s, checkpointed, resumed by y2); images_8, 3000 it, seed 0: DropGaussian in the baseline and
+    # in the full method (the ablations of what the full method adds)
+  T=${T:-540}
+  for sc in castle_p30 herz_jesus_p25; do for v in 3 6 9; do
+    n=${sc:0:1}$v
+    for m in baseline full; do
+      spt "$T" "${n}_${m}_i4" --data "$D/$sc" --downscale 4 --views $v --method $m --iterations 10000 &
+    done
+  done; done
+  for sc in castle_p30 herz_jesus_p25; do for v in 3 9; do
+    A="--data $D/$sc --downscale 8 --views $v --iterations 3000 --set train.checkpoint_every=0"
+    n=${sc:0:1}$v
+    sp "${n}_b_drop_s0" $A --method baseline --set train.drop_rate=0.2 &
+    sp "${n}_full_s0" $A --method full &
+  done; done
+  ;;
+y2)  # resume y1's images_4 runs; images_8 seeds 1 and 2 of the baseline and the full method
+  T=${T:-540}
+  for d in "$R"/*_i4; do [ -f "$d/metrics.json" ] || spt "$T" "$(basename "$d")" --resume "$d" & done
+  for s in 1 2; do for sc in castle_p30 herz_jesus_p25; do for v in 3 9; do
+    A="--data $D/$sc --downscale 8 --views $v --iterations 3000 --seed $s --set train.checkpoint_every=0"
+    n=${sc:0:1}$v
+    sp "${n}_baseline_s$s" $A --method baseline &
+    sp "${n}_full_s$s" $A --method full &
+  done; done; done
+  ;;
+y3)  # whatever y2 left unfinished
+  T=${T:-540}
+  for d in "$R"/*_i4; do [ -f "$d/metrics.json" ] || spt "$T" "$(basename "$d")" --resume "$d" & done
+  ;;
 e1)  # acceptance with the settings x chose (bench/select_variant.py on x's runs in $X): images_4, 10,000 it, 3/6/9
     # views, baseline and full (SIGINT at T s, checkpointed, resumed by e2/e3); images_8, 3000 it, seed 0; lego
   T=${T:-540}; X=${X:-/tmp/runs_x}

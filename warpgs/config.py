@@ -91,6 +91,8 @@ class TrainConfig:
     checkpoint_every: int = 1000  # 0 = only at the end (and on Ctrl-C)
     eval_every: int = 0  # test PSNR/SSIM every this many steps into metrics.json's curve (0 = off)
     background: list | None = None  # [r, g, b]; None: white if the scene says so, else black
+    drop_rate: float = 0.0  # DropGaussian (Park et al., CVPR 2025): each training render drops Gaussians at a rate
+    #   rising linearly from 0 to this at the last step, the rest's opacity x 1 / (1 - rate); 0: off. The paper: 0.2
     random_background: bool = False  # views with an alpha channel: a random background each step (no floaters
                                      # that mimic the background colour); evaluation keeps ``background``
     compact: bool = False  # at the end, drop Gaussians no training view needs (costs novel-view PSNR)
@@ -145,6 +147,7 @@ class FullConfig:
     pseudo_mask: str = "seen"  # pixels of a pseudo view that supervise: seen (U < 1: an input sees them) |
     #   reliable (U < the sampler's delta: where guidance was fused)
     growth_budget: float = 0.0  # > 0: at most this x the baseline phase's Gaussians during the cycles (0: no cap)
+    drop_rate: float | None = None  # DropGaussian's final rate for this method (train.drop_rate); None: train's
     flythrough_frames: int = 24  # frames per trajectory in flythrough.gif
     pseudo: dict = field(default_factory=dict)  # overrides of configs/pseudo.yaml, e.g. {sampler: {steps: 10}}
     densify_config: dict = field(default_factory=dict)  # overrides of configs/densify.yaml

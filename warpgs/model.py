@@ -262,12 +262,14 @@ class GaussianModel(nn.Module):
         return torch.cat([self.params["sh0"], self.params["shN"]], dim=1)
 
     def render(self, viewmat, K, width: int, height: int, *, background=None, sh_degree: int | None = None,
-               **kwargs):
-        """``warpgs.render.rasterize`` of this model (activations applied) -> ``RenderOutput``."""
+               opacity_scale=None, **kwargs):
+        """``warpgs.render.rasterize`` of this model (activations applied) -> ``RenderOutput``.
+        ``opacity_scale``: (N,) factors on the opacities (DropGaussian's mask, ``Trainer.dropout_scale``)."""
         from warpgs.render import rasterize
 
         deg = self.active_sh_degree if sh_degree is None else min(sh_degree, self.max_sh_degree)
-        return rasterize(self.means, self.quats, self.scales, self.opacities, self.sh, viewmat, K, width, height,
+        opac = self.opacities if opacity_scale is None else self.opacities * opacity_scale
+        return rasterize(self.means, self.quats, self.scales, opac, self.sh, viewmat, K, width, height,
                          sh_degree=deg, background=background, **kwargs)
 
     # ------------------------------------------------------------------------------------------

@@ -257,6 +257,10 @@ class Trainer:
         init_gen = torch.Generator().manual_seed(seed)
         self.model = init_model(cfg, scene, init_gen).to(self.device)
         self.split_gen = torch.Generator(device=self.device).manual_seed(seed + 1)
+        self.drop_gen = torch.Generator(device=self.device).manual_seed(seed + 5)
+        self.drop_rate = cfg.train.drop_rate  # the full method may set its own (full.drop_rate)
+        if not 0.0 <= self.drop_rate < 1.0:
+            raise ValueError(f"train.drop_rate must be in [0, 1), got {self.drop_rate}")
         self.view_rng = np.random.default_rng(seed + 2)
         self.order: list[int] = []
         self.optimizer = make_optimizer(self.model, cfg, self.scene_scale)
@@ -341,7 +345,8 @@ class Trainer:
                 g["lr"] = self.means_lr(step) * self.lr_scale
         cam = self.train_cams[self.next_view()]
         cam, bg = self.with_training_background(cam, self.split_gen)
-        out = self.model.render(cam.viewmat, cam.K, cam.width, cam.height, background=bg)
+        out = self.model.render(cam.viewmat, cam.K, cam.width, cam.height, background=bg,
+                                opacity_scale=self.dropout_scale(step))
         loss, parts = self.compute_loss(out, cam)
         loss.backward()
         # one device sync for the whole guard: the loss and every gradient must be finite
@@ -381,6 +386,15 @@ class Trainer:
         with torch.no_grad():
             mse = float(((out.image.detach().clamp(0, 1) - cam.image) ** 2).mean())
         return {"loss": value, "psnr": -10 * math.log10(max(mse, 1e-10)), **info}
+
+    def dropout_scale(self, step: int) -> torch.Tensor | None:
+        """DropGaussian's factors for one training render at ``step``: 0 for a Gaussian dropped at the rate
+        ``train.drop_rate`` x step / iterations, 1 / (1 - rate) for the others; None when off."""
+        rate = self.drop_rate * min(step / max(self.total_steps, 1), 1.0)
+        if rate <= 0:
+            return None
+        keep = torch.rand(len(self.model), device=self.device, generator=self.drop_gen) >= rate
+        return keep.float() / (1.0 - rate)
 
     def _skip(self, step: int, why: str) -> dict:
         self.optimizer.zero_grad(set_to_none=True)
@@ -473,6 +487,7 @@ class Trainer:
             **self.model_state(),
             "step": self.step if step is None else step,
             "split_gen": self.split_gen.get_state(),
+            "drop_gen": self.drop_gen.get_state(),
             "view_rng": copy.deepcopy(self.view_rng.bit_generator.state),
             "order": list(self.order),
             "torch_rng": torch.get_rng_state(),
@@ -485,6 +500,7 @@ class Trainer:
         snap = self._snapshot
         self.load_model_state(snap)
         self.split_gen.set_state(snap["split_gen"])
+        self.drop_gen.set_state(snap["drop_gen"])
         self.view_rng.bit_generator.state = copy.deepcopy(snap["view_rng"])
         self.order = list(snap["order"])
         torch.set_rng_state(snap["torch_rng"])
@@ -637,6 +653,7 @@ class Trainer:
             "optimizer": self.optimizer.state_dict(),
             "strategy_state": {k: v.cpu() for k, v in self.state.items()},
             "split_gen": self.split_gen.get_state(),
+            "drop_gen": self.drop_gen.get_state(),
             "view_rng": self.view_rng.bit_generator.state,
             "order": list(self.order),
             "torch_rng": torch.get_rng_state(),
@@ -682,6 +699,8 @@ class Trainer:
         self.optimizer.load_state_dict(ck["optimizer"])
         self.state = {k: v.to(self.device) for k, v in ck["strategy_state"].items()}
         self.split_gen.set_state(ck["split_gen"])
+        if "drop_gen" in ck:
+            self.drop_gen.set_state(ck["drop_gen"])
         self.view_rng.bit_generator.state = ck["view_rng"]
         self.order = list(ck["order"])
         torch.set_rng_state(ck["torch_rng"])

@@ -53,6 +53,8 @@ def check_settings(s: FullConfig) -> FullConfig:
         raise ValueError(f"full.guidance must be warped or render, got {s.guidance!r}")
     if s.pseudo_mask not in ("seen", "reliable"):
         raise ValueError(f"full.pseudo_mask must be seen or reliable, got {s.pseudo_mask!r}")
+    if s.drop_rate is not None and not 0.0 <= s.drop_rate < 1.0:
+        raise ValueError(f"full.drop_rate must be in [0, 1), got {s.drop_rate}")
     if s.growth_budget < 0:
         raise ValueError(f"full.growth_budget must be >= 0, got {s.growth_budget}")
     if s.cycles < 0 or not 0.0 <= s.baseline_fraction < 1.0:
@@ -94,6 +96,8 @@ class GenerativeTrainer(Trainer):
     def __init__(self, cfg, scene, out_dir=None, *, log=None):
         super().__init__(cfg, scene, out_dir, log=log)
         self.settings = check_settings(cfg.full)
+        if self.settings.drop_rate is not None:
+            self.drop_rate = self.settings.drop_rate
         self.pseudo_cams: list = []
         self.pseudo_order: list[int] = []
         self.pseudo_rng = np.random.default_rng(cfg.train.seed + 3)
@@ -158,7 +162,8 @@ class GenerativeTrainer(Trainer):
         parts["inputs"] = loss  # what the divergence guard judges (warpgs/train.py)
         if self.pseudo_cams and self.settings.pseudo_weight > 0:
             pc = self.pseudo_cams[self.next_pseudo()]
-            po = self.model.render(pc.viewmat, pc.K, pc.width, pc.height, background=self.background)
+            po = self.model.render(pc.viewmat, pc.K, pc.width, pc.height, background=self.background,
+                                   opacity_scale=self.dropout_scale(self.step))
             pl = self.pseudo_loss(po, pc)
             loss = loss + self.settings.pseudo_weight * pl
             parts["pseudo"] = pl
