@@ -4,7 +4,7 @@
 #   x: exploration at images_8, 3000 it, castle_p30 / herz_jesus_p25 x 3 / 9 views: the full method without the
 #      learning-rate restart, then with a pseudo-view mask, growth budget, no or stricter densification, no depth
 #      prior; bench/select_variant.py picks the acceptance settings from them by a rule fixed beforehand
-#   (later phases: the acceptance runs with the settings x chose)
+#   y1..y3: the acceptance runs with the capture defaults x led to (configs/nerfstudio.yaml), resumed across calls
 # Runs are spread over the GPUs (GPUS, default 2) and share the cores (OMP_NUM_THREADS=1); each writes
 # RUNS/<name>/metrics.json (gather: bench/gather_runs.py).
 set -u
@@ -64,39 +64,6 @@ y2)  # resume y1's images_4 runs; images_8 seeds 1 and 2 of the baseline and the
   done; done; done
   ;;
 y3)  # whatever y2 left unfinished
-  T=${T:-540}
-  for d in "$R"/*_i4; do [ -f "$d/metrics.json" ] || spt "$T" "$(basename "$d")" --resume "$d" & done
-  ;;
-e1)  # acceptance with the settings x chose (bench/select_variant.py on x's runs in $X): images_4, 10,000 it, 3/6/9
-    # views, baseline and full (SIGINT at T s, checkpointed, resumed by e2/e3); images_8, 3000 it, seed 0; lego
-  T=${T:-540}; X=${X:-/tmp/runs_x}
-  python3 bench/select_variant.py "$X" > "$R/flags.txt"; cp "$X/choice.json" "$OUT/choice.json"
-  BF=""; FF=$(sed -n 1p "$R/flags.txt"); echo "full: $FF"
-  for sc in castle_p30 herz_jesus_p25; do for v in 3 6 9; do
-    n=${sc:0:1}$v
-    spt "$T" "${n}_baseline_i4" --data "$D/$sc" --downscale 4 --views $v --method baseline --iterations 10000 $BF &
-    spt "$T" "${n}_full_i4" --data "$D/$sc" --downscale 4 --views $v --method full --iterations 10000 $BF $FF &
-  done; done
-  for sc in castle_p30 herz_jesus_p25; do for v in 3 9; do
-    n=${sc:0:1}$v
-    sp "${n}_baseline_i8_s0" --data "$D/$sc" --downscale 8 --views $v --method baseline --iterations 3000 $BF &
-    sp "${n}_full_i8_s0" --data "$D/$sc" --downscale 8 --views $v --method full --iterations 3000 $BF $FF &
-  done; done
-  sp lego --data blender --data-root "$D" --method baseline &
-  ;;
-e2)  # resume e1's images_4 runs; images_8 seeds 1 and 2; fern and the synthetic room (baselines: unchanged configs)
-  T=${T:-540}
-  BF=""; FF=$(sed -n 1p "$R/flags.txt")
-  for d in "$R"/*_i4; do [ -f "$d/metrics.json" ] || spt "$T" "$(basename "$d")" --resume "$d" & done
-  for s in 1 2; do for sc in castle_p30 herz_jesus_p25; do for v in 3 9; do
-    n=${sc:0:1}$v
-    sp "${n}_baseline_i8_s$s" --data "$D/$sc" --downscale 8 --views $v --method baseline --iterations 3000 --seed $s $BF &
-    sp "${n}_full_i8_s$s" --data "$D/$sc" --downscale 8 --views $v --method full --iterations 3000 --seed $s $BF $FF &
-  done; done; done
-  sp fern --data llff --data-root "$D" --iterations 3000 --method baseline &
-  sp synth --method baseline &
-  ;;
-e3)  # whatever e2 left unfinished
   T=${T:-540}
   for d in "$R"/*_i4; do [ -f "$d/metrics.json" ] || spt "$T" "$(basename "$d")" --resume "$d" & done
   ;;
