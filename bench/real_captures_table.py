@@ -1,9 +1,10 @@
-"""The README's real-capture table from the GPU run records (bench/gather_runs.py output).
+"""The README's real-capture tables from the GPU run records (bench/gather_runs.py output).
 
-    python bench/real_captures_table.py [bench/results/real_captures/session5_final.json]
+    python bench/real_captures_table.py [RUNS.json]     # default: session 6 (bench/gpu_session6.sh y1, y2)
 
 Prints markdown: per scene and view count, baseline and full method (PSNR / SSIM), the initial points
-(method, count, seconds) and the training time of each run.
+(method, count, seconds) and the training time of each run; then, for the images_8 runs of three seeds,
+median and range of baseline and full method.
 """
 
 from __future__ import annotations
@@ -12,7 +13,9 @@ import json
 import sys
 from pathlib import Path
 
-DEFAULT = Path(__file__).resolve().parent / "results" / "real_captures" / "session5_final.json"
+RESULTS = Path(__file__).resolve().parent / "results" / "real_captures"
+DEFAULT = RESULTS / "session6_runs_y.json"
+SEED0_BASELINE = RESULTS / "session6_explore_x.json"  # seed 0 of the images_8 baselines (run names <case>_b)
 SCENES = {"c": "castle_p30", "h": "herz_jesus_p25"}
 
 
@@ -35,16 +38,45 @@ def table(runs: dict) -> str:
                 secs = "+".join(f"{x:.1f}" for x in (init.get("times") or {}).values())
                 gain = f"{f['psnr'] - b['psnr']:+.2f}" if f else "-"
                 full = f"{f['psnr']:.2f} / {f['ssim']:.3f}" if f else "-"
+                if f and f.get("stopped_early"):
+                    full += f" (stopped at step {f['stopped_early']['step']})"
                 ft = f"{f['train_time_s']:.0f}" if f else "-"
                 lines.append(f"| {scene} | {v} | {label} | {b['psnr']:.2f} / {b['ssim']:.3f} | {full} | {gain} | "
                              f"{init.get('method', '-')}, {init.get('points', '-')}, {secs} | {b['train_time_s']:.0f} / {ft} |")
     return "\n".join(lines)
 
 
+def seed_table(runs: dict, seed0_baseline: dict) -> str:
+    """images_8, 3000 it, seeds 0-2: median [min, max] of baseline and full, and of the per-seed gain."""
+    import statistics
+
+    lines = ["| scene | views | baseline PSNR, median [range] | full PSNR, median [range] | full - baseline, median "
+             "[range] |", "|---|---|---|---|---|"]
+    for key, scene in SCENES.items():
+        for v in (3, 9):
+            c = f"{key}{v}"
+            b = [(_m(seed0_baseline, f"{c}_b") if s == 0 else _m(runs, f"{c}_baseline_s{s}")) for s in range(3)]
+            f = [_m(runs, f"{c}_full_s{s}") for s in range(3)]
+            if any(x is None for x in b + f):
+                continue
+            bp, fp = [x["psnr"] for x in b], [x["psnr"] for x in f]
+            d = [y - x for x, y in zip(bp, fp)]
+
+            def cell(xs, fmt="{:.2f}"):
+                return f"{fmt.format(statistics.median(xs))} [{fmt.format(min(xs))}, {fmt.format(max(xs))}]"
+
+            lines.append(f"| {scene} | {v} | {cell(bp)} | {cell(fp)} | {cell(d, '{:+.2f}')} |")
+    return "\n".join(lines)
+
+
 def main(argv=None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     path = Path(argv[0]) if argv else DEFAULT
-    print(table(json.loads(path.read_text())))
+    runs = json.loads(path.read_text())
+    print(table(runs))
+    if SEED0_BASELINE.is_file():
+        print()
+        print(seed_table(runs, json.loads(SEED0_BASELINE.read_text())))
     return 0
 
 

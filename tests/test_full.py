@@ -3,6 +3,7 @@ synthetic scene, writes its outputs, resumes, and its switches reach the config.
 
 import json
 
+import pytest
 import torch
 
 from warpgs.config import FullConfig
@@ -97,3 +98,46 @@ def test_compare_in_two_processes_matches_compare_in_turn(tmp_path, capsys):
     assert (tmp_path / "par" / "baseline.log").read_text().strip()
     report = (tmp_path / "par" / "full" / "report.md").read_text()
     assert f"| baseline | {par['baseline']['psnr']:.2f} |" in report
+
+
+def test_pseudo_view_masks_follow_the_uncertainty():
+    """full.pseudo_mask: 'seen' keeps every pixel an input sees (U < 1), 'reliable' only where guidance was
+    fused (U < delta)."""
+    from warpgs.pseudo.views import PseudoSequence
+
+    g = torch.Generator().manual_seed(0)
+    n, h, w = 4, 5, 6
+    u = torch.rand(n, h, w, generator=g)
+    u[1, 0, 0], u[2, 1, 1] = 1.0, 0.5
+    z = torch.zeros(n, h, w, 3)
+    seq = PseudoSequence(start=0, end=1, viewmats=torch.eye(4).repeat(n, 1, 1), K=torch.eye(3), width=w, height=h,
+                         frames=z, guidance=z, warped=z, uncertainty=u, renders=z, depths=u, sources=u, tau=u[:, 0, 0])
+    seen, rel = seq.pseudo_cameras(), seq.pseudo_cameras(max_uncertainty=0.5)
+    assert [c.name for c in seen] == ["pseudo_0_1_001", "pseudo_0_1_002"]
+    for i, (a, b) in enumerate(zip(seen, rel), start=1):
+        assert torch.equal(a.mask, u[i] < 1.0) and torch.equal(b.mask, u[i] < 0.5)
+    assert not seen[0].mask[0, 0] and seen[1].mask[1, 1] and not rel[1].mask[1, 1]
+
+
+def test_growth_budget_caps_the_cycles_and_bad_settings_are_named(tmp_path):
+    from warpgs.pipelines.full import check_settings
+
+    from test_stability import _small_full_trainer
+
+    _, tr = _small_full_trainer(tmp_path, "--set", "full.growth_budget=1.5")
+    configured = tr.cfg.strategy.max_gaussians
+    assert tr.strategy.max_gaussians == configured > 300  # the baseline phase runs under the configured budget
+    tr.history = [{"cycle": 0, "num_gaussians": 10 * configured}]
+    tr.apply_growth_budget()
+    assert tr.strategy.max_gaussians == configured  # the growth budget never raises the configured one
+    tr.history = [{"cycle": 0, "num_gaussians": 200}]
+    tr.apply_growth_budget()
+    assert tr.strategy.max_gaussians == 300  # 1.5 x the baseline phase's 200
+    tr.history = [{"cycle": 0, "num_gaussians": 100}]
+    tr.apply_growth_budget()
+    assert tr.strategy.max_gaussians == len(tr.model)  # never below what the model has
+    assert tr.cfg.strategy.max_gaussians == configured  # the config itself is left as it was
+    for bad, msg in (({"pseudo_mask": "all"}, "pseudo_mask"), ({"growth_budget": -1.0}, "growth_budget"),
+                     ({"drop_rate": 1.0}, "drop_rate")):
+        with pytest.raises(ValueError, match=msg):
+            check_settings(FullConfig(**bad))

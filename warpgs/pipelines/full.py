@@ -152,6 +152,10 @@ class GenerativeTrainer(Trainer):
 
     def compute_loss(self, out, cam):
         loss, parts = super().compute_loss(out, cam)
+        # what the divergence guard judges (warpgs/train.py): the inputs' photometric loss, the same before and
+        # after a cycle starts. The depth prior below appears with the first cycle's stereo, and its Pearson
+        # term (about 1 at first) made the input loss jump 30x there and stopped a run (castle_p30, 3 views)
+        parts["inputs"] = loss
         prior = self.input_depths.get(cam.name)
         if prior is not None and self.settings.input_depth_weight > 0:
             valid = prior > 0
@@ -159,7 +163,6 @@ class GenerativeTrainer(Trainer):
                 dl = losses.pearson_depth_loss(out.depth, prior, valid)
                 loss = loss + self.settings.input_depth_weight * dl
                 parts["input_depth"] = dl
-        parts["inputs"] = loss  # what the divergence guard judges (warpgs/train.py)
         if self.pseudo_cams and self.settings.pseudo_weight > 0:
             pc = self.pseudo_cams[self.next_pseudo()]
             po = self.model.render(pc.viewmat, pc.K, pc.width, pc.height, background=self.background,
@@ -218,6 +221,8 @@ class GenerativeTrainer(Trainer):
         phase ended with (or what it has now, if more)."""
         if self.settings.growth_budget > 0 and self.history:
             cap = int(self.settings.growth_budget * self.history[0]["num_gaussians"])
+            if self.cfg.strategy.max_gaussians > 0:  # within strategy.max_gaussians, too
+                cap = min(cap, self.cfg.strategy.max_gaussians)
             self.strategy = dataclasses.replace(self.strategy, max_gaussians=max(cap, len(self.model)))
 
     def densify(self, cams, cycle_dir: Path | None) -> int:
