@@ -10,12 +10,8 @@
 #      (bench/results/real_captures/session5_final.json; README table: bench/real_captures_table.py)
 # Runs go in parallel on the one GPU; each writes RUNS/<name>/metrics.json (gather: bench/gather_runs.py).
 set -u
-export PYTHONPATH=/tmp/site:$PWD PYTHONUNBUFFERED=1 OMP_NUM_THREADS=1 MKL_NUM_THREADS=1  # many runs share 16 cores
 P=$1; D=$2; R=$3; mkdir -p "$R"
-sp() { local name=$1; shift; python3 -m warpgs.pipelines.sparse --no-progress --device cuda --out "$R/$name" "$@" \
-       > "$R/$name.log" 2>&1; echo "$name rc=$?"; }
-spt() { local t=$1 name=$2; shift 2; timeout -s INT "$t" python3 -m warpgs.pipelines.sparse --no-progress \
-       --device cuda --out "$R/$name" "$@" >> "$R/$name.log" 2>&1; echo "$name rc=$?"; }
+GPUS=1; source bench/gpu_runs.sh  # sp, spt, acceptance_i4; many runs share 16 cores
 case $P in
 a)
   sp warm --data "$D/castle_p30" --downscale 8 --views 3 --method full --iterations 40 --set train.checkpoint_every=0
@@ -84,12 +80,7 @@ d)  # capture defaults: SfM points, less densification; SH degree; the full meth
 e1)  # acceptance: images_4, 10,000 it, 3/6/9 views, baseline and full (stopped with SIGINT at T s, checkpointed,
     # resumed by e2); images_8, 3000 it: the 3- and 9-view baselines and full runs of the setting
   T=${T:-540}
-  for sc in castle_p30 herz_jesus_p25; do for v in 3 6 9; do
-    n=${sc:0:1}$v
-    for m in baseline full; do
-      spt "$T" "${n}_${m}_i4" --data "$D/$sc" --downscale 4 --views $v --method $m --iterations 10000 &
-    done
-  done; done
+  acceptance_i4 "$T"
   for sc in castle_p30 herz_jesus_p25; do for v in 3 9; do
     n=${sc:0:1}$v
     sp "${n}_baseline_i8" --data "$D/$sc" --downscale 8 --views $v --method baseline --iterations 3000 &

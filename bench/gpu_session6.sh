@@ -8,16 +8,8 @@
 # Runs are spread over the GPUs (GPUS, default 2) and share the cores (OMP_NUM_THREADS=1); each writes
 # RUNS/<name>/metrics.json (gather: bench/gather_runs.py).
 set -u
-export PYTHONPATH=/tmp/site:$PWD PYTHONUNBUFFERED=1 OMP_NUM_THREADS=1 MKL_NUM_THREADS=1
 P=$1; D=$2; R=$3; mkdir -p "$R"
-GPUS=${GPUS:-2}; rm -f "$R/.k"
-gpu() { flock "$R/.k.lock" bash -c "n=\$(cat '$R/.k' 2>/dev/null || echo 0); echo \$((n + 1)) > '$R/.k'; echo \$((n % $GPUS))"; }
-sp() { local name=$1; shift; local g; g=$(gpu)
-       CUDA_VISIBLE_DEVICES=$g python3 -m warpgs.pipelines.sparse --no-progress --device cuda --out "$R/$name" "$@" \
-       > "$R/$name.log" 2>&1 && echo "$name ok" || echo "$name rc=$?"; }
-spt() { local t=$1 name=$2; shift 2; local g; g=$(gpu)
-        CUDA_VISIBLE_DEVICES=$g timeout -s INT "$t" python3 -m warpgs.pipelines.sparse --no-progress \
-        --device cuda --out "$R/$name" "$@" >> "$R/$name.log" 2>&1; echo "$name rc=$?"; }
+GPUS=${GPUS:-2}; source bench/gpu_runs.sh  # sp, spt, acceptance_i4
 case $P in
 x)
   NL="--set full.restart_lr=false"
@@ -40,12 +32,7 @@ y1)  # acceptance with the capture defaults x led to (configs/nerfstudio.yaml: o
     # full (SIGINT at T s, checkpointed, resumed by y2); images_8, 3000 it, seed 0: DropGaussian in the baseline and
     # in the full method (the ablations of what the full method adds)
   T=${T:-540}
-  for sc in castle_p30 herz_jesus_p25; do for v in 3 6 9; do
-    n=${sc:0:1}$v
-    for m in baseline full; do
-      spt "$T" "${n}_${m}_i4" --data "$D/$sc" --downscale 4 --views $v --method $m --iterations 10000 &
-    done
-  done; done
+  acceptance_i4 "$T"
   for sc in castle_p30 herz_jesus_p25; do for v in 3 9; do
     A="--data $D/$sc --downscale 8 --views $v --iterations 3000 --set train.checkpoint_every=0"
     n=${sc:0:1}$v

@@ -122,9 +122,9 @@ def test_pseudo_view_masks_follow_the_uncertainty():
 def test_growth_budget_caps_the_cycles_and_bad_settings_are_named(tmp_path):
     from warpgs.pipelines.full import check_settings
 
-    from test_stability import _small_full_trainer
+    from tiny_scene import small_full_trainer
 
-    _, tr = _small_full_trainer(tmp_path, "--set", "full.growth_budget=1.5")
+    _, tr = small_full_trainer(tmp_path, "--set", "full.growth_budget=1.5")
     configured = tr.cfg.strategy.max_gaussians
     assert tr.strategy.max_gaussians == configured > 300  # the baseline phase runs under the configured budget
     tr.history = [{"cycle": 0, "num_gaussians": 10 * configured}]

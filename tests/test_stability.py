@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 import torch
 
-from tiny_scene import make_scene, param_copy, same_params, tiny_config, write_nerfstudio
+from tiny_scene import make_scene, param_copy, same_params, small_full_trainer, tiny_config, write_nerfstudio
 from warpgs.config import Config
 from warpgs.train import CHECKPOINT, Trainer, TrainingDiverged, base_learning_rates, load_trained
 
@@ -308,16 +308,9 @@ def test_unknown_stress_cases_are_named():
 def test_pseudo_view_losses_never_trip_the_guard(tmp_path, monkeypatch):
     """The first steps with pseudo views can cost many times the input-only phase's loss (seen on a real
     capture: 15-44x, and the run was stopped); the guard judges the input views' loss alone."""
-    from warpgs.data.stress import stress_scene
-    from warpgs.pipelines.full import GenerativeTrainer, train_full
-    from warpgs.pipelines.sparse import build_parser, make_config
+    from warpgs.pipelines.full import train_full
 
-    args = build_parser().parse_args([
-        "--method", "full", "--iterations", "40", "--device", "cpu", "--no-progress", "--set", "full.n_frames=4",
-        "--set", "full.pseudo={sampler: {steps: 3}}", "--set", "model.init_num=300", "--set", "full.densify=false",
-        "--set", "eval.lpips_weights=/nonexistent/alexnet.pth"])
-    cfg, _ = make_config(args)
-    tr = GenerativeTrainer(cfg, stress_scene("views_3", downscale=4), tmp_path)
+    cfg, tr = small_full_trainer(tmp_path)
     real = tr.pseudo_loss
 
     def far_off(out, cam):  # four pseudo views in a row 1000x off: a divergence if the guard counted them
@@ -327,19 +320,6 @@ def test_pseudo_view_losses_never_trip_the_guard(tmp_path, monkeypatch):
     train_full(tr)
     assert tr.step == 40 and tr.cycles_done == 2 and not tr.recoveries
     assert all(np.isfinite(tr.losses)) and tr.max_loss_ratio < cfg.train.explode_factor  # no step skipped
-
-
-def _small_full_trainer(tmp_path, *extra):
-    from warpgs.data.stress import stress_scene
-    from warpgs.pipelines.full import GenerativeTrainer
-    from warpgs.pipelines.sparse import build_parser, make_config
-
-    args = build_parser().parse_args([
-        "--method", "full", "--iterations", "40", "--device", "cpu", "--no-progress", "--set", "full.n_frames=4",
-        "--set", "full.pseudo={sampler: {steps: 3}}", "--set", "model.init_num=300", "--set", "full.densify=false",
-        "--set", "eval.lpips_weights=/nonexistent/alexnet.pth", *extra])
-    cfg, _ = make_config(args)
-    return cfg, GenerativeTrainer(cfg, stress_scene("views_3", downscale=4), tmp_path)
 
 
 def test_the_depth_prior_a_cycle_brings_never_trips_the_guard(tmp_path, monkeypatch):
@@ -353,7 +333,7 @@ def test_the_depth_prior_a_cycle_brings_never_trips_the_guard(tmp_path, monkeypa
     from warpgs.pipelines.full import train_full
 
     # a heavy prior weight: in this small scene the photometric loss is 0.2, on castle_p30 it was 0.03
-    cfg, tr = _small_full_trainer(tmp_path, "--set", "full.restart_lr=false", "--set", "full.input_depth_weight=20")
+    cfg, tr = small_full_trainer(tmp_path, "--set", "full.restart_lr=false", "--set", "full.input_depth_weight=20")
     real_update = tr.update_pseudo_views
 
     def with_prior(cycle):  # a depth prior that disagrees with the model's depth
@@ -386,7 +366,7 @@ def test_the_depth_prior_a_cycle_brings_never_trips_the_guard(tmp_path, monkeypa
 def test_dropgaussian_drops_at_its_rate_and_keeps_the_expected_opacity(tmp_path):
     import torch
 
-    cfg, tr = _small_full_trainer(tmp_path, "--set", "model.init_num=4000", "--set", "train.drop_rate=0.2")
+    cfg, tr = small_full_trainer(tmp_path, "--set", "model.init_num=4000", "--set", "train.drop_rate=0.2")
     assert tr.dropout_scale(0) is None  # the rate starts at 0
     s = tr.dropout_scale(tr.total_steps // 2)  # rate 0.1
     assert s.shape == (len(tr.model),)
@@ -410,6 +390,6 @@ def test_dropgaussian_drops_at_its_rate_and_keeps_the_expected_opacity(tmp_path)
                       cam.K, cam.width, cam.height, sh_degree=m.active_sh_degree, background=tr.background).image
     assert torch.allclose(a, b, atol=1e-5)
     with pytest.raises(ValueError, match="drop_rate"):
-        _small_full_trainer(tmp_path, "--set", "train.drop_rate=1.0")
+        small_full_trainer(tmp_path, "--set", "train.drop_rate=1.0")
     with pytest.raises(ValueError, match="full.drop_rate"):
-        _small_full_trainer(tmp_path, "--set", "full.drop_rate=-0.1")
+        small_full_trainer(tmp_path, "--set", "full.drop_rate=-0.1")

@@ -210,7 +210,6 @@ class GenerativeTrainer(Trainer):
         times["densify_s"] = time.perf_counter() - t0
         self.pseudo_cams = cams
         self.pseudo_order = []
-        self.apply_growth_budget()
         self.log(f"warpgs: cycle {cycle}: {len(cams)} pseudo views ({times['pseudo_views_s']:.1f} s), "
                  f"{added} Gaussians added by densification ({times['densify_s']:.1f} s), {len(self.model)} in all")
         times["added"] = added
@@ -309,8 +308,6 @@ class GenerativeTrainer(Trainer):
         self.pseudo_order = list(ck["pseudo_order"])
         dev = self.device
         self.input_depths = {k: v.to(dev) for k, v in ck.get("input_depths", {}).items()}
-        if self.cycles_done or self.pseudo_cams:
-            self.apply_growth_budget()
         self.pseudo_cams = [CameraTensors(name=c["name"], viewmat=c["viewmat"].to(dev), K=c["K"].to(dev),
                                           width=c["width"], height=c["height"], image=c["image"].to(dev),
                                           mask=None if c["mask"] is None else c["mask"].to(dev),
@@ -347,6 +344,7 @@ def train_full(trainer: GenerativeTrainer) -> None:
             trainer.save_checkpoint()
         else:
             times = {}
+        trainer.apply_growth_budget()  # every cycle, a resumed one too (the strategy's budget is not checkpointed)
         t0 = time.perf_counter()
         trainer.train(end)
         times["train_s"] = time.perf_counter() - t0
