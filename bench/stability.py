@@ -100,8 +100,9 @@ def run_one(case: str, method: str, seed: int, device: str, preset: str, work: P
     from warpgs.config import ConfigError
     from warpgs.data.scene import SceneError
     from warpgs.data.stress import stress_scene
-    from warpgs.pipelines.full import GenerativeTrainer, finish_full, train_full
-    from warpgs.train import CHECKPOINT, Trainer, TrainingDiverged, TrainingInterrupted
+    from warpgs.pipelines.full import finish_full, train_full
+    from warpgs.pipelines.sparse import make_trainer
+    from warpgs.train import CHECKPOINT, TrainingDiverged, TrainingInterrupted
 
     out = work / f"{case}_{method}_seed{seed}"
     row = {"case": case, "method": method, "seed": seed, "preset": preset, "device": device, "status": None,
@@ -121,7 +122,7 @@ def run_one(case: str, method: str, seed: int, device: str, preset: str, work: P
                         "measures": {k: v for k, v in scene.metadata["stress"]["measures"].items()
                                      if k != "true_viewmat"}}
         cfg.method = method
-        trainer = GenerativeTrainer(cfg, scene, out) if method == "full" else Trainer(cfg, scene, out)
+        trainer = make_trainer(cfg, scene, out)
         train_full(trainer) if method == "full" else trainer.train()
         m = finish_full(trainer) if method == "full" else trainer.finish()
         row["status"] = "finished"

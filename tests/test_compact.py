@@ -12,7 +12,7 @@ import torch
 
 import reference
 from tiny_scene import camera_ring, make_scene, tiny_config, write_nerfstudio
-from warpgs.compact import (CompactConfig, ScheduledPruning, check_config, importance, lowest_mask, param_bytes,
+from warpgs.compact import (CompactConfig, ScheduledPruning, attach, check_config, importance, lowest_mask, param_bytes,
                             ply_bytes, prune_lowest, search, size_report, truncate_sh, virtual_cameras)
 from warpgs.config import Config
 from warpgs.model import GaussianModel
@@ -259,6 +259,7 @@ def test_pruning_during_training_follows_the_schedule(scene):
     cfg.compact.prune_at, cfg.compact.prune_ratio = [0.5], 0.25
     cfg.compact.ratios, cfg.compact.sh_search = [], False
     tr = Trainer(cfg, scene, None, log=lambda m: None)
+    attach(tr)
     assert isinstance(tr.strategy, ScheduledPruning) and tr.strategy.prune_steps == [20]
     assert tr.strategy.max_gaussians == 800  # the wrapped strategy's fields show through
     n0 = len(tr.model)
@@ -281,6 +282,7 @@ def test_cap_after_pruning_keeps_densification_from_growing_back(scene):
     cfg.compact.cap_after_prune = True
     cfg.compact.ratios, cfg.compact.sh_search = [], False
     tr = Trainer(cfg, scene, None, log=lambda m: None)
+    attach(tr)
     tr.train(19)
     assert len(tr.model) > 300  # it grew
     tr.train(20)
@@ -353,7 +355,7 @@ def test_full_method_compact(tmp_path):
 
     out = tmp_path / "full"
     args = ["--method", "full", "--iterations", "30", "--out", str(out), "--device", "cpu", "--no-progress", "--compact",
-            "--set", "full.n_frames=4", "--set", "full.pseudo={sampler: {steps: 3}}", "--set", "full.flythrough_frames=2",
+            "--set", "pseudo.trajectory.n_frames=4", "--set", "pseudo.sampler.steps=3", "--set", "full.flythrough_frames=2",
             "--set", "eval.fps_repeats=1", "--set", f"eval.lpips_weights={tmp_path / 'none.pth'}",
             "--set", "compact.finetune_steps=4", "--set", "compact.ratios=[0.5]", "--set", "compact.prune_at=[0.9]"]
     assert main(args) == 0

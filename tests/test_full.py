@@ -49,7 +49,8 @@ def test_ablation_switches_reach_the_config(tmp_path):
                                       "--ablation", "render_guidance", "--ablation", "no_geometric", "--cycles", "3"])
     cfg, _ = make_config(args)
     assert cfg.full.densify is False and cfg.full.pseudo_loss == "l1" and cfg.full.guidance == "render"
-    assert cfg.full.geometric is False and cfg.full.photometric is True and cfg.full.cycles == 3
+    assert cfg.pseudo.uncertainty.geometric is False and cfg.pseudo.uncertainty.photometric is True
+    assert cfg.full.cycles == 3
     assert set(ABLATIONS) == {"render_guidance", "no_geometric", "no_photometric", "no_filter", "no_densify",
                               "l1_pseudo"}
 

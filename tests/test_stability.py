@@ -200,8 +200,8 @@ def test_the_full_method_rolls_back_inside_a_cycle(tmp_path, monkeypatch):
     from warpgs.pipelines.sparse import build_parser, make_config
 
     args = build_parser().parse_args([
-        "--method", "full", "--iterations", "40", "--device", "cpu", "--no-progress", "--set", "full.n_frames=4",
-        "--set", "full.pseudo={sampler: {steps: 3}}", "--set", "model.init_num=300", "--set", "full.densify=false",
+        "--method", "full", "--iterations", "40", "--device", "cpu", "--no-progress", "--set", "pseudo.trajectory.n_frames=4",
+        "--set", "pseudo.sampler.steps=3", "--set", "model.init_num=300", "--set", "full.densify=false",
         "--set", "train.snapshot_every=5", "--set", "eval.lpips_weights=/nonexistent/alexnet.pth"])
     cfg, _ = make_config(args)
     tr = GenerativeTrainer(cfg, stress_scene("views_3", downscale=4), tmp_path)

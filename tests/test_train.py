@@ -219,6 +219,56 @@ def test_cli_runs_resumes_and_writes_outputs(tmp_path, capsys):
     assert "available methods" in capsys.readouterr().err
 
 
+def test_run_folder_holds_the_whole_resolved_config_and_resume_keeps_it(tmp_path, monkeypatch):
+    """config.yaml is the complete config tree (every dataclass field, the pseudo-view and densification
+    sections too), a default changed in a dataclass shows up there with no YAML touched, and --resume
+    reads the same config back (from the checkpoint) and writes it unchanged."""
+    import dataclasses
+
+    import yaml
+
+    from warpgs.config import Config, to_dict
+    from warpgs.pipelines.sparse import build_parser, main, make_config
+    from warpgs.pseudo.sampler import SamplerConfig
+
+    defaults = list(SamplerConfig.__init__.__defaults__)
+    names = [f.name for f in dataclasses.fields(SamplerConfig)]
+    defaults[names.index("steps")] = 17  # the dataclass default, edited (no YAML sets it)
+    monkeypatch.setattr(SamplerConfig.__init__, "__defaults__", tuple(defaults))
+    data = write_nerfstudio(tmp_path / "scene")
+    out = tmp_path / "out"
+    argv = ["--data", str(data), "--views", "3", "--device", "cpu", "--no-progress", "--method", "baseline",
+            "--set", "model.init=box", "--set", "model.init_box=[-1,-1,-1,1,1,1]", "--set", "model.init_num=100",
+            "--set", "eval.fps_repeats=1", "--set", "eval.save_images=false", "--set", "densify.filter.std_ratio=3.5",
+            "--iterations", "6", "--out", str(out)]
+    assert main(argv) == 0
+    saved = yaml.safe_load((out / "config.yaml").read_text())
+    expected, _ = make_config(build_parser().parse_args(argv))
+    assert saved == to_dict(expected)
+    assert saved["pseudo"]["sampler"]["steps"] == 17 and saved["densify"]["filter"]["std_ratio"] == 3.5
+
+    def keys(d, prefix=""):
+        return {prefix + k for k, v in d.items() if not isinstance(v, dict)} | {
+            x for k, v in d.items() if isinstance(v, dict) and v for x in keys(v, prefix + k + ".")}
+
+    assert keys(saved) == keys(to_dict(Config()))  # every field of the tree is written
+    assert main(["--resume", str(out), "--iterations", "8", "--no-progress"]) == 0
+    again = yaml.safe_load((out / "config.yaml").read_text())
+    assert {k: v for k, v in again.items() if k != "train"} == {k: v for k, v in saved.items() if k != "train"}
+    assert again["train"] == {**saved["train"], "iterations": 8}
+
+
+def test_keys_of_earlier_versions_are_read_where_they_live_now():
+    from warpgs.config import build_config
+
+    cfg = build_config([{"full": {"n_frames": 5, "geometric": False, "pseudo": {"sampler": {"steps": 3}},
+                                  "densify_config": {"stereo": {"min_score": 0.8}}, "cycles": 1}}])
+    assert cfg.pseudo.trajectory.n_frames == 5 and cfg.pseudo.uncertainty.geometric is False
+    assert cfg.pseudo.sampler.steps == 3 and cfg.densify.stereo.min_score == 0.8 and cfg.full.cycles == 1
+    later = build_config([{"pseudo": {"trajectory": {"n_frames": 7}}}, {"full": {"n_frames": 4}}])
+    assert later.pseudo.trajectory.n_frames == 4  # a later layer wins, whichever spelling it uses
+
+
 def test_alpha_loss_is_the_mean_absolute_alpha_error():
     """loss.alpha_weight adds weight x mean |rendered alpha - input alpha| for inputs with an alpha channel."""
     import dataclasses

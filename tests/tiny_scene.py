@@ -134,8 +134,8 @@ def small_full_trainer(tmp_path, *extra):
     from warpgs.pipelines.sparse import build_parser, make_config
 
     args = build_parser().parse_args([
-        "--method", "full", "--iterations", "40", "--device", "cpu", "--no-progress", "--set", "full.n_frames=4",
-        "--set", "full.pseudo={sampler: {steps: 3}}", "--set", "model.init_num=300", "--set", "full.densify=false",
+        "--method", "full", "--iterations", "40", "--device", "cpu", "--no-progress", "--set", "pseudo.trajectory.n_frames=4",
+        "--set", "pseudo.sampler.steps=3", "--set", "model.init_num=300", "--set", "full.densify=false",
         "--set", "eval.lpips_weights=/nonexistent/alexnet.pth", *extra])
     cfg, _ = make_config(args)
     return cfg, GenerativeTrainer(cfg, stress_scene("views_3", downscale=4), tmp_path)

@@ -45,83 +45,14 @@ size of the 3D-GS PLY that ``GaussianModel.save_ply`` writes (it also stores thr
 from __future__ import annotations
 
 import copy
-from dataclasses import dataclass, field
 from types import SimpleNamespace
 
 import numpy as np
 import torch
 
-from warpgs.model import GaussianModel, num_sh_coeffs
+from warpgs.config import CompactConfig, check_compact_config as check_config
+from warpgs.model import GaussianModel, num_sh_coeffs, param_bytes, ply_bytes, size_report  # sizes: re-exported
 from warpgs.strategy import _update, contribution, remove
-
-IMPORTANCE_VIEWS = ("train", "virtual", "pseudo")
-
-
-@dataclass
-class CompactConfig:
-    enabled: bool = False
-    importance: str = "weight"  # weight (total blending weight) | weight_volume (x volume^volume_power, LightGaussian)
-    volume_power: float = 0.1
-    importance_views: list = field(default_factory=lambda: ["train", "pseudo"])  # of train, virtual, pseudo
-    virtual_frames: int = 3  # virtual: poses interpolated between each pair of neighbouring training views
-    prune_at: list = field(default_factory=lambda: [0.5, 0.65, 0.8])  # fractions of the run; [] = none
-    prune_ratio: float = 0.3  # share of the Gaussians pruned at each of prune_at
-    cap_after_prune: bool = False  # densification may not grow the count back above what each pruning left
-    stop_densify_at: float | None = None  # fraction of train.iterations after which densification stops (None: the strategy's)
-    tolerance_db: float = 0.1  # training-view PSNR the final model may lose against the best evaluated
-    ratios: list = field(default_factory=lambda: [0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9])  # searched; [] = no search
-    finetune_steps: int = 300  # per point of the search
-    sh_search: bool = True  # try lower SH degrees (0 first)
-    report_test: bool = True  # record each point's test PSNR (reported only; never used to choose)
-    seed: int = 0
-
-
-def check_config(c: CompactConfig) -> CompactConfig:
-    if c.importance not in ("weight", "weight_volume"):
-        raise ValueError(f"compact.importance={c.importance!r}: expected weight or weight_volume")
-    bad = [v for v in c.importance_views if v not in IMPORTANCE_VIEWS]
-    if bad or not c.importance_views:
-        raise ValueError(f"compact.importance_views={c.importance_views!r}: a non-empty list of {', '.join(IMPORTANCE_VIEWS)}")
-    for name in ("prune_at", "ratios"):
-        vals = getattr(c, name)
-        if any(not isinstance(v, (int, float)) or not 0 < float(v) < 1 for v in vals):
-            raise ValueError(f"compact.{name}={vals!r}: values must lie strictly between 0 and 1")
-    if not 0 <= c.prune_ratio < 1:
-        raise ValueError(f"compact.prune_ratio={c.prune_ratio}: expected 0 <= ratio < 1")
-    if c.tolerance_db < 0 or c.finetune_steps < 0:
-        raise ValueError("compact: tolerance_db and finetune_steps must be >= 0")
-    if c.stop_densify_at is not None and not 0 < c.stop_densify_at <= 1:
-        raise ValueError(f"compact.stop_densify_at={c.stop_densify_at}: expected a fraction in (0, 1] or null")
-    return c
-
-
-# ----------------------------------------------------------------------------------------------
-# sizes
-
-
-def floats_per_gaussian(sh_degree: int) -> int:
-    """means 3 + quats 4 + scales 3 + opacity 1 + SH 3 (d + 1)^2."""
-    return 3 + 4 + 3 + 1 + 3 * num_sh_coeffs(sh_degree)
-
-
-def param_bytes(num: int, sh_degree: int) -> int:
-    return 4 * num * floats_per_gaussian(sh_degree)
-
-
-def ply_bytes(num: int, sh_degree: int) -> int:
-    """Size of the file ``GaussianModel.save_ply`` writes (header + float32 rows with three normals)."""
-    n_rest = 3 * (num_sh_coeffs(sh_degree) - 1)
-    names = (["x", "y", "z", "nx", "ny", "nz", "f_dc_0", "f_dc_1", "f_dc_2"] + [f"f_rest_{i}" for i in range(n_rest)]
-             + ["opacity", "scale_0", "scale_1", "scale_2", "rot_0", "rot_1", "rot_2", "rot_3"])
-    header = "ply\nformat binary_little_endian 1.0\n" + f"element vertex {num}\n"
-    header += "".join(f"property float {name}\n" for name in names) + "end_header\n"
-    return len(header.encode("ascii")) + 4 * num * len(names)
-
-
-def size_report(model: GaussianModel) -> dict:
-    n, d = len(model), model.max_sh_degree
-    return {"num_gaussians": n, "sh_degree": d, "param_bytes": param_bytes(n, d), "ply_bytes": ply_bytes(n, d)}
-
 
 # ----------------------------------------------------------------------------------------------
 # importance and pruning
@@ -251,9 +182,22 @@ class ScheduledPruning:
         self.base.max_gaussians = n if self.budget <= 0 else min(self.budget, n)
 
 
+class CompactStage:
+    """The search, as a stage ``Trainer.finish`` runs before evaluation (``Trainer.stages``)."""
+
+    def before_evaluation(self, trainer) -> None:
+        trainer.compact_report = finish_hook(trainer)
+
+
 def attach(trainer) -> None:
-    """Installs the compact mode's pruning schedule on a trainer (called by ``Trainer.__init__``)."""
+    """Compact mode on a freshly built trainer (before training or resuming): the pruning schedule, the
+    steps reserved for the search's fine-tunes, and the search as a stage of ``finish``. Nothing when
+    ``compact.enabled`` is off."""
+    if not trainer.cfg.compact.enabled:
+        return
     cfg = check_config(trainer.cfg.compact)
+    if not any(isinstance(s, CompactStage) for s in trainer.stages):
+        trainer.stages.append(CompactStage())
     if (cfg.ratios or cfg.sh_search) and cfg.finetune_steps > 0:
         # the search's fine-tunes are the run's last steps, so the kept model has had train.iterations
         # steps, as the default run has (fairer than extra steps: on sparse views more steps overfit)
@@ -412,7 +356,7 @@ def search(trainer, cfg: CompactConfig | None = None) -> dict:
 
 
 def finish_hook(trainer) -> dict | None:
-    """Called by ``Trainer.finish`` before evaluation: runs the search when compact mode is on."""
+    """The search when compact mode is on (``CompactStage``, before evaluation)."""
     cfg = trainer.cfg.compact
     if not cfg.enabled:
         return None
@@ -425,6 +369,6 @@ def finish_hook(trainer) -> dict | None:
     return report
 
 
-__all__ = ["CompactConfig", "ScheduledPruning", "attach", "finetune", "importance", "importance_cameras",
+__all__ = ["CompactConfig", "CompactStage", "ScheduledPruning", "attach", "check_config", "finetune", "importance", "importance_cameras",
            "lowest_mask", "param_bytes", "ply_bytes", "prune_lowest", "search", "size_report", "truncate_sh",
            "virtual_cameras"]

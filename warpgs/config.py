@@ -15,24 +15,17 @@ Unknown keys are errors that list the valid ones. The config used is written to 
 from __future__ import annotations
 
 import dataclasses
-import types
-import typing
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
 
 import yaml
 
-from warpgs.compact import CompactConfig
+from warpgs.configio import (  # noqa: F401  (re-exported: the config API in one place)
+    CONFIG_DIR, REPO_ROOT, ConfigError, apply_values, merge, parse_override, read_yaml)
+from warpgs.densify import DensifyConfig
 from warpgs.points import GeometryConfig
+from warpgs.pseudo.views import PseudoConfig
 from warpgs.strategy import DefaultStrategy
-
-REPO_ROOT = Path(__file__).resolve().parents[1]
-CONFIG_DIR = REPO_ROOT / "configs"
-
-
-class ConfigError(ValueError):
-    pass
 
 
 @dataclass
@@ -133,13 +126,10 @@ class FullConfig:
     input_depth_weight: float = 1.0  # w3 on the inputs, against their plane-sweep depth (never the loader's)
     pseudo_loss: str = "lpips"  # lpips | l1 (ablation; also the fallback when LPIPS weights are absent)
     guidance: str = "warped"  # warped | render (ablation: 3D-GS renders instead of warped guidance)
-    geometric: bool = True  # uncertainty's geometric term (ablation: false)
-    photometric: bool = True  # uncertainty's photometric term (ablation: false)
     densify: bool = True  # densification from pseudo views (ablation: false)
     point_filter: bool = True  # statistical outlier removal of the stereo cloud (ablation: false)
     stereo_sources: str = "inputs"  # inputs: every stereo reference (input or pseudo view) is matched against the
     #   input views only | all: against its nearest views, pseudo views included (SYN3R)
-    n_frames: int = 9  # poses per trajectory, both inputs included (SVD: 25)
     init_opacity: float = 0.1  # opacity of the Gaussians densification adds
     max_new: int = 0  # cap on Gaussians added per cycle (0: none)
     restart_lr: bool = True  # the means' learning-rate schedule restarts at each pseudo-view update (the paper);
@@ -149,8 +139,50 @@ class FullConfig:
     growth_budget: float = 0.0  # > 0: at most this x the baseline phase's Gaussians during the cycles (0: no cap)
     drop_rate: float | None = None  # DropGaussian's final rate for this method (train.drop_rate); None: train's
     flythrough_frames: int = 24  # frames per trajectory in flythrough.gif
-    pseudo: dict = field(default_factory=dict)  # overrides of configs/pseudo.yaml, e.g. {sampler: {steps: 10}}
-    densify_config: dict = field(default_factory=dict)  # overrides of configs/densify.yaml
+
+
+IMPORTANCE_VIEWS = ("train", "virtual", "pseudo")
+
+
+@dataclass
+class CompactConfig:
+    """Compact mode (``--compact``, warpgs/compact.py): importance pruning during training and a search for
+    the smallest model within a tolerance of the best training-view PSNR."""
+
+    enabled: bool = False
+    importance: str = "weight"  # weight (total blending weight) | weight_volume (x volume^volume_power, LightGaussian)
+    volume_power: float = 0.1
+    importance_views: list = field(default_factory=lambda: ["train", "pseudo"])  # of train, virtual, pseudo
+    virtual_frames: int = 3  # virtual: poses interpolated between each pair of neighbouring training views
+    prune_at: list = field(default_factory=lambda: [0.5, 0.65, 0.8])  # fractions of the run; [] = none
+    prune_ratio: float = 0.3  # share of the Gaussians pruned at each of prune_at
+    cap_after_prune: bool = False  # densification may not grow the count back above what each pruning left
+    stop_densify_at: float | None = None  # fraction of train.iterations after which densification stops (None: the strategy's)
+    tolerance_db: float = 0.1  # training-view PSNR the final model may lose against the best evaluated
+    ratios: list = field(default_factory=lambda: [0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9])  # searched; [] = no search
+    finetune_steps: int = 300  # per point of the search
+    sh_search: bool = True  # try lower SH degrees (0 first)
+    report_test: bool = True  # record each point's test PSNR (reported only; never used to choose)
+    seed: int = 0
+
+
+def check_compact_config(c: CompactConfig) -> CompactConfig:
+    if c.importance not in ("weight", "weight_volume"):
+        raise ValueError(f"compact.importance={c.importance!r}: expected weight or weight_volume")
+    bad = [v for v in c.importance_views if v not in IMPORTANCE_VIEWS]
+    if bad or not c.importance_views:
+        raise ValueError(f"compact.importance_views={c.importance_views!r}: a non-empty list of {', '.join(IMPORTANCE_VIEWS)}")
+    for name in ("prune_at", "ratios"):
+        vals = getattr(c, name)
+        if any(not isinstance(v, (int, float)) or not 0 < float(v) < 1 for v in vals):
+            raise ValueError(f"compact.{name}={vals!r}: values must lie strictly between 0 and 1")
+    if not 0 <= c.prune_ratio < 1:
+        raise ValueError(f"compact.prune_ratio={c.prune_ratio}: expected 0 <= ratio < 1")
+    if c.tolerance_db < 0 or c.finetune_steps < 0:
+        raise ValueError("compact: tolerance_db and finetune_steps must be >= 0")
+    if c.stop_densify_at is not None and not 0 < c.stop_densify_at <= 1:
+        raise ValueError(f"compact.stop_densify_at={c.stop_densify_at}: expected a fraction in (0, 1] or null")
+    return c
 
 
 @dataclass
@@ -167,6 +199,8 @@ class Config:
     full: FullConfig = field(default_factory=FullConfig)
     compact: CompactConfig = field(default_factory=CompactConfig)  # compact mode (warpgs/compact.py, --compact)
     geometry: GeometryConfig = field(default_factory=GeometryConfig)  # model.init sfm / stereo (warpgs/points)
+    pseudo: PseudoConfig = field(default_factory=PseudoConfig)  # the full method's pseudo views (warpgs/pseudo)
+    densify: DensifyConfig = field(default_factory=DensifyConfig)  # its densification from them (warpgs/densify)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -176,117 +210,34 @@ def to_dict(cfg) -> dict:
     return dataclasses.asdict(cfg)
 
 
-def _type_ok(value, tp) -> tuple[bool, Any]:
-    """(accepted, coerced value) of ``value`` for the annotation ``tp``."""
-    origin = typing.get_origin(tp)
-    if origin in (typing.Union, types.UnionType):
-        for arg in typing.get_args(tp):
-            ok, v = _type_ok(value, arg)
-            if ok:
-                return True, v
-        return False, value
-    if tp is type(None):
-        return value is None, value
-    if tp is Any:
-        return True, value
-    base = origin or tp
-    if base is bool:
-        return isinstance(value, bool), value
-    if base is int:
-        return isinstance(value, int) and not isinstance(value, bool), value
-    if base is float:
-        if isinstance(value, (int, float)) and not isinstance(value, bool):
-            return True, float(value)
-        if isinstance(value, str):  # YAML 1.1 reads '1e-3' (no dot) as a string
-            try:
-                return True, float(value)
-            except ValueError:
-                return False, value
-        return False, value
-    if base is str:
-        return isinstance(value, str), value
-    if base is list:
-        if isinstance(value, (list, tuple)):
-            return True, list(value)
-        return False, value
-    if base is dict:
-        return isinstance(value, dict), value
-    return isinstance(value, base), value
+# keys of earlier versions -> where they live now (read from old config.yaml files and checkpoints)
+MOVED = {("full", "n_frames"): ("pseudo", "trajectory", "n_frames"),
+         ("full", "geometric"): ("pseudo", "uncertainty", "geometric"),
+         ("full", "photometric"): ("pseudo", "uncertainty", "photometric"),
+         ("full", "pseudo"): ("pseudo",),
+         ("full", "densify_config"): ("densify",)}
 
 
-def apply_values(obj, values: dict, where: str) -> None:
-    """Sets the fields of the dataclass ``obj`` (recursing into nested dataclasses) from ``values``,
-    coerced to their annotated types; unknown keys and wrong types raise ``ConfigError`` naming
-    ``where``. The one reader of every config section (training, pseudo views, densification)."""
-    if not isinstance(values, dict):
-        raise ConfigError(f"{where}: expected a mapping, got {type(values).__name__}")
-    hints = typing.get_type_hints(type(obj))
-    names = [f.name for f in dataclasses.fields(obj)]
-    for key, value in values.items():
-        if key not in names:
-            raise ConfigError(f"{where}: unknown key {key!r}; valid keys: {', '.join(names)}")
-        cur = getattr(obj, key)
-        if dataclasses.is_dataclass(cur):
-            if not isinstance(value, dict):
-                raise ConfigError(f"{where}.{key}: expected a mapping of {type(cur).__name__} fields, got {value!r}")
-            apply_values(cur, value, f"{where}.{key}")
-            continue
-        ok, v = _type_ok(value, hints[key])
-        if not ok:
-            raise ConfigError(f"{where}.{key}: {value!r} is not a valid {hints[key]}")
-        setattr(obj, key, v)
-
-
-def read_yaml(path: str | Path, _seen=None) -> dict:
-    """A config file as a dict, with its ``base:`` file (relative to it) merged underneath."""
-    path = Path(path)
-    if not path.is_file():
-        raise ConfigError(f"{path}: config file not found")
-    seen = set() if _seen is None else _seen
-    if path.resolve() in seen:
-        raise ConfigError(f"{path}: 'base' chain loops")
-    seen.add(path.resolve())
-    try:
-        data = yaml.safe_load(path.read_text()) or {}
-    except yaml.YAMLError as e:
-        raise ConfigError(f"{path}: cannot parse YAML ({e})") from e
-    if not isinstance(data, dict):
-        raise ConfigError(f"{path}: expected a mapping at the top level")
-    base = data.pop("base", None)
-    if base:
-        data = merge(read_yaml(path.parent / base, seen), data)
-    return data
-
-
-def merge(a: dict, b: dict) -> dict:
-    out = dict(a)
-    for k, v in b.items():
-        out[k] = merge(out[k], v) if isinstance(v, dict) and isinstance(out.get(k), dict) else v
-    return out
-
-
-def parse_override(text: str) -> dict:
-    """``"train.iterations=500"`` -> ``{"train": {"iterations": 500}}`` (value parsed as YAML)."""
-    if "=" not in text:
-        raise ConfigError(f"--set {text!r}: expected key=value, e.g. train.iterations=500")
-    key, raw = text.split("=", 1)
-    try:
-        value = yaml.safe_load(raw) if raw.strip() else None
-    except yaml.YAMLError as e:
-        raise ConfigError(f"--set {text!r}: cannot parse the value ({e})") from e
-    out: dict = value
-    for part in reversed(key.strip().split(".")):
-        if not part:
-            raise ConfigError(f"--set {text!r}: empty key component")
-        out = {part: out}
-    return out
+def upgrade(layer: dict) -> dict:
+    """A config layer with the keys of earlier versions moved to where they live now (``MOVED``)."""
+    if not isinstance(layer, dict) or not isinstance(layer.get("full"), dict):
+        return layer
+    layer = {**layer, "full": dict(layer["full"])}
+    for old, new in MOVED.items():
+        if old[1] in layer["full"]:
+            value = layer["full"].pop(old[1])
+            for key in reversed(new):
+                value = {key: value}
+            layer = merge(layer, value)
+    return layer
 
 
 def build_config(layers: list[dict]) -> Config:
+    """Defaults, then each layer in order (nested dicts, later ones winning); every key is checked."""
     cfg = Config()
     merged: dict = {}
     for layer in layers:
-        merged = merge(merged, layer)
+        merged = merge(merged, upgrade(layer))
     apply_values(cfg, merged, "config")
     return cfg
 

@@ -395,3 +395,30 @@ def read_point_cloud(path: str | Path) -> tuple[np.ndarray, np.ndarray | None]:
 
 def _warn(msg: str) -> None:
     print(f"warpgs: {msg}", file=sys.stderr)
+
+
+# sizes: what a model stores and what its PLY takes
+
+
+def floats_per_gaussian(sh_degree: int) -> int:
+    """means 3 + quats 4 + scales 3 + opacity 1 + SH 3 (d + 1)^2."""
+    return 3 + 4 + 3 + 1 + 3 * num_sh_coeffs(sh_degree)
+
+
+def param_bytes(num: int, sh_degree: int) -> int:
+    return 4 * num * floats_per_gaussian(sh_degree)
+
+
+def ply_bytes(num: int, sh_degree: int) -> int:
+    """Size of the file ``GaussianModel.save_ply`` writes (header + float32 rows with three normals)."""
+    n_rest = 3 * (num_sh_coeffs(sh_degree) - 1)
+    names = (["x", "y", "z", "nx", "ny", "nz", "f_dc_0", "f_dc_1", "f_dc_2"] + [f"f_rest_{i}" for i in range(n_rest)]
+             + ["opacity", "scale_0", "scale_1", "scale_2", "rot_0", "rot_1", "rot_2", "rot_3"])
+    header = "ply\nformat binary_little_endian 1.0\n" + f"element vertex {num}\n"
+    header += "".join(f"property float {name}\n" for name in names) + "end_header\n"
+    return len(header.encode("ascii")) + 4 * num * len(names)
+
+
+def size_report(model: GaussianModel) -> dict:
+    n, d = len(model), model.max_sh_degree
+    return {"num_gaussians": n, "sh_degree": d, "param_bytes": param_bytes(n, d), "ply_bytes": ply_bytes(n, d)}

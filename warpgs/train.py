@@ -53,7 +53,7 @@ import torch
 from warpgs import losses
 from warpgs.config import Config, config_from_dict, save_config, to_dict
 from warpgs.metrics import LPIPSMetric, mean_or_none, peak_memory_mb, psnr, render_fps, ssim
-from warpgs.model import PARAM_NAMES, GaussianModel, read_point_cloud
+from warpgs.model import PARAM_NAMES, GaussianModel, read_point_cloud, size_report
 
 CHECKPOINT = "checkpoint.pt"
 
@@ -284,10 +284,10 @@ class Trainer:
         self.compact_report: dict | None = None
         self.stopped_early: dict | None = None  # set by the caller when training stopped before the end
         self.reserved_steps = 0  # compact mode: the last steps, taken by the search's fine-tunes (warpgs/compact.py)
-        if cfg.compact.enabled:  # compact mode: importance pruning during training (warpgs/compact.py)
-            from warpgs.compact import attach
-
-            attach(self)
+        # stages above training (compact mode, warpgs/compact.py): objects with ``before_evaluation(trainer)``
+        # that ``finish`` calls in order, after training and before the test metrics. They are attached by
+        # whoever builds the trainer (warpgs.pipelines.sparse.make_trainer), so this module imports none of them.
+        self.stages: list = []
 
     # ------------------------------------------------------------------------------------------
     # training
@@ -765,10 +765,8 @@ class Trainer:
             removed = self.compact()
             if removed:
                 self.log(f"warpgs: compaction removed {removed} of {self.n_before_compaction} Gaussians")
-        if self.cfg.compact.enabled:  # compact mode: the smallest model within tolerance (warpgs/compact.py)
-            from warpgs.compact import finish_hook
-
-            self.compact_report = finish_hook(self)
+        for stage in self.stages:
+            stage.before_evaluation(self)
         ev = self.evaluate(save_dir=(out / "test") if out is not None and self.cfg.eval.save_images else None)
         train_ev = self.evaluate(self.train_cams, lpips=False)
         fps = render_fps(lambda i: self.render(self.test_cams[i] if self.test_cams else self.train_cams[i]),
@@ -812,8 +810,6 @@ class Trainer:
             metrics["stopped_early"] = self.stopped_early
         if "lpips_missing" in ev:
             metrics["lpips_missing"] = ev["lpips_missing"]
-        from warpgs.compact import size_report
-
         size = size_report(self.model)  # SH degree stored, float32 parameter bytes, PLY file bytes
         metrics.update(sh_degree=size["sh_degree"], param_bytes=size["param_bytes"], ply_bytes=size["ply_bytes"])
         if self.compact_report is not None:

@@ -1,7 +1,7 @@
 """Densification from pseudo views: pick views, dense stereo, clean the cloud, add Gaussians where none are.
 
     from warpgs.densify import DensifyConfig, densify_gaussians, load_densify_config
-    cfg = load_densify_config()                                   # configs/densify.yaml
+    cfg = load_densify_config()                                   # the defaults (or Config.densify)
     out = densify_gaussians(model.means, images, Ks, viewmats, depth_range=scene.bounds, config=cfg)
     out.insertion.means, out.insertion.colors, out.insertion.scales   # the new Gaussians (scales: std devs)
 
@@ -30,7 +30,7 @@ import numpy as np
 import torch
 import yaml
 
-from warpgs.config import ConfigError, apply_values
+from warpgs.configio import ConfigError, apply_values
 from warpgs.viz import ORIGIN_ADDED, ORIGIN_KEPT, ORIGIN_NAMES, ORIGIN_REMOVED, save_origin_ply
 
 from .filter import FilterConfig, FilterResult, filter_cloud, statistical_outliers, voxel_downsample
@@ -53,7 +53,6 @@ from .stereo import (
     winner_take_all,
 )
 
-DEFAULT_CONFIG = Path(__file__).resolve().parents[2] / "configs" / "densify.yaml"
 
 
 
@@ -76,8 +75,8 @@ class DensifyConfig:
 DensifyConfigError = ConfigError  # the one config error type (warpgs.config)
 
 
-def load_densify_config(path: str | Path | None = DEFAULT_CONFIG, overrides: dict | None = None) -> DensifyConfig:
-    """Defaults, then the YAML file (``configs/densify.yaml``; None: defaults only), then ``overrides``
+def load_densify_config(path: str | Path | None = None, overrides: dict | None = None) -> DensifyConfig:
+    """Defaults, then a YAML file of ``DensifyConfig`` fields (None: defaults only), then ``overrides``
     (a nested dict, e.g. ``{"filter": {"std_ratio": 3.0}}``). Unknown keys are errors."""
     cfg = DensifyConfig()
     if path is not None:
@@ -151,7 +150,7 @@ def densify_gaussians(existing_means: torch.Tensor, images: torch.Tensor, Ks: to
 
 
 __all__ = [
-    "DEFAULT_CONFIG", "Densification", "DensifyConfig", "DensifyConfigError", "FilterConfig", "FilterResult",
+    "Densification", "DensifyConfig", "DensifyConfigError", "FilterConfig", "FilterResult",
     "InsertConfig", "Insertion", "MVSNetLite", "ORIGIN_ADDED", "ORIGIN_KEPT", "ORIGIN_NAMES", "ORIGIN_REMOVED",
     "PointCloud", "SelectConfig", "StereoConfig", "StereoNetwork", "StereoResult", "StereoWeightsError",
     "camera_centres", "check_consistency", "cost_volume", "densify_gaussians", "estimate_depths",

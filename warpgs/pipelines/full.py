@@ -18,6 +18,7 @@ included), so the two are compared at equal iterations.
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 import json
 import math
@@ -29,18 +30,17 @@ import numpy as np
 import torch
 from warpgs import losses
 from warpgs.config import FullConfig
-from warpgs.config import merge as merge_dicts
 from warpgs.model import rgb_to_sh
 from warpgs.train import CHECKPOINT, Trainer
 
 ABLATIONS = {
-    # name: (what it switches, as settings overrides) -- the paper's Table 4
-    "render_guidance": {"guidance": "render"},
-    "no_geometric": {"geometric": False},
-    "no_photometric": {"photometric": False},
-    "no_filter": {"point_filter": False},
-    "no_densify": {"densify": False},
-    "l1_pseudo": {"pseudo_loss": "l1"},
+    # name: what it switches, as a config layer -- the paper's Table 4
+    "render_guidance": {"full": {"guidance": "render"}},
+    "no_geometric": {"pseudo": {"uncertainty": {"geometric": False}}},
+    "no_photometric": {"pseudo": {"uncertainty": {"photometric": False}}},
+    "no_filter": {"full": {"point_filter": False}},
+    "no_densify": {"full": {"densify": False}},
+    "l1_pseudo": {"full": {"pseudo_loss": "l1"}},
 }
 
 
@@ -176,14 +176,11 @@ class GenerativeTrainer(Trainer):
     # one cycle's pseudo views and densification
 
     def pseudo_config(self):
-        from warpgs.pseudo.views import PseudoConfig
-
-        s = self.settings
-        over = merge_dicts({"trajectory": {"n_frames": s.n_frames},
-                       "uncertainty": {"geometric": s.geometric, "photometric": s.photometric}}, s.pseudo)
-        if s.guidance == "render":
-            over = merge_dicts(over, {"sampler": {"guided": False}})
-        return PseudoConfig.load(overrides=over)
+        """``cfg.pseudo``, unguided for the render-guidance ablation."""
+        pcfg = copy.deepcopy(self.cfg.pseudo)
+        if self.settings.guidance == "render":
+            pcfg.sampler.guided = False
+        return pcfg
 
     def update_pseudo_views(self, cycle: int) -> dict:
         """Generates this cycle's pseudo views and densifies from them; returns stage times (s)."""
@@ -225,11 +222,11 @@ class GenerativeTrainer(Trainer):
             self.strategy = dataclasses.replace(self.strategy, max_gaussians=max(cap, len(self.model)))
 
     def densify(self, cams, cycle_dir: Path | None) -> int:
-        from warpgs.densify import densify_gaussians, load_densify_config, neighbour_views, select_views
+        from warpgs.densify import densify_gaussians, neighbour_views, select_views
         from warpgs.viz import save_origin_ply
 
         s = self.settings
-        dcfg = load_densify_config(overrides=s.densify_config or None)
+        dcfg = copy.deepcopy(self.cfg.densify)
         if not s.point_filter:
             dcfg.filter.std_ratio = float("inf")  # keeps every point: the 'no point filtering' ablation
         # the inputs take part as stereo references and sources (real multi-view evidence); the pseudo

@@ -34,7 +34,7 @@ from pathlib import Path
 import torch
 
 from warpgs import losses
-from warpgs.config import CONFIG_DIR, ConfigError, build_config, parse_override, read_yaml, save_config
+from warpgs.config import CONFIG_DIR, ConfigError, build_config, merge, parse_override, read_yaml, save_config
 from warpgs.pipelines.full import ABLATIONS
 
 METHODS = ("baseline", "full", "compare")
@@ -101,15 +101,12 @@ def flag_layer(args) -> dict:
         train["progress"] = False
     if train:
         layer["train"] = train
-    full = {}
     if args.cycles is not None:
-        full["cycles"] = args.cycles
+        layer["full"] = {"cycles": args.cycles}
     for name in args.ablation:
         if name not in ABLATIONS:
             raise ConfigError(f"--ablation {name!r}: available ablations are {', '.join(ABLATIONS)}")
-        full.update(ABLATIONS[name])
-    if full:
-        layer["full"] = full
+        layer = merge(layer, ABLATIONS[name])
     if args.out is not None:
         layer["out"] = args.out
     return layer
@@ -176,16 +173,27 @@ def print_metrics(m: dict, out: Path) -> None:
     print(f"  wrote {out / 'metrics.json'}, {out / 'point_cloud.ply'}, {out / 'test'}/")
 
 
+def make_trainer(cfg, scene, out: Path | None = None, **kwargs):
+    """The trainer of ``cfg.method`` with the stages its config asks for (compact mode)."""
+    from warpgs.compact import attach
+    from warpgs.pipelines.full import GenerativeTrainer
+    from warpgs.train import Trainer
+
+    trainer = (GenerativeTrainer if cfg.method == "full" else Trainer)(cfg, scene, out, **kwargs)
+    attach(trainer)
+    return trainer
+
+
 def run_method(method: str, cfg, scene, out: Path, resume: bool, baseline_metrics: dict | None = None,
                resume_hint: str | None = None):
     """Trains one method into ``out``; returns its metrics, or an exit code when it stopped early."""
-    from warpgs.pipelines.full import GenerativeTrainer, finish_full, train_full
-    from warpgs.train import Trainer, TrainingDiverged, TrainingInterrupted
+    from warpgs.pipelines.full import finish_full, train_full
+    from warpgs.train import TrainingDiverged, TrainingInterrupted
 
     cfg = copy.deepcopy(cfg)
     cfg.method = method
     try:
-        trainer = GenerativeTrainer(cfg, scene, out) if method == "full" else Trainer(cfg, scene, out)
+        trainer = make_trainer(cfg, scene, out)
     except (RuntimeError, ValueError) as e:
         print(f"error: {e}", file=sys.stderr)
         return 2

@@ -6,8 +6,8 @@ cross-view uncertainty, and the uncertainty-modulated video diffusion sampler.
     seqs[0].frames, seqs[0].guidance, seqs[0].uncertainty     # [N, H, W, 3], [N, H, W, 3], [N, H, W]
     seqs[0].pseudo_cameras()                                  # the interior frames as training views
 
-or ``python -m warpgs.pseudo.views --model point_cloud.ply --data synthetic --views 3``. Settings:
-``configs/pseudo.yaml``.
+or ``python -m warpgs.pipelines.pseudo --model point_cloud.ply --data synthetic --views 3``. Settings:
+``PseudoConfig`` (a run's ``pseudo:`` section).
 
 Pieces, each usable alone:
 
@@ -46,7 +46,7 @@ from .trajectory import (
 _VIEWS = ("PseudoConfig", "PseudoSequence", "generate_pseudo_views", "model_renderer", "save_image", "save_sequence")
 
 
-def __getattr__(name):  # views is imported on first use, so `python -m warpgs.pseudo.views` runs it cleanly
+def __getattr__(name):  # views (and torch) are imported on first use
     if name in _VIEWS:
         from . import views
 

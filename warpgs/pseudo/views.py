@@ -1,7 +1,7 @@
-"""Pseudo views along camera trajectories between the input views (the whole of issue #5 in one call).
+"""Pseudo views along camera trajectories between the input views.
 
     from warpgs.pseudo.views import PseudoConfig, generate_pseudo_views, model_renderer
-    cfg = PseudoConfig.load()                           # configs/pseudo.yaml (the paper's settings)
+    cfg = PseudoConfig.load()                           # the defaults: the paper's settings (or Config.pseudo)
     seqs = generate_pseudo_views(model_renderer(model), scene.train, cfg)
     for s in seqs: save_sequence(s, "outputs/pseudo")   # PNGs: pseudo views, guidance, uncertainty, renders
 
@@ -14,7 +14,7 @@ depth [H, W])`` is all this needs of the model; ``model_renderer`` adapts a ``Ga
 
 Command line (a trained model and its scene)::
 
-    python -m warpgs.pseudo.views --model outputs/sparse/point_cloud.ply --data synthetic --views 3 \
+    python -m warpgs.pipelines.pseudo --model outputs/sparse/point_cloud.ply --data synthetic --views 3 \
         --out outputs/pseudo [--pseudo-backend svd --svd-path /path/to/svd] [--set sampler.steps=50]
 """
 
@@ -29,7 +29,7 @@ import numpy as np
 import torch
 import yaml
 
-from warpgs.config import apply_values
+from warpgs.configio import apply_values
 
 from .backends import DefaultBackendConfig, SVDConfig, make_backend
 from .guidance import UncertaintyConfig, WarpResult, guidance_and_uncertainty
@@ -43,7 +43,6 @@ from .trajectory import (
     perturb_trajectory,
 )
 
-CONFIG_PATH = Path(__file__).resolve().parents[2] / "configs" / "pseudo.yaml"
 
 RenderFn = Callable[[torch.Tensor, torch.Tensor, int, int], tuple[torch.Tensor, torch.Tensor]]
 
@@ -62,7 +61,7 @@ class PseudoConfig:
     svd: SVDConfig = field(default_factory=SVDConfig)
 
     @classmethod
-    def load(cls, path: str | Path | None = CONFIG_PATH, overrides: Sequence[str] | dict | None = None) -> "PseudoConfig":
+    def load(cls, path: str | Path | None = None, overrides: Sequence[str] | dict | None = None) -> "PseudoConfig":
         """Defaults, then the YAML file (if any), then ``section.key=value`` overrides (values as YAML).
         Unknown keys are errors naming the valid ones."""
         cfg = cls()
@@ -174,7 +173,7 @@ def generate_pseudo_views(
     Args:
         render_fn: ``(viewmat [4,4], K [3,3], width, height) -> (image [H,W,3], depth [H,W])`` of the 3D-GS.
         inputs: the input views (``Camera`` or ``CameraTensors``) with their images.
-        cfg: settings (``PseudoConfig.load()`` for configs/pseudo.yaml); backend: a sampler backend
+        cfg: settings (``PseudoConfig()``: the paper's); backend: a sampler backend
             (default: the one ``cfg.backend`` names).
         input_depths: depth at each input; default: rendered by ``render_fn`` (as in the paper).
         trajectories: poses to use instead of the path through all inputs (indices into ``inputs``).
@@ -290,7 +289,7 @@ def save_sequence(seq: PseudoSequence, out_dir: str | Path) -> Path:
 
 def add_pseudo_args(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
     g = parser.add_argument_group("pseudo views")
-    g.add_argument("--pseudo-config", default=str(CONFIG_PATH), help="YAML settings (default: configs/pseudo.yaml)")
+    g.add_argument("--pseudo-config", default=None, help="a YAML file of PseudoConfig fields (default: none, the paper's settings)")
     g.add_argument("--pseudo-backend", choices=["default", "svd"], default=None, help="video backend")
     g.add_argument("--svd-path", default=None, help="local Stable Video Diffusion folder (or $WARPGS_SVD_PATH)")
     g.add_argument("--set", dest="pseudo_set", action="append", default=[], metavar="SECTION.KEY=VALUE",
@@ -305,30 +304,3 @@ def config_from_args(args: argparse.Namespace) -> PseudoConfig:
     if args.svd_path:
         cfg.svd.path = args.svd_path
     return cfg
-
-
-def main(argv=None) -> int:
-    from warpgs.data import add_data_args, load_scene_from_args
-    from warpgs.train import load_trained
-
-    p = argparse.ArgumentParser(prog="python -m warpgs.pseudo.views", description=__doc__.split("\n")[0])
-    p.add_argument("--model", required=True, help="trained 3D-GS: a PLY or a checkpoint.pt")
-    p.add_argument("--out", default="outputs/pseudo", help="folder for the PNGs")
-    p.add_argument("--device", default="auto", help="cpu | cuda | auto")
-    add_data_args(p)
-    add_pseudo_args(p)
-    args = p.parse_args(argv)
-    device = ("cuda" if torch.cuda.is_available() else "cpu") if args.device == "auto" else args.device
-    cfg = config_from_args(args)
-    scene = load_scene_from_args(args)
-    model = load_trained(args.model, device=device)
-    bg = [1.0, 1.0, 1.0] if scene.white_background else [0.0, 0.0, 0.0]
-    seqs = generate_pseudo_views(model_renderer(model, bg), scene.train, cfg, device=device, out_dir=args.out)
-    for s in seqs:
-        print(f"inputs {s.start} -> {s.end}: {len(s)} frames, mean U {float(s.uncertainty.mean()):.3f}")
-    print(f"wrote {args.out}")
-    return 0
-
-
-if __name__ == "__main__":
-    raise SystemExit(main())

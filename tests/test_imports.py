@@ -1,0 +1,120 @@
+"""warpgs's import graph, read from the source with ``ast``: every import counts, deferred ones (inside
+functions) too, and importing ``a.b.c`` also runs the packages ``a.b`` and ``a`` above it. The graph has no
+circle, and no module imports one of a higher layer (kernels at the bottom, runnable pipelines at the top)."""
+
+import ast
+from pathlib import Path
+
+PKG = Path(__file__).resolve().parents[1] / "warpgs"
+
+# lower layers may not import higher ones; one layer may import within itself
+LAYERS = [
+    ["_warp", "kernels", "configio", "losses", "viz"],
+    ["render", "metrics"],
+    ["model", "data"],
+    ["strategy"],
+    ["pseudo", "densify"],
+    ["points"],
+    ["config"],
+    ["train"],
+    ["compact"],
+    ["pipelines"],
+]
+RANK = {name: i for i, names in enumerate(LAYERS) for name in names}
+
+
+def _modules() -> dict[str, Path]:
+    mods = {}
+    for p in PKG.rglob("*.py"):
+        parts = ("warpgs",) + p.relative_to(PKG).with_suffix("").parts
+        if parts[-1] == "__init__":
+            parts = parts[:-1]
+        mods[".".join(parts)] = p
+    return mods
+
+
+def _with_parents(name: str) -> list[str]:
+    parts = name.split(".")
+    return [".".join(parts[:i]) for i in range(1, len(parts) + 1)]
+
+
+def import_graph() -> dict[str, set[str]]:
+    mods = _modules()
+    graph = {}
+    for name, path in mods.items():
+        package = name if path.name == "__init__.py" else name.rpartition(".")[0]
+        targets = set()
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.Import):
+                found = [a.name for a in node.names]
+            elif isinstance(node, ast.ImportFrom):
+                if node.level:
+                    base = package.split(".")[: len(package.split(".")) - node.level + 1]
+                    mod = ".".join(base + ([node.module] if node.module else []))
+                else:
+                    mod = node.module or ""
+                # ``from m import x``: the submodule m.x when there is one, else m
+                found = [f"{mod}.{a.name}" if f"{mod}.{a.name}" in mods else mod for a in node.names]
+            else:
+                continue
+            for t in found:
+                targets.update(p for p in _with_parents(t) if p in mods)
+        own = set(_with_parents(name))  # a module's own packages are running already
+        graph[name] = {t for t in targets if t not in own}
+    return graph
+
+
+def _layer(name: str) -> int:
+    parts = name.split(".")
+    if len(parts) == 1:
+        return -1  # the package itself (warpgs/__init__.py)
+    return RANK[parts[1]]
+
+
+def test_every_module_has_a_layer():
+    missing = sorted({n.split(".")[1] for n in _modules() if "." in n} - set(RANK))
+    assert not missing, f"add these to LAYERS: {missing}"
+
+
+def test_no_import_circle():
+    graph = import_graph()
+    index, low, stack, on, circles = {}, {}, [], set(), []
+
+    def visit(v):  # Tarjan's strongly connected components
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        on.add(v)
+        for w in graph[v]:
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in on:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            comp = []
+            while True:
+                w = stack.pop()
+                on.discard(w)
+                comp.append(w)
+                if w == v:
+                    break
+            if len(comp) > 1:
+                circles.append(sorted(comp))
+
+    for v in sorted(graph):
+        if v not in index:
+            visit(v)
+    assert not circles, circles
+
+
+def test_no_upward_import():
+    up = sorted(f"{a} -> {b}" for a, deps in import_graph().items() for b in deps
+                if _layer(b) > _layer(a) and b != "warpgs")
+    assert not up, up
+
+
+def test_the_graph_reader_sees_deferred_and_relative_imports():
+    g = import_graph()
+    assert "warpgs.data.scene" in g["warpgs.data.llff"]  # from .scene import ...
+    assert "warpgs.train" in g["warpgs.compact"]  # deferred, inside a function
+    assert "warpgs.densify" in g["warpgs.points.stereo"]  # a submodule runs its package first
