@@ -47,15 +47,16 @@ def _args(data, method, device, iterations, views, data_root, scene, overrides, 
 
 
 def _train(argv: list[str], out: Path) -> dict:
-    from warpgs.pipelines.sparse import build_parser, load_scene_for, make_config, run_method
+    from warpgs.pipelines.sparse import RunStopped, build_parser, load_scene_for, make_config, run_method
 
     args = build_parser().parse_args(argv + ["--out", str(out)])
     cfg, _ = make_config(args)
     scene = load_scene_for(cfg)
     t0 = time.perf_counter()
-    result = run_method(cfg.method, cfg, scene, out, resume=False)
-    if isinstance(result, int):
-        raise RuntimeError(f"training into {out} stopped with exit code {result}")
+    try:
+        result = run_method(cfg.method, cfg, scene, out, resume=False)
+    except RunStopped as e:
+        raise RuntimeError(f"training into {out} stopped with exit code {e.code}") from e
     result["wall_s"] = round(time.perf_counter() - t0, 2)
     return result
 

@@ -393,3 +393,23 @@ def test_dropgaussian_drops_at_its_rate_and_keeps_the_expected_opacity(tmp_path)
         small_full_trainer(tmp_path, "--set", "train.drop_rate=1.0")
     with pytest.raises(ValueError, match="full.drop_rate"):
         small_full_trainer(tmp_path, "--set", "full.drop_rate=-0.1")
+
+
+def test_the_guard_judges_against_the_median_of_its_phase():
+    """DivergenceGuard alone, analytic: the median of the last explode_window finite losses since the
+    phase began; explode_patience exploding steps or max_nan_steps skipped ones in a row diverge."""
+    from types import SimpleNamespace
+
+    from warpgs.guard import DivergenceGuard
+
+    g = DivergenceGuard(SimpleNamespace(explode_factor=10.0, explode_window=3, explode_patience=2, max_nan_steps=3))
+    losses = [100.0, 1.0, float("nan"), 2.0, 3.0]
+    assert g.exploding(25.0, losses) is None  # last 3 steps: NaN (skipped: left out), 2, 3; 25 is 10x 2.5, not above
+    assert "12.5x the median 2" in g.exploding(25.0, [1.0, 2.0, 3.0]) and g.max_loss_ratio == 12.5
+    g.restart(4)  # a new phase: only the losses from step 4 on
+    assert g.exploding(25.0, losses) is None  # 25 / 3 < 10
+    assert g.exploding(5.0, []) is None  # nothing to compare with yet
+    assert not g.exploded() and g.exploded()  # the second in a row diverges
+    g.healthy()
+    assert not g.skipped() and not g.skipped() and g.skipped()
+    assert (g.nan_steps, g.explode_steps) == (3, 0)

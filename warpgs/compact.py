@@ -52,7 +52,7 @@ import torch
 
 from warpgs.config import CompactConfig, check_compact_config as check_config
 from warpgs.model import GaussianModel, num_sh_coeffs, param_bytes, ply_bytes, size_report  # sizes: re-exported
-from warpgs.strategy import _update, contribution, remove
+from warpgs.strategy import contribution, remove, update_params
 
 # ----------------------------------------------------------------------------------------------
 # importance and pruning
@@ -126,7 +126,7 @@ def truncate_sh(model: GaussianModel, degree: int, optimizer=None) -> GaussianMo
     if not 0 <= degree <= model.max_sh_degree:
         raise ValueError(f"truncate_sh: degree {degree} outside 0..{model.max_sh_degree}")
     k = num_sh_coeffs(degree) - 1
-    _update(model, optimizer, lambda n, p: p[:, :k].contiguous(), lambda key, v: v[:, :k].contiguous(), names=["shN"])
+    update_params(model, optimizer, lambda n, p: p[:, :k].contiguous(), lambda key, v: v[:, :k].contiguous(), names=["shN"])
     model.max_sh_degree = degree
     model.active_sh_degree = min(model.active_sh_degree, degree)
     return model

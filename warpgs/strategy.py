@@ -145,9 +145,9 @@ class DefaultStrategy:
 # the operations (gsplat's strategy/ops.py semantics)
 
 
-def _update(model: GaussianModel, optimizer: torch.optim.Optimizer | None,
-            param_fn: Callable[[str, torch.Tensor], torch.Tensor],
-            state_fn: Callable[[str, torch.Tensor], torch.Tensor], names=None) -> None:
+def update_params(model: GaussianModel, optimizer: torch.optim.Optimizer | None,
+                  param_fn: Callable[[str, torch.Tensor], torch.Tensor],
+                  state_fn: Callable[[str, torch.Tensor], torch.Tensor], names=None) -> None:
     """Replaces each parameter by ``param_fn(name, p)`` and its Adam moments by ``state_fn(key, v)``."""
     names = list(model.params.keys()) if names is None else names
     for name in names:
@@ -167,8 +167,8 @@ def _update(model: GaussianModel, optimizer: torch.optim.Optimizer | None,
 
 def duplicate(model, optimizer, state, mask: torch.Tensor) -> None:
     sel = torch.where(mask)[0]
-    _update(model, optimizer, lambda n, p: torch.cat([p, p[sel]]),
-            lambda k, v: torch.cat([v, torch.zeros((len(sel), *v.shape[1:]), device=v.device, dtype=v.dtype)]))
+    update_params(model, optimizer, lambda n, p: torch.cat([p, p[sel]]),
+                  lambda k, v: torch.cat([v, torch.zeros((len(sel), *v.shape[1:]), device=v.device, dtype=v.dtype)]))
     for k, v in state.items():
         state[k] = torch.cat([v, v[sel]])
 
@@ -192,15 +192,15 @@ def split(model, optimizer, state, mask: torch.Tensor, generator: torch.Generato
             new = t[sel].repeat(2, *([1] * (t.dim() - 1)))
         return torch.cat([t[rest], new])
 
-    _update(model, optimizer, param_fn,
-            lambda k, v: torch.cat([v[rest], torch.zeros((2 * len(sel), *v.shape[1:]), device=v.device, dtype=v.dtype)]))
+    update_params(model, optimizer, param_fn,
+                  lambda k, v: torch.cat([v[rest], torch.zeros((2 * len(sel), *v.shape[1:]), device=v.device, dtype=v.dtype)]))
     for k, v in state.items():
         state[k] = torch.cat([v[rest], v[sel].repeat(2, *([1] * (v.dim() - 1)))])
 
 
 def remove(model, optimizer, state, mask: torch.Tensor) -> None:
     keep = torch.where(~mask)[0]
-    _update(model, optimizer, lambda n, p: p[keep], lambda k, v: v[keep])
+    update_params(model, optimizer, lambda n, p: p[keep], lambda k, v: v[keep])
     for k, v in state.items():
         state[k] = v[keep]
 
@@ -208,7 +208,7 @@ def remove(model, optimizer, state, mask: torch.Tensor) -> None:
 def reset_opacities(model, optimizer, value: float) -> None:
     """Clamps opacities to at most ``value`` and zeroes their Adam moments (3D-GS's opacity reset)."""
     logit = float(torch.logit(torch.tensor(value)))
-    _update(model, optimizer, lambda n, p: p.clamp(max=logit), lambda k, v: torch.zeros_like(v), names=["opacities"])
+    update_params(model, optimizer, lambda n, p: p.clamp(max=logit), lambda k, v: torch.zeros_like(v), names=["opacities"])
 
 
 def quat_to_rotmat(q: torch.Tensor) -> torch.Tensor:

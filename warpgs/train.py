@@ -18,7 +18,7 @@ steps through a temporary file and a rename, so an interruption never leaves a b
 finishes the current step, writes a checkpoint and stops (``TrainingInterrupted``); a second Ctrl-C
 stops at once, keeping the last checkpoint.
 
-Divergence: a step is skipped (no update) when its loss or gradients are not finite, or when its loss
+Divergence (judged by ``warpgs.guard.DivergenceGuard``, acted on here): a step is skipped (no update) when its loss or gradients are not finite, or when its loss
 on the input views (``parts["inputs"]`` of ``compute_loss``; pseudo views are left out) explodes: above ``train.explode_factor`` x the median of the last ``train.explode_window`` finite
 losses (the statistic restarts with each ``train()`` call, i.e. each phase of the full method, and after
 an opacity reset, whose expected jumps are not divergence). A divergence is ``train.max_nan_steps``
@@ -52,6 +52,7 @@ import torch
 
 from warpgs import losses
 from warpgs.config import Config, config_from_dict, save_config, to_dict
+from warpgs.guard import DivergenceGuard
 from warpgs.metrics import LPIPSMetric, mean_or_none, peak_memory_mb, psnr, render_fps, ssim
 from warpgs.model import PARAM_NAMES, GaussianModel, read_point_cloud, size_report
 
@@ -268,14 +269,12 @@ class Trainer:
         self.step = 0
         self.train_time = 0.0
         self.losses: list[float] = []
-        self.nan_steps = 0  # consecutive skipped steps
-        self.explode_steps = 0  # consecutive steps with an exploding loss
-        # divergence handling (module docstring): learning-rate scale, recoveries so far, the last good state
+        # divergence handling (module docstring): the guard's verdicts, the learning-rate scale, recoveries so
+        # far, the last good state
+        self.guard = DivergenceGuard(cfg.train)
         self.lr_scale = 1.0
         self.recoveries: list[dict] = []
-        self.max_loss_ratio = 0.0  # the largest loss / running median seen (how close a healthy run came)
         self._snapshot: dict | None = None
-        self._stat_start = 0  # losses before this step do not enter the exploding-loss statistic
         self.curve: list[dict] = []  # test metrics every train.eval_every steps (PSNR against time)
         self.initial: dict | None = None
         self.n_before_compaction: int | None = None
@@ -288,6 +287,18 @@ class Trainer:
         # that ``finish`` calls in order, after training and before the test metrics. They are attached by
         # whoever builds the trainer (warpgs.pipelines.sparse.make_trainer), so this module imports none of them.
         self.stages: list = []
+
+    @property
+    def explode_steps(self) -> int:
+        return self.guard.explode_steps
+
+    @property
+    def nan_steps(self) -> int:
+        return self.guard.nan_steps
+
+    @property
+    def max_loss_ratio(self) -> float:
+        return self.guard.max_loss_ratio
 
     # ------------------------------------------------------------------------------------------
     # training
@@ -357,16 +368,15 @@ class Trainer:
         # the guard judges the input views' loss: extra views (the full method's pseudo views) change what is
         # optimised and can be far off at first without anything diverging
         value = float(parts.get("inputs", loss).detach())
-        exploding = self._exploding(value)
+        exploding = self.guard.exploding(value, self.losses)
         if exploding:
-            self.explode_steps += 1
-            if self.explode_steps >= self.cfg.train.explode_patience:
-                return self._diverge(step, f"{self.explode_steps} consecutive steps with an exploding loss "
+            if self.guard.exploded():
+                return self._diverge(step, f"{self.guard.explode_steps} consecutive steps with an exploding loss "
                                            f"(the last: {exploding})")
             return self._skip(step, exploding)
         self.optimizer.step()
         self.optimizer.zero_grad(set_to_none=True)
-        self.nan_steps = self.explode_steps = 0
+        self.guard.healthy()
         info = self.strategy.step_post_backward(self.model, self.optimizer, self.state, step, out,
                                                 cam.width, cam.height, self.scene_scale, generator=self.split_gen)
         s = self.strategy
@@ -378,7 +388,7 @@ class Trainer:
         if bad:
             return self._diverge(step, f"the parameters {', '.join(bad)} are not finite after the optimiser step")
         if info.get("reset"):  # the opacity reset's jump in the loss is expected: restart the statistic
-            self._stat_start = step + 1
+            self.guard.restart(step + 1)
         self.losses.append(value)
         every = self.cfg.train.snapshot_every
         if every and (step + 1) % every == 0:
@@ -398,39 +408,15 @@ class Trainer:
 
     def _skip(self, step: int, why: str) -> dict:
         self.optimizer.zero_grad(set_to_none=True)
-        self.nan_steps += 1
         self.log(f"warpgs: step {step} skipped: {why}")
-        if self.nan_steps >= self.cfg.train.max_nan_steps:
-            return self._diverge(step, f"{self.nan_steps} consecutive steps without a usable loss and gradient "
+        if self.guard.skipped():
+            return self._diverge(step, f"{self.guard.nan_steps} consecutive steps without a usable loss and gradient "
                                        f"(the last: {why})")
         self.losses.append(float("nan"))
         return {"loss": float("nan"), "psnr": float("nan"), "skipped": 1}
 
     # ------------------------------------------------------------------------------------------
     # divergence: exploding losses, snapshots of the last good state, rollback
-
-    def _exploding(self, value: float) -> str | None:
-        """Why ``value`` (a finite loss) counts as exploding, or None: it is above ``train.explode_factor``
-        x the median of the last ``train.explode_window`` finite losses of this phase (skipped steps are
-        not among them). From the phase's second step on, so that a run that blows up at once is caught
-        against its first loss."""
-        tc = self.cfg.train
-        if tc.explode_factor <= 0 or tc.explode_window <= 0:
-            return None
-        start = max(self._stat_start, len(self.losses) - tc.explode_window)
-        recent = [x for x in self.losses[start:] if math.isfinite(x)]
-        if not recent:
-            return None
-        median = float(np.median(recent))
-        if median <= 0:
-            return None
-        ratio = value / median
-        self.max_loss_ratio = max(self.max_loss_ratio, ratio)
-        if ratio > tc.explode_factor:
-            return (f"the loss {value:.4g} is {ratio:.3g}x the median {median:.4g} of the "
-                    f"{len(recent)} finite loss{'es' if len(recent) > 1 else ''} before it "
-                    f"(train.explode_factor={tc.explode_factor:g})")
-        return None
 
     def nonfinite_parameters(self) -> list[str]:
         """Names of the parameters that are not finite, or whose value as rendered is not (a log-scale
@@ -491,7 +477,7 @@ class Trainer:
             "view_rng": copy.deepcopy(self.view_rng.bit_generator.state),
             "order": list(self.order),
             "torch_rng": torch.get_rng_state(),
-            "stat_start": self._stat_start,
+            "stat_start": self.guard.stat_start,
         }
         return True
 
@@ -508,8 +494,8 @@ class Trainer:
         self.apply_lr_scale()
         del self.losses[self.step:]
         self.curve = [row for row in self.curve if row["step"] <= self.step]
-        self._stat_start = snap["stat_start"]
-        self.nan_steps = self.explode_steps = 0
+        self.guard.restart(snap["stat_start"])
+        self.guard.healthy()
         return self.step
 
     def apply_lr_scale(self) -> None:
@@ -564,7 +550,7 @@ class Trainer:
             self.initial = self.evaluate(save_dir=None, lpips=False)["mean"]
         # a new phase (the full method's cycles, a resume): its losses make their own statistic, and its
         # start is a good state to come back to
-        self._stat_start = self.step
+        self.guard.restart(self.step)
         if not self.take_snapshot():  # e.g. what was added between phases is not finite: back to the last good state
             self._diverge(self.step, f"the model is not finite at the start of training (step {self.step}: "
                                      f"{', '.join(self.nonfinite_parameters()) or 'optimiser state'})")
@@ -797,7 +783,7 @@ class Trainer:
             "skipped_steps": sum(1 for x in self.losses if not math.isfinite(x)),
             "recoveries": self.recoveries,  # divergences survived: step, cause, step rolled back to, lr scale after
             "lr_scale": self.lr_scale,
-            "max_loss_ratio": round(self.max_loss_ratio, 3),  # largest loss / running median (train.explode_factor)
+            "max_loss_ratio": round(self.guard.max_loss_ratio, 3),  # largest loss / running median (train.explode_factor)
             "curve": self.curve,
             "per_view": ev["views"],
         }

@@ -65,7 +65,7 @@ def check_settings(s: FullConfig) -> FullConfig:
 def append_gaussians(trainer: Trainer, means, colors, scales, opacity: float) -> int:
     """Adds Gaussians (centres, RGB colours, isotropic std devs) to the trainer's model, with zero Adam
     moments and zero densification statistics."""
-    from warpgs.strategy import _update
+    from warpgs.strategy import update_params
 
     n = int(means.shape[0])
     if n == 0:
@@ -83,8 +83,8 @@ def append_gaussians(trainer: Trainer, means, colors, scales, opacity: float) ->
         "sh0": rgb_to_sh(rgb)[:, None, :],
         "shN": torch.zeros(n, *model.params["shN"].shape[1:], device=dev),
     }
-    _update(model, trainer.optimizer, lambda name, p: torch.cat([p, new[name].to(p.dtype)]),
-            lambda k, v: torch.cat([v, torch.zeros((n, *v.shape[1:]), device=v.device, dtype=v.dtype)]))
+    update_params(model, trainer.optimizer, lambda name, p: torch.cat([p, new[name].to(p.dtype)]),
+                  lambda k, v: torch.cat([v, torch.zeros((n, *v.shape[1:]), device=v.device, dtype=v.dtype)]))
     for k, v in trainer.state.items():
         trainer.state[k] = torch.cat([v, torch.zeros((n, *v.shape[1:]), device=v.device, dtype=v.dtype)])
     return n

@@ -184,9 +184,19 @@ def make_trainer(cfg, scene, out: Path | None = None, **kwargs):
     return trainer
 
 
+class RunStopped(Exception):
+    """A run that ends without metrics (bad settings, Ctrl-C): ``code`` is the process's exit code (2, 130);
+    what to tell the user has been printed already."""
+
+    def __init__(self, code: int):
+        super().__init__(code)
+        self.code = code
+
+
 def run_method(method: str, cfg, scene, out: Path, resume: bool, baseline_metrics: dict | None = None,
-               resume_hint: str | None = None):
-    """Trains one method into ``out``; returns its metrics, or an exit code when it stopped early."""
+               resume_hint: str | None = None) -> dict:
+    """Trains one method into ``out``; returns its metrics (``stopped_early`` set when it diverged and the
+    last good state's were written). Raises ``RunStopped`` when it ends without them."""
     from warpgs.pipelines.full import finish_full, train_full
     from warpgs.train import TrainingDiverged, TrainingInterrupted
 
@@ -196,7 +206,7 @@ def run_method(method: str, cfg, scene, out: Path, resume: bool, baseline_metric
         trainer = make_trainer(cfg, scene, out)
     except (RuntimeError, ValueError) as e:
         print(f"error: {e}", file=sys.stderr)
-        return 2
+        raise RunStopped(2) from e
     if resume and (out / "checkpoint.pt").is_file():
         trainer.load_checkpoint()
         print(f"warpgs: resumed {out / 'checkpoint.pt'} at step {trainer.step} of {cfg.train.iterations}",
@@ -211,10 +221,10 @@ def run_method(method: str, cfg, scene, out: Path, resume: bool, baseline_metric
     except TrainingInterrupted as e:
         print(f"\nwarpgs: stopped at step {e.step}; checkpoint {e.checkpoint}. Continue with:\n"
               f"  python -m warpgs.pipelines.sparse {resume_hint}", file=sys.stderr)
-        return 130
-    except KeyboardInterrupt:
+        raise RunStopped(130) from e
+    except KeyboardInterrupt as e:
         print(f"\nwarpgs: stopped; the last checkpoint in {out} is intact ({resume_hint})", file=sys.stderr)
-        return 130
+        raise RunStopped(130) from e
     except TrainingDiverged as e:
         # the model is at its last good state: its metrics, renders and PLY are written all the same
         print("\n" + diverged_message(method, e, out), file=sys.stderr)
@@ -276,22 +286,19 @@ def main(argv=None) -> int:
     except (SceneError, ValueError) as e:
         print(f"error: {e}", file=sys.stderr)
         return 2
-    if cfg.method != "compare":
-        result = run_method(cfg.method, cfg, scene, out, resume)
-        return result if isinstance(result, int) else (1 if result.get("stopped_early") else 0)
-    out.mkdir(parents=True, exist_ok=True)
-    save_config(cfg, out / "config.yaml")
-    hint = f"--resume {out}"
-    if compare_in_parallel(args, cfg):
-        base, full = compare_parallel(cfg, scene, out, resume, hint)
-    else:
-        base = run_method("baseline", cfg, scene, out / "baseline", resume, resume_hint=hint)
-        if isinstance(base, int):
-            return base
-        full = run_method("full", cfg, scene, out / "full", resume, baseline_metrics=base, resume_hint=hint)
-    for result in (base, full):
-        if isinstance(result, int):
-            return result
+    try:
+        if cfg.method != "compare":
+            return 1 if run_method(cfg.method, cfg, scene, out, resume).get("stopped_early") else 0
+        out.mkdir(parents=True, exist_ok=True)
+        save_config(cfg, out / "config.yaml")
+        hint = f"--resume {out}"
+        if compare_in_parallel(args, cfg):
+            base, full = compare_parallel(cfg, scene, out, resume, hint)
+        else:
+            base = run_method("baseline", cfg, scene, out / "baseline", resume, resume_hint=hint)
+            full = run_method("full", cfg, scene, out / "full", resume, baseline_metrics=base, resume_hint=hint)
+    except RunStopped as e:
+        return e.code
     print_side_by_side(base, full, out)
     return 1 if base.get("stopped_early") or full.get("stopped_early") else 0
 
@@ -317,14 +324,19 @@ def _baseline_process(cfg, scene, out: Path, resume: bool, hint: str, log_path: 
     os.dup2(log.fileno(), 1)
     os.dup2(log.fileno(), 2)
     sys.stdout = sys.stderr = log
-    result = run_method("baseline", cfg, scene, out, resume, resume_hint=hint)
+    try:
+        run_method("baseline", cfg, scene, out, resume, resume_hint=hint)
+    except RunStopped as e:
+        log.flush()
+        sys.exit(e.code)
     log.flush()
-    sys.exit(result if isinstance(result, int) else 0)
+    sys.exit(0)
 
 
 def compare_parallel(cfg, scene, out: Path, resume: bool, hint: str):
-    """Baseline (second process) and full method (this process) at once -> (baseline, full) metrics or
-    exit codes. Ctrl-C reaches both; each keeps its checkpoint, and --resume continues both."""
+    """Baseline (second process) and full method (this process) at once -> (baseline, full) metrics;
+    ``RunStopped`` when either ends without them. Ctrl-C reaches both; each keeps its checkpoint, and
+    --resume continues both."""
     import multiprocessing as mp
 
     from warpgs.pipelines.full import write_report
@@ -346,12 +358,11 @@ def compare_parallel(cfg, scene, out: Path, resume: bool, hint: str):
             proc.join()
     if proc.exitcode != 0:
         print(f"warpgs: the baseline process stopped (exit code {proc.exitcode}); see {log_path}", file=sys.stderr)
-        return (130 if proc.exitcode in (130, -2) else proc.exitcode or 1), full
+        raise RunStopped(130 if proc.exitcode in (130, -2) else proc.exitcode or 1)
     base = json.loads((out / "baseline" / "metrics.json").read_text())
     print(f"\nbaseline: test PSNR {base['psnr']:.2f}  SSIM {base['ssim']:.3f}  ({base['num_gaussians']} Gaussians, "
           f"training {base['train_time_s']:.1f} s; full log {log_path})")
-    if not isinstance(full, int):  # the report's PSNR chart gets the baseline line now that it is known
-        write_report(out / "full", full, full.get("cycles", []), base)
+    write_report(out / "full", full, full.get("cycles", []), base)  # the report's PSNR chart gets the baseline line
     return base, full
 
 
