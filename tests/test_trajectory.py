@@ -9,7 +9,7 @@ from scipy.spatial.transform import Rotation, Slerp
 
 from warpgs.pseudo.trajectory import (
     Trajectory,
-    camera_centers,
+    camera_centres,
     chord_knots,
     guidance_sources,
     natural_cubic_spline,
@@ -96,9 +96,9 @@ def test_path_trajectories_ends_rotations_and_spline():
     rng = np.random.default_rng(4)
     V = _random_poses(5, rng)
     trajs = path_trajectories(V, n_frames=9)
-    order = nearest_neighbour_path(camera_centers(V))
+    order = nearest_neighbour_path(camera_centres(V))
     assert [(t.start, t.end) for t in trajs] == list(zip(order[:-1], order[1:]))
-    C = camera_centers(V[order])
+    C = camera_centres(V[order])
     knots = chord_knots(C)
     spline = CubicSpline(knots, C, bc_type="natural")
     for k, t in enumerate(trajs):
@@ -143,7 +143,7 @@ def test_perturb_pose_statistics():
     rng = np.random.default_rng(6)
     V = pose(Rotation.random(random_state=7).as_matrix(), [1.0, -2.0, 0.5])
     P = np.stack([perturb_pose(V, rng, 0.05, 0.1) for _ in range(4000)])
-    dc = camera_centers(P) - camera_centers(V[None])
+    dc = camera_centres(P) - camera_centres(V[None])
     assert np.allclose(dc.std(0), 0.05, rtol=0.08) and np.allclose(dc.mean(0), 0, atol=0.005)
     dR = np.einsum("nij,jk->nik", P[:, :3, :3], V[:3, :3].T)  # R_p R_v^T
     ang = np.degrees(Rotation.from_matrix(dR).magnitude())
@@ -159,13 +159,13 @@ def test_perturb_trajectory_keeps_the_most_uncertain_candidate():
 
     def score(f, m):  # "uncertainty" grows towards +y
         seen.setdefault(f, []).append(m)
-        return float(camera_centers(m[None])[0] @ target)
+        return float(camera_centres(m[None])[0] @ target)
 
     out = perturb_trajectory(traj, score, np.random.default_rng(8), n_candidates=5, translation=0.1)
     assert np.array_equal(out.viewmats[0], traj.viewmats[0]) and np.array_equal(out.viewmats[-1], traj.viewmats[-1])
     assert sorted(seen) == [1, 2, 3, 4] and all(len(v) == 5 for v in seen.values())
     for f in range(1, 5):
-        best = max(seen[f], key=lambda m: float(camera_centers(m[None])[0] @ target))
+        best = max(seen[f], key=lambda m: float(camera_centres(m[None])[0] @ target))
         assert np.array_equal(out.viewmats[f], best)
     assert perturb_trajectory(traj, score, np.random.default_rng(0), n_candidates=0) is traj
 
@@ -173,7 +173,7 @@ def test_perturb_trajectory_keeps_the_most_uncertain_candidate():
 def test_guidance_sources():
     V = np.stack([pose(np.eye(3), [x, 0.0, 0.0]) for x in (0.0, 1.0, 5.0)])
     traj = Trajectory(0, 1, path_trajectories(V[:2], n_frames=7)[0].viewmats)
-    centers = camera_centers(V)
+    centers = camera_centres(V)
     assert guidance_sources(traj, centers).tolist() == [0, 0, 0, 0, 1, 1, 1]  # the midpoint tie goes to 0
     assert guidance_sources(traj, centers, "halves").tolist() == [0, 0, 0, 0, 1, 1, 1]
     traj8 = Trajectory(0, 1, path_trajectories(V[:2], n_frames=8)[0].viewmats)

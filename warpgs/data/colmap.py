@@ -24,6 +24,9 @@ from pathlib import Path
 
 import numpy as np
 
+from warpgs.geometry import quat_to_rotmat as qvec_to_rotmat  # COLMAP's names for the shared helpers
+from warpgs.geometry import rotmat_to_quat as rotmat_to_qvec  # noqa: F401
+
 from .scene import SceneError
 
 # model id -> (name, number of params)
@@ -105,34 +108,6 @@ class ColmapPoints:
     rgb: np.ndarray  # (N, 3) uint8
     error: np.ndarray  # (N,) float64
     track_lengths: np.ndarray  # (N,) int64
-
-
-def qvec_to_rotmat(q: np.ndarray) -> np.ndarray:
-    w, x, y, z = np.asarray(q, np.float64) / np.linalg.norm(q)
-    return np.array(
-        [
-            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
-        ]
-    )
-
-
-def rotmat_to_qvec(R: np.ndarray) -> np.ndarray:
-    """Rotation matrix -> unit quaternion (w, x, y, z) with w >= 0."""
-    R = np.asarray(R, np.float64)
-    K = np.array(
-        [
-            [R[0, 0] - R[1, 1] - R[2, 2], 0, 0, 0],
-            [R[1, 0] + R[0, 1], R[1, 1] - R[0, 0] - R[2, 2], 0, 0],
-            [R[2, 0] + R[0, 2], R[2, 1] + R[1, 2], R[2, 2] - R[0, 0] - R[1, 1], 0],
-            [R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1], R[0, 0] + R[1, 1] + R[2, 2]],
-        ]
-    ) / 3.0
-    vals, vecs = np.linalg.eigh(K)
-    x, y, z, w = vecs[:, np.argmax(vals)]
-    q = np.array([w, x, y, z])
-    return -q if q[0] < 0 else q
 
 
 # ----------------------------------------------------------------------------------------------

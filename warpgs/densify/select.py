@@ -23,20 +23,8 @@ from typing import Sequence
 
 import numpy as np
 
-
-def _as_numpy(viewmats) -> np.ndarray:
-    if hasattr(viewmats, "detach"):
-        viewmats = viewmats.detach().cpu().numpy()
-    v = np.asarray(viewmats, dtype=np.float64)
-    if v.ndim != 3 or v.shape[1:] != (4, 4):
-        raise ValueError(f"viewmats must be [V, 4, 4], got {v.shape}")
-    return v
-
-
-def camera_centres(viewmats) -> np.ndarray:
-    """[V, 3] camera centres -R^T t of world-to-camera matrices."""
-    v = _as_numpy(viewmats)
-    return -np.einsum("vji,vj->vi", v[:, :3, :3], v[:, :3, 3])
+from warpgs.geometry import as_viewmats as _as_numpy
+from warpgs.geometry import camera_centres
 
 
 def rotation_angles(viewmats_a, viewmats_b=None) -> np.ndarray:

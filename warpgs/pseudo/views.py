@@ -37,7 +37,7 @@ from .sampler import SamplerConfig, sample_video
 from .trajectory import (
     Trajectory,
     TrajectoryConfig,
-    camera_centers,
+    camera_centres,
     guidance_sources,
     path_trajectories,
     perturb_trajectory,
@@ -193,7 +193,7 @@ def generate_pseudo_views(
     if input_depths is None:
         input_depths = [render_fn(c.viewmat.to(dev), c.K.to(dev), c.width, c.height)[1] for c in cams]
     src_D = torch.stack([d.to(dev).float() for d in input_depths])
-    centers = camera_centers(src_V.double().cpu().numpy())
+    centers = camera_centres(src_V.double().cpu().numpy())
 
     if trajectories is None:
         trajectories = path_trajectories(src_V.double().cpu().numpy(), tc.n_frames, tc.order)
