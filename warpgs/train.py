@@ -272,6 +272,7 @@ class Trainer:
         # divergence handling (module docstring): the guard's verdicts, the learning-rate scale, recoveries so
         # far, the last good state
         self.guard = DivergenceGuard(cfg.train)
+        self.phase_start, self.phase_len = 0, None  # the running learning-rate schedule (means_lr)
         self.lr_scale = 1.0
         self.recoveries: list[dict] = []
         self._snapshot: dict | None = None
@@ -308,9 +309,11 @@ class Trainer:
         return self.cfg.train.iterations - self.reserved_steps
 
     def means_lr(self, step: int) -> float:
+        """The means' learning rate: exponential decay over the running schedule, from ``phase_start``
+        over ``phase_len`` steps (None: ``optim.means_lr_decay_steps``, else the whole run)."""
         o = self.cfg.optim
-        n = o.means_lr_decay_steps or self.total_steps
-        t = min(max(step / max(n, 1), 0.0), 1.0)
+        n = self.phase_len or o.means_lr_decay_steps or self.total_steps
+        t = min(max((step - self.phase_start) / max(n, 1), 0.0), 1.0)
         return self.scene_scale * math.exp((1 - t) * math.log(o.means_lr) + t * math.log(o.means_lr_final))
 
     def next_view(self) -> int:
@@ -438,7 +441,7 @@ class Trainer:
 
     def model_state(self) -> dict:
         """A CPU copy of what training changes besides the step and the RNGs: the parameters (and SH
-        degrees), Adam's moments, the densification statistics and the full method's pseudo-view order.
+        degrees), Adam's moments, the densification statistics and what the method adds (``method_state``).
         ``load_model_state`` puts it back: the state to return to of a divergence rollback and of compact
         mode's search (warpgs/compact.py)."""
         st = {
@@ -448,9 +451,15 @@ class Trainer:
             "optimizer": _cpu_copy(self.optimizer.state_dict()),
             "strategy_state": _cpu_copy(self.state),
         }
-        if hasattr(self, "pseudo_rng"):
-            st["pseudo"] = (copy.deepcopy(self.pseudo_rng.bit_generator.state), list(self.pseudo_order))
+        st.update(self.method_state())
         return st
+
+    def method_state(self) -> dict:
+        """What a method adds to ``model_state`` (a rollback replays it); the baseline adds nothing."""
+        return {}
+
+    def load_method_state(self, st: dict) -> None:
+        """Puts back what ``method_state`` added to a ``model_state``."""
 
     def load_model_state(self, st: dict) -> None:
         """Puts back a ``model_state`` (copies of it: ``st`` stays usable); learning rates as saved in it."""
@@ -460,9 +469,7 @@ class Trainer:
         self.optimizer = make_optimizer(self.model, self.cfg, self.scene_scale)
         self.optimizer.load_state_dict(copy.deepcopy(st["optimizer"]))
         self.state = {k: v.to(self.device, copy=True) for k, v in st["strategy_state"].items()}
-        if "pseudo" in st:
-            self.pseudo_rng.bit_generator.state = copy.deepcopy(st["pseudo"][0])
-            self.pseudo_order = list(st["pseudo"][1])
+        self.load_method_state(st)
 
     def take_snapshot(self, step: int | None = None) -> bool:
         """Keeps the current state in memory (on the CPU) as the last good one, if it is all finite;

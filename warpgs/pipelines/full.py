@@ -101,7 +101,6 @@ class GenerativeTrainer(Trainer):
         self.pseudo_cams: list = []
         self.pseudo_order: list[int] = []
         self.pseudo_rng = np.random.default_rng(cfg.train.seed + 3)
-        self.phase_start, self.phase_len = 0, None  # the running learning-rate schedule
         self.cycles_done = 0
         self.history: list[dict] = []  # per cycle: test PSNR/SSIM, Gaussians, stage times
         self.input_depths: dict[str, torch.Tensor] = {}  # plane-sweep depth of the inputs (0: unknown)
@@ -121,12 +120,6 @@ class GenerativeTrainer(Trainer):
 
     # ------------------------------------------------------------------------------------------
     # training
-
-    def means_lr(self, step: int) -> float:
-        o = self.cfg.optim
-        n = self.phase_len or o.means_lr_decay_steps or self.total_steps
-        t = min(max((step - self.phase_start) / max(n, 1), 0.0), 1.0)
-        return self.scene_scale * math.exp((1 - t) * math.log(o.means_lr) + t * math.log(o.means_lr_final))
 
     def next_pseudo(self) -> int:
         if not self.pseudo_order:
@@ -272,6 +265,15 @@ class GenerativeTrainer(Trainer):
 
     # ------------------------------------------------------------------------------------------
     # checkpoints: the baseline state plus the cycle and its pseudo views
+
+    def method_state(self) -> dict:
+        """The pseudo-view order and its generator: a rollback replays the same pseudo views."""
+        return {"pseudo": (copy.deepcopy(self.pseudo_rng.bit_generator.state), list(self.pseudo_order))}
+
+    def load_method_state(self, st: dict) -> None:
+        if "pseudo" in st:
+            self.pseudo_rng.bit_generator.state = copy.deepcopy(st["pseudo"][0])
+            self.pseudo_order = list(st["pseudo"][1])
 
     def checkpoint_state(self) -> dict:
         st = super().checkpoint_state()
