@@ -4,7 +4,8 @@ import numpy as np
 import pytest
 import torch
 
-from warpgs.model import GaussianModel, read_ply_vertices, read_point_cloud
+from warpgs.model import GaussianModel, read_point_cloud
+from warpgs.ply import read_vertices as read_ply_vertices
 
 V = torch.eye(4)
 K = torch.tensor([[40.0, 0, 24], [0, 40.0, 16], [0, 0, 1]])

@@ -28,6 +28,8 @@ import numpy as np
 import torch
 from torch import nn
 
+from warpgs import ply
+
 SH_C0 = 0.28209479177387814
 PARAM_NAMES = ("means", "quats", "scales", "opacities", "sh0", "shN")
 
@@ -195,7 +197,7 @@ class GaussianModel(nn.Module):
     @classmethod
     def load_ply(cls, path: str | Path, device=None) -> "GaussianModel":
         """Reads a 3D-GS PLY (the layout ``save_ply`` writes, and what 3D-GS / gsplat export)."""
-        v = read_ply_vertices(path)
+        v = ply.read_vertices(path)
         need = ["x", "y", "z", "f_dc_0", "f_dc_1", "f_dc_2", "opacity", "scale_0", "scale_1", "scale_2",
                 "rot_0", "rot_1", "rot_2", "rot_3"]
         missing = [k for k in need if k not in v]
@@ -285,100 +287,14 @@ class GaussianModel(nn.Module):
         rest = np.ascontiguousarray(p["shN"].transpose(0, 2, 1)).reshape(n, -1)  # channel-major
         cols = ([p["means"], np.zeros((n, 3), np.float32), p["sh0"].reshape(n, 3), rest,
                  p["opacities"].reshape(n, 1), p["scales"], p["quats"]])
-        data = np.concatenate(cols, axis=1).astype("<f4")
-        names = (["x", "y", "z", "nx", "ny", "nz", "f_dc_0", "f_dc_1", "f_dc_2"]
-                 + [f"f_rest_{i}" for i in range(rest.shape[1])]
-                 + ["opacity", "scale_0", "scale_1", "scale_2", "rot_0", "rot_1", "rot_2", "rot_3"])
-        assert data.shape[1] == len(names)
-        header = "ply\nformat binary_little_endian 1.0\n" + f"element vertex {n}\n"
-        header += "".join(f"property float {name}\n" for name in names) + "end_header\n"
-        tmp = path.with_name(path.name + ".tmp")
-        with open(tmp, "wb") as f:
-            f.write(header.encode("ascii"))
-            f.write(np.ascontiguousarray(data).tobytes())
-        tmp.replace(path)
-        return path
-
-
-# ----------------------------------------------------------------------------------------------
-# PLY reading (any vertex PLY: 3D-GS files, COLMAP / Open3D / MeshLab point clouds)
-
-_PLY_TYPES = {
-    "char": "i1", "int8": "i1", "uchar": "u1", "uint8": "u1", "short": "i2", "int16": "i2",
-    "ushort": "u2", "uint16": "u2", "int": "i4", "int32": "i4", "uint": "u4", "uint32": "u4",
-    "float": "f4", "float32": "f4", "double": "f8", "float64": "f8",
-}
-
-
-def read_ply_vertices(path: str | Path) -> dict[str, np.ndarray]:
-    """The ``vertex`` element of a PLY file (ascii or binary, either endianness) as name -> array."""
-    path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"{path}: PLY file is missing")
-    with open(path, "rb") as f:
-        if f.readline().strip() != b"ply":
-            raise ValueError(f"{path}: not a PLY file (no 'ply' magic line)")
-        fmt, elements = None, []
-        while True:
-            line = f.readline()
-            if not line:
-                raise ValueError(f"{path}: PLY header has no end_header")
-            tok = line.decode("ascii", "replace").split()
-            if not tok or tok[0] in ("comment", "obj_info"):
-                continue
-            if tok[0] == "end_header":
-                break
-            if tok[0] == "format":
-                fmt = tok[1]
-            elif tok[0] == "element":
-                elements.append((tok[1], int(tok[2]), []))
-            elif tok[0] == "property":
-                if not elements:
-                    raise ValueError(f"{path}: property before any element")
-                if tok[1] == "list":
-                    elements[-1][2].append((tok[4], ("list", tok[2], tok[3])))
-                else:
-                    if tok[1] not in _PLY_TYPES:
-                        raise ValueError(f"{path}: unknown PLY type {tok[1]!r}")
-                    elements[-1][2].append((tok[2], tok[1]))
-        if fmt not in ("ascii", "binary_little_endian", "binary_big_endian"):
-            raise ValueError(f"{path}: unsupported PLY format {fmt!r}")
-        body = f.read()
-    order = "<" if fmt == "binary_little_endian" else ">"
-    offset = 0
-    lines = body.decode("ascii", "replace").split("\n") if fmt == "ascii" else None
-    line_no = 0
-    for name, count, props in elements:
-        has_list = any(isinstance(t, tuple) for _, t in props)
-        if name == "vertex":
-            if has_list:
-                raise ValueError(f"{path}: vertex element with list properties is not supported")
-            if fmt == "ascii":
-                rows = [ln.split() for ln in lines[line_no:line_no + count]]
-                if len(rows) < count:
-                    raise ValueError(f"{path}: file ends inside the vertex data")
-                arr = np.array(rows, dtype=np.float64).reshape(count, len(props))
-                return {pname: arr[:, i].astype(_PLY_TYPES[t]) for i, (pname, t) in enumerate(props)}
-            dtype = np.dtype([(pname, order + _PLY_TYPES[t]) for pname, t in props])
-            if len(body) < offset + count * dtype.itemsize:
-                raise ValueError(f"{path}: file is truncated ({len(body) - offset} bytes of vertex data, "
-                                 f"{count * dtype.itemsize} expected)")
-            arr = np.frombuffer(body, dtype=dtype, count=count, offset=offset)
-            return {pname: arr[pname].astype(arr[pname].dtype.newbyteorder("=")) for pname, _ in props}
-        # skip an element that comes before the vertices
-        if fmt == "ascii":
-            line_no += count
-        elif has_list:
-            raise ValueError(f"{path}: element {name!r} with lists precedes the vertices; not supported")
-        else:
-            offset += count * sum(np.dtype(_PLY_TYPES[t]).itemsize for _, t in props)
-    raise ValueError(f"{path}: PLY file has no vertex element")
+        data = np.ascontiguousarray(np.concatenate(cols, axis=1).astype("<f4"))
+        return ply.write_vertices(path, data.view(ply.float_fields(ply.gaussian_fields(rest.shape[1]))).reshape(n))
 
 
 def read_point_cloud(path: str | Path) -> tuple[np.ndarray, np.ndarray | None]:
     """Points (N, 3) float32 and colours (N, 3) in [0, 1] (or None) from any vertex PLY: plain
     ``red/green/blue`` (8-bit or float) or a 3D-GS file's DC colour."""
-    v = read_ply_vertices(path)
+    v = ply.read_vertices(path)
     if not all(k in v for k in ("x", "y", "z")):
         raise ValueError(f"{path}: PLY vertices have no x, y, z")
     xyz = np.stack([v["x"], v["y"], v["z"]], 1).astype(np.float32)
@@ -411,12 +327,8 @@ def param_bytes(num: int, sh_degree: int) -> int:
 
 def ply_bytes(num: int, sh_degree: int) -> int:
     """Size of the file ``GaussianModel.save_ply`` writes (header + float32 rows with three normals)."""
-    n_rest = 3 * (num_sh_coeffs(sh_degree) - 1)
-    names = (["x", "y", "z", "nx", "ny", "nz", "f_dc_0", "f_dc_1", "f_dc_2"] + [f"f_rest_{i}" for i in range(n_rest)]
-             + ["opacity", "scale_0", "scale_1", "scale_2", "rot_0", "rot_1", "rot_2", "rot_3"])
-    header = "ply\nformat binary_little_endian 1.0\n" + f"element vertex {num}\n"
-    header += "".join(f"property float {name}\n" for name in names) + "end_header\n"
-    return len(header.encode("ascii")) + 4 * num * len(names)
+    names = ply.gaussian_fields(3 * (num_sh_coeffs(sh_degree) - 1))
+    return len(ply.header(num, ply.float_fields(names))) + 4 * num * len(names)
 
 
 def size_report(model: GaussianModel) -> dict:

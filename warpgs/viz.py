@@ -31,6 +31,8 @@ from pathlib import Path
 
 import numpy as np
 
+from warpgs.ply import write_vertices
+
 ORIGIN_KEPT = 0  # an existing Gaussian centre      (values of the PLY's 'origin' property)
 ORIGIN_ADDED = 1  # a new Gaussian from the stereo cloud
 ORIGIN_REMOVED = 2  # a stereo point dropped as an outlier
@@ -103,13 +105,7 @@ def save_origin_ply(path: str | Path, points, colors=None, origin=None) -> Path:
         if len(o) != n or (o > 2).any():
             raise ValueError("origin must hold one value in {0, 1, 2} per point")
         rec["origin"] = o
-    types = {"<f4": "float", "u1": "uchar"}
-    header = "ply\nformat binary_little_endian 1.0\n" + f"element vertex {n}\n"
-    header += "".join(f"property {types[t]} {name}\n" for name, t in fields) + "end_header\n"
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_bytes(header.encode("ascii") + rec.tobytes())
-    return path
+    return write_vertices(path, rec)
 
 
 # ----------------------------------------------------------------------------------------------

@@ -14,7 +14,7 @@ Examples:
     python -m warpgs.pipelines.sparse --data blender --iterations 10000 --out outputs/lego
     python -m warpgs.pipelines.sparse --data /path/to/scene --set strategy.max_gaussians=200000
     python -m warpgs.pipelines.sparse --resume outputs/lego             # continue an interrupted run
-    python -m warpgs.pipelines.sparse --method baseline --data blender --compact   # fewest Gaussians (issue #8)
+    python -m warpgs.pipelines.sparse --method baseline --data blender --compact   # fewest Gaussians
 
 Config layers (later wins): configs/<method>.yaml, configs/<dataset>.yaml, --config files, --set
 key=value, explicit flags. With --resume the checkpoint's config replaces the first two.
