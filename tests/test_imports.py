@@ -16,7 +16,7 @@ LAYERS = [
     ["pseudo", "densify"],
     ["points"],
     ["config"],
-    ["train"],
+    ["evaluation", "train"],
     ["compact"],
     ["pipelines"],
 ]

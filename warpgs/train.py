@@ -38,7 +38,6 @@ from __future__ import annotations
 
 import copy
 import dataclasses
-import json
 import math
 import os
 import signal
@@ -51,10 +50,11 @@ import numpy as np
 import torch
 
 from warpgs import losses
-from warpgs.config import Config, config_from_dict, save_config, to_dict
+from warpgs.config import Config, config_from_dict, to_dict
+from warpgs.evaluation import evaluate_views, run_metrics, write_run_outputs
 from warpgs.guard import DivergenceGuard
-from warpgs.metrics import LPIPSMetric, mean_or_none, peak_memory_mb, psnr, render_fps, ssim
-from warpgs.model import PARAM_NAMES, GaussianModel, read_point_cloud, size_report
+from warpgs.metrics import render_fps
+from warpgs.model import PARAM_NAMES, GaussianModel, read_point_cloud
 
 CHECKPOINT = "checkpoint.pt"
 
@@ -192,13 +192,6 @@ def make_optimizer(model: GaussianModel, cfg: Config, scene_scale: float) -> tor
     lrs = base_learning_rates(cfg, scene_scale)
     groups = [{"params": [model.params[k]], "lr": lrs[k], "name": k} for k in model.params.keys()]
     return torch.optim.Adam(groups, eps=o.eps)
-
-
-def save_png(path: Path, image: np.ndarray) -> None:
-    from PIL import Image
-
-    path.parent.mkdir(parents=True, exist_ok=True)
-    Image.fromarray((np.clip(image, 0, 1) * 255 + 0.5).astype(np.uint8)).save(path)
 
 
 def _cpu_copy(obj):
@@ -715,32 +708,11 @@ class Trainer:
         return self.model.render(cam.viewmat, cam.K, cam.width, cam.height, background=self.background)
 
     def evaluate(self, cameras=None, save_dir: str | Path | None = None, lpips: bool = True) -> dict:
-        """Metrics over ``cameras`` (default: the test views), masked where the scene's protocol says;
-        with ``save_dir``, writes each render beside its ground truth as a PNG."""
-        cams = self.test_cams if cameras is None else cameras
-        masked = bool(self.scene.eval_masked)
-        lp = LPIPSMetric(self.cfg.eval.lpips_weights, self.device) if lpips else None
-        views = []
-        with torch.no_grad():
-            for i, cam in enumerate(cams):
-                img = self.render(cam).image.clamp(0, 1)
-                mask = cam.mask if masked else None
-                if masked and mask is None:
-                    raise ValueError(f"{self.scene.name}: masked evaluation, but view {cam.name} has no mask")
-                row = {"name": cam.name, "psnr": psnr(img, cam.image, mask), "ssim": ssim(img, cam.image, mask)}
-                if lp is not None:
-                    row["lpips"] = lp.value(img, cam.image, mask)
-                views.append(row)
-                if save_dir is not None:
-                    pair = torch.cat([img, cam.image], dim=1).cpu().numpy()
-                    save_png(Path(save_dir) / f"{i:03d}_{cam.name}.png", pair)
-        mean = {"psnr": mean_or_none([v["psnr"] for v in views]), "ssim": mean_or_none([v["ssim"] for v in views])}
-        result = {"mean": mean, "views": views, "masked": masked}
-        if lp is not None:
-            mean["lpips"] = mean_or_none([v["lpips"] for v in views])
-            if lp.missing:
-                result["lpips_missing"] = lp.missing
-        return result
+        """Metrics over ``cameras`` (default: the test views); ``warpgs.evaluation.evaluate_views``."""
+        return evaluate_views(self.render, self.test_cams if cameras is None else cameras,
+                              masked=bool(self.scene.eval_masked), scene_name=self.scene.name,
+                              lpips_weights=self.cfg.eval.lpips_weights, device=self.device, save_dir=save_dir,
+                              lpips=lpips)
 
     def compact(self) -> int:
         """Final compaction (``train.compact``): drops what no training view uses."""
@@ -764,61 +736,9 @@ class Trainer:
         train_ev = self.evaluate(self.train_cams, lpips=False)
         fps = render_fps(lambda i: self.render(self.test_cams[i] if self.test_cams else self.train_cams[i]),
                          len(self.test_cams) or len(self.train_cams), self.cfg.eval.fps_repeats, self.device)
-        finite = [x for x in self.losses if math.isfinite(x)]
-        cam0 = self.scene.test[0] if self.scene.test else self.scene.train[0]
-        metrics = {
-            "method": self.cfg.method,
-            "scene": self.scene.name,
-            "train_views": len(self.scene.train),
-            "test_views": len(self.scene.test),
-            "resolution": [cam0.width, cam0.height],
-            "iterations": self.step,
-            "psnr": ev["mean"]["psnr"],
-            "ssim": ev["mean"]["ssim"],
-            "lpips": ev["mean"].get("lpips"),
-            "masked": ev["masked"],
-            "initial_psnr": (self.initial or {}).get("psnr"),
-            "train_psnr": train_ev["mean"]["psnr"],
-            "num_gaussians": len(self.model),
-            "num_gaussians_before_compaction": self.n_before_compaction,
-            "train_time_s": round(self.train_time, 2),
-            "render_fps": round(fps, 2),
-            **peak_memory_mb(self.device),
-            "device": str(self.device),
-            "seed": self.cfg.train.seed,
-            "final_loss": float(np.mean(finite[-50:])) if finite else None,
-            "skipped_steps": sum(1 for x in self.losses if not math.isfinite(x)),
-            "recoveries": self.recoveries,  # divergences survived: step, cause, step rolled back to, lr scale after
-            "lr_scale": self.lr_scale,
-            "max_loss_ratio": round(self.guard.max_loss_ratio, 3),  # largest loss / running median (train.explode_factor)
-            "curve": self.curve,
-            "per_view": ev["views"],
-        }
-        geo = getattr(self.scene, "geometry", None)
-        if geo is not None:
-            metrics["init"] = geo.summary()
-        metrics["stage_times_s"] = {**{f"init_{k}": round(v, 2) for k, v in (geo.times.items() if geo else [])},
-                                    "train_s": round(self.train_time, 2)}
-        if self.stopped_early:
-            metrics["stopped_early"] = self.stopped_early
-        if "lpips_missing" in ev:
-            metrics["lpips_missing"] = ev["lpips_missing"]
-        size = size_report(self.model)  # SH degree stored, float32 parameter bytes, PLY file bytes
-        metrics.update(sh_degree=size["sh_degree"], param_bytes=size["param_bytes"], ply_bytes=size["ply_bytes"])
-        if self.compact_report is not None:
-            metrics["compact"] = self.compact_report
+        metrics = run_metrics(self, ev, train_ev, fps)
         if out is not None:
-            out.mkdir(parents=True, exist_ok=True)
-            self.export_ply()
-            if geo is not None and len(geo.xyz):  # the initial points, for open3d / python -m warpgs.viz
-                from warpgs.viz import save_origin_ply
-
-                save_origin_ply(out / "init_points.ply", geo.xyz, geo.rgb)
-            self.save_checkpoint()
-            save_config(self.cfg, out / "config.yaml")
-            tmp = out / "metrics.json.tmp"
-            tmp.write_text(json.dumps(metrics, indent=2))
-            tmp.replace(out / "metrics.json")
+            write_run_outputs(self, metrics)
         return metrics
 
 
