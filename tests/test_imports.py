@@ -118,3 +118,15 @@ def test_the_graph_reader_sees_deferred_and_relative_imports():
     assert "warpgs.data.scene" in g["warpgs.data.llff"]  # from .scene import ...
     assert "warpgs.train" in g["warpgs.compact"]  # deferred, inside a function
     assert "warpgs.densify" in g["warpgs.points.stereo"]  # a submodule runs its package first
+
+
+def test_the_wheel_lists_every_package_and_carries_the_configs():
+    """pyproject's explicit package list (needed to map configs/ into the wheel as warpgs/configs) names
+    every package of the tree, and that mapping points at the configs folder."""
+    import tomllib
+
+    meta = tomllib.loads((PKG.parent / "pyproject.toml").read_text())["tool"]["setuptools"]
+    tree = {".".join(("warpgs",) + p.parent.relative_to(PKG).parts) for p in PKG.rglob("__init__.py")}
+    assert set(meta["packages"]) - {"warpgs.configs"} == tree
+    assert meta["package-dir"]["warpgs.configs"] == "configs" and (PKG.parent / "configs" / "baseline.yaml").is_file()
+    assert set(meta["package-data"]["warpgs.configs"]) == {"*.yaml", "data/*.yaml"}

@@ -14,7 +14,8 @@ from typing import Any
 import yaml
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
-CONFIG_DIR = REPO_ROOT / "configs"  # the one config folder
+# the one config folder: the checkout's configs/, or the copy an installed wheel carries (warpgs/configs)
+CONFIG_DIR = REPO_ROOT / "configs" if (REPO_ROOT / "configs").is_dir() else Path(__file__).resolve().parent / "configs"
 
 
 class ConfigError(ValueError):

@@ -20,13 +20,14 @@ import os
 from pathlib import Path
 from typing import Any
 
+from warpgs.configio import CONFIG_DIR, REPO_ROOT
+
 from .blender import load_blender
 from .dtu import load_dtu
 from .llff import load_llff
 from .nerfstudio import find_colmap_model, load_colmap, load_nerfstudio
 from .scene import DatasetNotFoundError, Scene, SceneError
 
-REPO_ROOT = Path(__file__).resolve().parents[2]
 LOADERS = {
     "nerfstudio": load_nerfstudio,
     "colmap": load_colmap,
@@ -41,7 +42,7 @@ ENV_ROOT = "WARPGS_DATA_ROOT"
 
 
 def config_dir() -> Path:
-    return Path(os.environ.get("WARPGS_CONFIG_DIR", REPO_ROOT / "configs")) / "data"
+    return Path(os.environ.get("WARPGS_CONFIG_DIR", CONFIG_DIR)) / "data"
 
 
 def dataset_names() -> list[str]:
