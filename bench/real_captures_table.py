@@ -13,6 +13,7 @@ it: the baseline did not change between them, and the one repeated, castle at 9 
 from __future__ import annotations
 
 import json
+import statistics
 import sys
 from pathlib import Path
 
@@ -50,10 +51,13 @@ def table(runs: dict) -> str:
     return "\n".join(lines)
 
 
+def _cell(xs, fmt="{:.2f}") -> str:
+    """median [min, max] of ``xs``."""
+    return f"{fmt.format(statistics.median(xs))} [{fmt.format(min(xs))}, {fmt.format(max(xs))}]"
+
+
 def seed_table(runs: dict, seed0_baseline: dict) -> str:
     """images_8, 3000 it, seeds 0-2: median [min, max] of baseline and full, and of the per-seed gain."""
-    import statistics
-
     lines = ["| scene | views | baseline PSNR, median [range] | full PSNR, median [range] | full - baseline, median "
              "[range] |", "|---|---|---|---|---|"]
     for key, scene in SCENES.items():
@@ -65,11 +69,7 @@ def seed_table(runs: dict, seed0_baseline: dict) -> str:
                 continue
             bp, fp = [x["psnr"] for x in b], [x["psnr"] for x in f]
             d = [y - x for x, y in zip(bp, fp)]
-
-            def cell(xs, fmt="{:.2f}"):
-                return f"{fmt.format(statistics.median(xs))} [{fmt.format(min(xs))}, {fmt.format(max(xs))}]"
-
-            lines.append(f"| {scene} | {v} | {cell(bp)} | {cell(fp)} | {cell(d, '{:+.2f}')} |")
+            lines.append(f"| {scene} | {v} | {_cell(bp)} | {_cell(fp)} | {_cell(d, '{:+.2f}')} |")
     return "\n".join(lines)
 
 
@@ -77,8 +77,6 @@ def i4_seed_table(runs: dict, seed0_baseline: dict) -> str:
     """images_4, 10,000 it, seeds 0-2: median [range] of baseline and full, the gain of the medians (the
     issue's criterion) and the per-seed gains, Gaussians and training time (medians); then the mean and the
     worst gain of the medians over the six cases."""
-    import statistics
-
     med = statistics.median
     lines = ["| scene | views | baseline PSNR, median [range] | full PSNR, median [range] | full - baseline (medians) | "
              "per-seed gains | Gaussians (baseline / full) | training s (baseline / full) |",
@@ -96,8 +94,8 @@ def i4_seed_table(runs: dict, seed0_baseline: dict) -> str:
             g = med(fp) - med(bp)
             gains.append(g)
             per = ", ".join(f"{y - x:+.2f}" for x, y in zip(bp, fp))
-            lines.append(f"| {scene} | {v} | {med(bp):.2f} [{min(bp):.2f}, {max(bp):.2f}] | {med(fp):.2f} [{min(fp):.2f}, "
-                         f"{max(fp):.2f}] | {g:+.2f} | {per} | {med([x['num_gaussians'] for x in b]):.0f} / "
+            lines.append(f"| {scene} | {v} | {_cell(bp)} | {_cell(fp)} | {g:+.2f} | {per} | "
+                         f"{med([x['num_gaussians'] for x in b]):.0f} / "
                          f"{med([x['num_gaussians'] for x in f]):.0f} | {med([x['train_time_s'] for x in b]):.0f} / "
                          f"{med([x['train_time_s'] for x in f]):.0f} |")
     if gains:

@@ -139,7 +139,7 @@ def run_one(case: str, method: str, seed: int, device: str, preset: str, work: P
                 row["metrics"] = {"psnr": ev["psnr"], "ssim": ev["ssim"], "num_gaussians": len(trainer.model),
                                   "iterations": trainer.step, "train_time_s": round(trainer.train_time, 2),
                                   "recoveries": trainer.recoveries, "lr_scale": trainer.lr_scale,
-                                  "max_loss_ratio": round(trainer.max_loss_ratio, 3), "of": "the last good state"}
+                                  "max_loss_ratio": round(trainer.guard.max_loss_ratio, 3), "of": "the last good state"}
             except Exception as ev_err:
                 row["metrics"] = {"error": f"evaluating the last good state failed: {ev_err}"}
     except Exception as e:  # noqa: BLE001 -- anything else is a crash, recorded rather than raised

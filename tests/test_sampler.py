@@ -381,3 +381,5 @@ def test_pseudo_config_file_and_overrides(tmp_path):
     bad.write_text("trajectory:\n  n_frame: 3\n")
     with pytest.raises(ValueError, match="n_frame"):
         PseudoConfig.load(bad)
+    with pytest.raises(ValueError, match="not found"):  # a missing file is named, not skipped
+        PseudoConfig.load(tmp_path / "none.yaml")

@@ -71,7 +71,7 @@ def test_one_exploding_loss_is_skipped(scene, monkeypatch):
     # the exploding step made no update (Adam counted 59 of 60) and is recorded as skipped; no rollback
     assert all(int(st["step"]) == 59 for st in tr.optimizer.state.values())
     assert np.isnan(tr.losses[40]) and np.isfinite(np.delete(tr.losses, 40)).all()
-    assert tr.recoveries == [] and tr.explode_steps == 0 and tr.max_loss_ratio > 1e3
+    assert tr.recoveries == [] and tr.guard.explode_steps == 0 and tr.guard.max_loss_ratio > 1e3
 
 
 def test_an_exploding_loss_is_caught_and_rolled_back_exactly(scene, monkeypatch):
@@ -195,16 +195,9 @@ def test_the_cli_stops_with_one_paragraph_and_a_nonzero_code(tmp_path, capsys):
 
 
 def test_the_full_method_rolls_back_inside_a_cycle(tmp_path, monkeypatch):
-    from warpgs.data.stress import stress_scene
-    from warpgs.pipelines.full import GenerativeTrainer, train_full
-    from warpgs.pipelines.sparse import build_parser, make_config
+    from warpgs.pipelines.full import train_full
 
-    args = build_parser().parse_args([
-        "--method", "full", "--iterations", "40", "--device", "cpu", "--no-progress", "--set", "pseudo.trajectory.n_frames=4",
-        "--set", "pseudo.sampler.steps=3", "--set", "model.init_num=300", "--set", "full.densify=false",
-        "--set", "train.snapshot_every=5", "--set", "eval.lpips_weights=/nonexistent/alexnet.pth"])
-    cfg, _ = make_config(args)
-    tr = GenerativeTrainer(cfg, stress_scene("views_3", downscale=4), tmp_path)
+    cfg, tr = small_full_trainer(tmp_path, "--set", "train.snapshot_every=5")
     real = tr.compute_loss
 
     def explode_from_30_until_a_rollback(out, cam):
@@ -319,7 +312,7 @@ def test_pseudo_view_losses_never_trip_the_guard(tmp_path, monkeypatch):
     monkeypatch.setattr(tr, "pseudo_loss", far_off)
     train_full(tr)
     assert tr.step == 40 and tr.cycles_done == 2 and not tr.recoveries
-    assert all(np.isfinite(tr.losses)) and tr.max_loss_ratio < cfg.train.explode_factor  # no step skipped
+    assert all(np.isfinite(tr.losses)) and tr.guard.max_loss_ratio < cfg.train.explode_factor  # no step skipped
 
 
 def test_the_depth_prior_a_cycle_brings_never_trips_the_guard(tmp_path, monkeypatch):
@@ -353,7 +346,7 @@ def test_the_depth_prior_a_cycle_brings_never_trips_the_guard(tmp_path, monkeypa
         depth_term = float(losses.pearson_depth_loss(out.depth, prior, prior > 0))
     # the test can fail: the depth term alone is far above what the guard allows over the photometric losses
     assert 20 * depth_term > cfg.train.explode_factor * float(np.median(tr.losses))
-    assert tr.max_loss_ratio < cfg.train.explode_factor
+    assert tr.guard.max_loss_ratio < cfg.train.explode_factor
     # one schedule: the means' learning rate at every step is the baseline's
     assert (tr.phase_start, tr.phase_len) == (0, tr.total_steps)
     o = cfg.optim

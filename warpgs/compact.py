@@ -369,6 +369,6 @@ def finish_hook(trainer) -> dict | None:
     return report
 
 
-__all__ = ["CompactConfig", "CompactStage", "ScheduledPruning", "attach", "check_config", "finetune", "importance", "importance_cameras",
-           "lowest_mask", "param_bytes", "ply_bytes", "prune_lowest", "search", "size_report", "truncate_sh",
+__all__ = ["CompactConfig", "CompactStage", "ScheduledPruning", "attach", "check_config", "finetune", "importance",
+           "importance_cameras", "lowest_mask", "param_bytes", "ply_bytes", "prune_lowest", "search", "size_report", "truncate_sh",
            "virtual_cameras"]

@@ -27,7 +27,6 @@ def save_png(path: Path, image: np.ndarray) -> None:
     Image.fromarray((np.clip(image, 0, 1) * 255 + 0.5).astype(np.uint8)).save(path)
 
 
-
 def evaluate_views(render, cams, *, masked: bool, scene_name: str, lpips_weights, device, save_dir=None,
                    lpips: bool = True) -> dict:
     """Metrics over ``cams`` (``render(cam)`` gives the image), masked where the scene's protocol says;

@@ -18,20 +18,21 @@ steps through a temporary file and a rename, so an interruption never leaves a b
 finishes the current step, writes a checkpoint and stops (``TrainingInterrupted``); a second Ctrl-C
 stops at once, keeping the last checkpoint.
 
-Divergence (judged by ``warpgs.guard.DivergenceGuard``, acted on here): a step is skipped (no update) when its loss or gradients are not finite, or when its loss
-on the input views (``parts["inputs"]`` of ``compute_loss``; pseudo views are left out) explodes: above ``train.explode_factor`` x the median of the last ``train.explode_window`` finite
-losses (the statistic restarts with each ``train()`` call, i.e. each phase of the full method, and after
-an opacity reset, whose expected jumps are not divergence). A divergence is ``train.max_nan_steps``
-skipped steps in a row, ``train.explode_patience`` exploding ones in a row (one high loss alone, e.g. a
-hard view early in a phase, costs one step, never the run), or parameters that are not finite after
-the optimiser step. The trainer keeps an
-in-memory snapshot of the last good state (parameters, Adam moments, densification statistics, RNGs),
-taken at each ``train()`` call and every ``train.snapshot_every`` steps when all of it is finite; on a
-divergence it rolls back to it, scales every learning rate by ``train.recovery_lr_factor`` and goes on
-(each recovery is logged and listed in metrics.json). After ``train.max_recoveries`` recoveries the
-next divergence stops the run with ``TrainingDiverged``, naming the step, the cause and the last good
-checkpoint on disk; the model is left at the last good state. A checkpoint is never written from a
-state that is not finite, so the one on disk stays the last good one.
+Divergence (judged by ``warpgs.guard.DivergenceGuard``, acted on here): a step is skipped (no update)
+when its loss or gradients are not finite, or when its loss on the input views (``parts["inputs"]`` of
+``compute_loss``; pseudo views are left out) explodes: above ``train.explode_factor`` x the median of the
+last ``train.explode_window`` finite losses (the statistic restarts with each ``train()`` call, i.e. each
+phase of the full method, and after an opacity reset, whose expected jumps are not divergence). A
+divergence is ``train.max_nan_steps`` skipped steps in a row, ``train.explode_patience`` exploding ones
+in a row (one high loss alone, e.g. a hard view early in a phase, costs one step, never the run), or
+parameters that are not finite after the optimiser step. The trainer keeps an in-memory snapshot of the
+last good state (parameters, Adam moments, densification statistics, RNGs), taken at each ``train()``
+call and every ``train.snapshot_every`` steps when all of it is finite; on a divergence it rolls back to
+it, scales every learning rate by ``train.recovery_lr_factor`` and goes on (each recovery is logged and
+listed in metrics.json). After ``train.max_recoveries`` recoveries the next divergence stops the run with
+``TrainingDiverged``, naming the step, the cause and the last good checkpoint on disk; the model is left
+at the last good state. A checkpoint is never written from a state that is not finite, so the one on disk
+stays the last good one.
 """
 
 from __future__ import annotations
@@ -281,18 +282,6 @@ class Trainer:
         # that ``finish`` calls in order, after training and before the test metrics. They are attached by
         # whoever builds the trainer (warpgs.pipelines.sparse.make_trainer), so this module imports none of them.
         self.stages: list = []
-
-    @property
-    def explode_steps(self) -> int:
-        return self.guard.explode_steps
-
-    @property
-    def nan_steps(self) -> int:
-        return self.guard.nan_steps
-
-    @property
-    def max_loss_ratio(self) -> float:
-        return self.guard.max_loss_ratio
 
     # ------------------------------------------------------------------------------------------
     # training

@@ -28,9 +28,8 @@ from typing import NamedTuple
 
 import numpy as np
 import torch
-import yaml
 
-from warpgs.configio import ConfigError, apply_values
+from warpgs.configio import ConfigError, apply_values, read_yaml
 from warpgs.viz import ORIGIN_ADDED, ORIGIN_KEPT, ORIGIN_NAMES, ORIGIN_REMOVED, save_origin_ply
 
 from .filter import FilterConfig, FilterResult, filter_cloud, statistical_outliers, voxel_downsample
@@ -52,8 +51,6 @@ from .stereo import (
     stereo_point_cloud,
     winner_take_all,
 )
-
-
 
 
 @dataclass
@@ -80,12 +77,8 @@ def load_densify_config(path: str | Path | None = None, overrides: dict | None =
     (a nested dict, e.g. ``{"filter": {"std_ratio": 3.0}}``). Unknown keys are errors."""
     cfg = DensifyConfig()
     if path is not None:
-        p = Path(path)
-        if not p.is_file():
-            raise DensifyConfigError(f"{p}: densify config file not found")
-        data = yaml.safe_load(p.read_text()) or {}
-        data = data.get("densify", data)
-        apply_values(cfg, data, str(p))
+        data = read_yaml(path)
+        apply_values(cfg, data.get("densify", data), str(path))
     if overrides:
         apply_values(cfg, overrides, "overrides")
     return cfg

@@ -324,13 +324,13 @@ def _baseline_process(cfg, scene, out: Path, resume: bool, hint: str, log_path: 
     os.dup2(log.fileno(), 1)
     os.dup2(log.fileno(), 2)
     sys.stdout = sys.stderr = log
+    code = 0
     try:
         run_method("baseline", cfg, scene, out, resume, resume_hint=hint)
     except RunStopped as e:
-        log.flush()
-        sys.exit(e.code)
+        code = e.code
     log.flush()
-    sys.exit(0)
+    sys.exit(code)
 
 
 def compare_parallel(cfg, scene, out: Path, resume: bool, hint: str):

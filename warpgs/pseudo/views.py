@@ -27,9 +27,8 @@ from typing import Callable, Sequence
 
 import numpy as np
 import torch
-import yaml
 
-from warpgs.configio import apply_values
+from warpgs.configio import apply_values, parse_override, read_yaml
 
 from .backends import DefaultBackendConfig, SVDConfig, make_backend
 from .guidance import UncertaintyConfig, WarpResult, guidance_and_uncertainty
@@ -42,7 +41,6 @@ from .trajectory import (
     path_trajectories,
     perturb_trajectory,
 )
-
 
 RenderFn = Callable[[torch.Tensor, torch.Tensor, int, int], tuple[torch.Tensor, torch.Tensor]]
 
@@ -62,29 +60,17 @@ class PseudoConfig:
 
     @classmethod
     def load(cls, path: str | Path | None = None, overrides: Sequence[str] | dict | None = None) -> "PseudoConfig":
-        """Defaults, then the YAML file (if any), then ``section.key=value`` overrides (values as YAML).
-        Unknown keys are errors naming the valid ones."""
+        """Defaults, then the YAML file ``path`` (a missing one is an error), then overrides: ``section.key=value``
+        strings (values as YAML) or one nested dict. Unknown keys are errors naming the valid ones."""
         cfg = cls()
-        if path is not None and Path(path).is_file():
-            apply_values(cfg, yaml.safe_load(Path(path).read_text()) or {}, str(path))
-        if overrides:
-            items = overrides.items() if isinstance(overrides, dict) else (_split(o) for o in overrides)
-            for key, value in items:
-                d: dict = {}
-                node = d
-                parts = key.split(".")
-                for p in parts[:-1]:
-                    node = node.setdefault(p, {})
-                node[parts[-1]] = value
-                apply_values(cfg, d, f"override {key}")
+        if path is not None:
+            apply_values(cfg, read_yaml(path), str(path))
+        if isinstance(overrides, dict):
+            apply_values(cfg, overrides, "overrides")
+        else:
+            for item in overrides or ():
+                apply_values(cfg, parse_override(item), f"--set {item}")
         return cfg
-
-
-def _split(item: str) -> tuple[str, object]:
-    if "=" not in item:
-        raise ValueError(f"override {item!r}: expected section.key=value")
-    k, v = item.split("=", 1)
-    return k.strip(), yaml.safe_load(v)
 
 
 def backend_from_config(cfg: PseudoConfig, device="cpu"):
