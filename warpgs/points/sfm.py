@@ -70,7 +70,9 @@ class SfmOptions:
     ignore_two_view_tracks: bool = False  # COLMAP's default (True) drops points seen by 2 views: most of them at 3 views
     min_track_length: int = 2  # points seen by fewer views are dropped
     seed: int = 0  # triangulation/RANSAC seed
-    num_threads: int = -1  # -1: all cores (results do not depend on it)
+    # 1: bit-identical points run to run. -1 (all cores) is faster on many-core machines, but COLMAP's
+    # thread pools can then change a few points between runs (a CI run got 854 against 856 points)
+    num_threads: int = 1
 
     @classmethod
     def colmap_defaults(cls) -> "SfmOptions":
