@@ -113,6 +113,33 @@ def splat_sigma(s: splat, px: float, py: float) -> float:
     return 0.5 * (s[2] * dx * dx + s[4] * dy * dy) + s[3] * dx * dy
 
 
+# what composite_splat did with a Gaussian
+SKIPPED = wp.constant(0)  # alpha < 1/255 (or sigma < 0): the pixel goes on behind it
+COMPOSITED = wp.constant(1)
+SATURATED = wp.constant(2)  # it would bring T to <= 1e-4: not composited, the pixel stops before it
+
+
+@wp.func
+def composite_splat(s: splat, px: float, py: float, alpha_max: float, T: float, C: wp.vec3, D: float):
+    """One Gaussian of a pixel, front to back: -> (SKIPPED / COMPOSITED / SATURATED, T, C, D), where C and
+    D are the colour and depth sums in front of it and T the transmittance; T, C, D change only when
+    COMPOSITED."""
+    sigma = splat_sigma(s, px, py)
+    alpha = wp.min(alpha_max, s[5] * wp.exp(-sigma))
+    status = SKIPPED
+    if not (sigma < 0.0 or alpha < ALPHA_MIN):
+        next_T = T * (1.0 - alpha)
+        if next_T <= T_MIN:
+            status = SATURATED
+        else:
+            w = alpha * T
+            C = C + w * wp.vec3(s[6], s[7], s[8])
+            D = D + w * s[9]
+            T = next_T
+            status = COMPOSITED
+    return status, T, C, D
+
+
 # per-Gaussian gradient of one pixel: means2d (2) | conic (3) | opacity | colour (3) | depth
 grad10 = wp.types.vector(length=10, dtype=wp.float32)
 
@@ -237,120 +264,13 @@ def store_pixel(pix: int, C: wp.vec3, D: float, T: float, n: int, background: wp
     last_count[pix] = n
 
 
-@wp.kernel
-def rasterize_fwd(
-    ranges: wp.array2d(dtype=wp.int32),
-    gauss_ids: wp.array(dtype=wp.int32),
-    splats: wp.array(dtype=splat),
-    background: wp.array(dtype=wp.vec3),
-    width: int,
-    height: int,
-    tiles_x: int,
-    alpha_max: float,
-    out_color: wp.array(dtype=wp.vec3),
-    out_depth: wp.array(dtype=float),
-    out_alpha: wp.array(dtype=float),
-    last_count: wp.array(dtype=wp.int32),
-):
-    tile, x, y = pixel_of_thread(wp.tid(), tiles_x)
-    if x >= width or y >= height:
-        return
-    px = float(x) + 0.5
-    py = float(y) + 0.5
-    start = ranges[tile, 0]
-    end = ranges[tile, 1]
-    T = float(1.0)
-    C = wp.vec3(0.0)
-    D = float(0.0)
-    n = start
-    nxt = splat()
-    if start < end:
-        nxt = splats[gauss_ids[start]]
-    for k in range(start, end):
-        s = nxt
-        if k + 1 < end:  # prefetch the next Gaussian while this one is composited
-            nxt = splats[gauss_ids[k + 1]]
-        sigma = splat_sigma(s, px, py)
-        alpha = wp.min(alpha_max, s[5] * wp.exp(-sigma))
-        if sigma < 0.0 or alpha < ALPHA_MIN:
-            continue
-        next_T = T * (1.0 - alpha)
-        if next_T <= T_MIN:
-            break
-        w = alpha * T
-        C = C + w * wp.vec3(s[6], s[7], s[8])
-        D = D + w * s[9]
-        T = next_T
-        n = k + 1
-    store_pixel(y * width + x, C, D, T, n, background[0], out_color, out_depth, out_alpha, last_count)
-
-
-@wp.kernel
-def rasterize_bwd(
-    ranges: wp.array2d(dtype=wp.int32),
-    gauss_ids: wp.array(dtype=wp.int32),
-    splats: wp.array(dtype=splat),
-    background: wp.array(dtype=wp.vec3),
-    width: int,
-    height: int,
-    tiles_x: int,
-    alpha_max: float,
-    out_depth: wp.array(dtype=float),
-    out_alpha: wp.array(dtype=float),
-    last_count: wp.array(dtype=wp.int32),
-    v_out_color: wp.array(dtype=wp.vec3),
-    v_out_depth: wp.array(dtype=float),
-    v_out_alpha: wp.array(dtype=float),
-    # gradients, accumulated with atomics (zero-initialised by the caller): floats, or with ``fixed``
-    # fixed-point integers in v_fixed [N, 10] (see accumulate_grad)
-    fixed: int,
-    v_fixed: wp.array2d(dtype=wp.int64),
-    v_means2d: wp.array(dtype=wp.vec2),
-    v_conics: wp.array(dtype=wp.vec3),
-    v_opacities: wp.array(dtype=float),
-    v_colors: wp.array(dtype=wp.vec3),
-    v_depths: wp.array(dtype=float),
-):
-    # No early return: every lane of a warp must reach the shuffles below.
-    tile, x, y = pixel_of_thread(wp.tid(), tiles_x)
-    inside = x < width and y < height
-    start = ranges[tile, 0]
-    pix = wp.min(y, height - 1) * width + wp.min(x, width - 1)
-    px = float(x) + 0.5
-    py = float(y) + 0.5
-
-    last, T_final, vC, vD, vA = pixel_grad_inputs(inside, pix, start, last_count, out_depth, out_alpha,
-                                                  v_out_color, v_out_depth, v_out_alpha)
-    vA_bg = vA - wp.dot(background[0], vC)
-    T = T_final
-    S_c = wp.vec3(0.0)
-    S_d = float(0.0)
-
-    bound = warp_max(last)
-    g_nxt = int(0)
-    s_nxt = splat()
-    if bound > start:
-        g_nxt = gauss_ids[bound - 1]
-        s_nxt = splats[g_nxt]
-    for j in range(bound - start):
-        k = bound - 1 - j
-        g = g_nxt
-        s = s_nxt
-        if k > start:  # prefetch the next (nearer) Gaussian
-            g_nxt = gauss_ids[k - 1]
-            s_nxt = splats[g_nxt]
-        valid = int(0)
-        grad = grad10()
-        if inside and k < last:
-            valid, T, S_c, S_d, grad = splat_backward(s, px, py, alpha_max, T, S_c, S_d, vC, vD, vA_bg, T_final)
-        accumulate_grad(valid, g, grad, fixed, v_fixed, v_means2d, v_conics, v_opacities, v_colors, v_depths)
-
-
 # ----------------------------------------------------------------------------------------------------
-# CUDA variants: each 256-thread block (one tile) loads the tile's Gaussians into shared memory in
-# batches of 256, one per thread, then every thread composites from shared memory (as gsplat does).
-# They need cooperating threads, which Warp's CPU backend does not have (one thread per block), so
-# the CPU runs the kernels above; the CUDA tests check these against the same torch oracle.
+# Each compositing kernel is one definition with two variants, picked when the code is generated: the
+# CPU variant walks the tile's list one Gaussian after another; the CUDA variant has each 256-thread
+# block (one tile) load the tile's Gaussians into shared memory in batches of 256, one per thread, then
+# every thread composites from shared memory (as gsplat does). The CUDA variant needs cooperating
+# threads, which Warp's CPU backend does not have (one thread per block), so the CPU runs the other;
+# the CUDA tests check it against the same torch oracle.
 
 splat_id = wp.types.vector(length=11, dtype=wp.float32)  # a splat and its Gaussian id (as float bits)
 
@@ -409,125 +329,170 @@ def block_count(v: int) -> int: ...
 def block_sync(): ...
 
 
-@wp.kernel
-def rasterize_fwd_cuda(
-    ranges: wp.array2d(dtype=wp.int32),
-    gauss_ids: wp.array(dtype=wp.int32),
-    splats: wp.array(dtype=splat),
-    background: wp.array(dtype=wp.vec3),
-    width: int,
-    height: int,
-    tiles_x: int,
-    alpha_max: float,
-    out_color: wp.array(dtype=wp.vec3),
-    out_depth: wp.array(dtype=float),
-    out_alpha: wp.array(dtype=float),
-    last_count: wp.array(dtype=wp.int32),
-):
-    tid = wp.tid()
-    tile, x, y = pixel_of_thread(tid, tiles_x)
-    lane = tid % BLOCK
-    inside = x < width and y < height
-    px = float(x) + 0.5
-    py = float(y) + 0.5
-    start = ranges[tile, 0]
-    end = ranges[tile, 1]
-    T = float(1.0)
-    C = wp.vec3(0.0)
-    D = float(0.0)
-    n = start
-    done = int(0)
-    if not inside:
-        done = 1
-    n_batches = (end - start + BLOCK - 1) / BLOCK
-    for b in range(n_batches):
-        if block_count(done) == BLOCK:  # every pixel of the tile is saturated
-            break
-        k0 = start + b * BLOCK
-        if k0 + lane < end:
-            g = gauss_ids[k0 + lane]
-            batch_splat(1, lane, splats[g], g)
-        block_sync()
-        for t in range(wp.min(BLOCK, end - k0)):
-            if done == 0:
-                s = batch_splat(0, t, splat(), 0)
-                dx = s[0] - px
-                dy = s[1] - py
-                sigma = 0.5 * (s[2] * dx * dx + s[4] * dy * dy) + s[3] * dx * dy
-                alpha = wp.min(alpha_max, s[5] * wp.exp(-sigma))
-                if sigma >= 0.0 and alpha >= ALPHA_MIN:
-                    next_T = T * (1.0 - alpha)
-                    if next_T <= T_MIN:
-                        done = 1
-                    else:
-                        w = alpha * T
-                        C = C + w * wp.vec3(s[6], s[7], s[8])
-                        D = D + w * s[9]
-                        T = next_T
-                        n = k0 + t + 1
-        block_sync()
-    if inside:
-        store_pixel(y * width + x, C, D, T, n, background[0], out_color, out_depth, out_alpha, last_count)
+@wp.func
+def stored_splat(sg: splat_id) -> splat:
+    """The splat part of a shared-memory entry read by ``batch_splat``."""
+    return splat(sg[0], sg[1], sg[2], sg[3], sg[4], sg[5], sg[6], sg[7], sg[8], sg[9])
 
 
-@wp.kernel
-def rasterize_bwd_cuda(
-    ranges: wp.array2d(dtype=wp.int32),
-    gauss_ids: wp.array(dtype=wp.int32),
-    splats: wp.array(dtype=splat),
-    background: wp.array(dtype=wp.vec3),
-    width: int,
-    height: int,
-    tiles_x: int,
-    alpha_max: float,
-    out_depth: wp.array(dtype=float),
-    out_alpha: wp.array(dtype=float),
-    last_count: wp.array(dtype=wp.int32),
-    v_out_color: wp.array(dtype=wp.vec3),
-    v_out_depth: wp.array(dtype=float),
-    v_out_alpha: wp.array(dtype=float),
-    fixed: int,
-    v_fixed: wp.array2d(dtype=wp.int64),
-    v_means2d: wp.array(dtype=wp.vec2),
-    v_conics: wp.array(dtype=wp.vec3),
-    v_opacities: wp.array(dtype=float),
-    v_colors: wp.array(dtype=wp.vec3),
-    v_depths: wp.array(dtype=float),
-):
-    tid = wp.tid()
-    tile, x, y = pixel_of_thread(tid, tiles_x)
-    lane = tid % BLOCK
-    inside = x < width and y < height
-    start = ranges[tile, 0]
-    end = ranges[tile, 1]
-    pix = wp.min(y, height - 1) * width + wp.min(x, width - 1)
-    px = float(x) + 0.5
-    py = float(y) + 0.5
+def _compositing_kernels(cuda: bool):
+    """The CUDA or CPU variants of the forward kernel (colour, depth, alpha and the count composited per
+    pixel) and of the backward kernel (per-Gaussian gradients from the pixels' output gradients)."""
 
-    last, T_final, vC, vD, vA = pixel_grad_inputs(inside, pix, start, last_count, out_depth, out_alpha,
-                                                  v_out_color, v_out_depth, v_out_alpha)
-    vA_bg = vA - wp.dot(background[0], vC)
-    T = T_final
-    S_c = wp.vec3(0.0)
-    S_d = float(0.0)
-    warp_last = warp_max(last)
+    def rasterize_fwd(
+        ranges: wp.array2d(dtype=wp.int32),
+        gauss_ids: wp.array(dtype=wp.int32),
+        splats: wp.array(dtype=splat),
+        background: wp.array(dtype=wp.vec3),
+        width: int,
+        height: int,
+        tiles_x: int,
+        alpha_max: float,
+        out_color: wp.array(dtype=wp.vec3),
+        out_depth: wp.array(dtype=float),
+        out_alpha: wp.array(dtype=float),
+        last_count: wp.array(dtype=wp.int32),
+    ):
+        tid = wp.tid()
+        tile, x, y = pixel_of_thread(tid, tiles_x)
+        inside = x < width and y < height
+        px = float(x) + 0.5
+        py = float(y) + 0.5
+        start = ranges[tile, 0]
+        end = ranges[tile, 1]
+        T = float(1.0)
+        C = wp.vec3(0.0)
+        D = float(0.0)
+        n = start
+        if wp.static(cuda):
+            lane = tid % BLOCK
+            done = int(0)
+            if not inside:
+                done = 1
+            n_batches = (end - start + BLOCK - 1) / BLOCK
+            for b in range(n_batches):
+                if block_count(done) == BLOCK:  # every pixel of the tile is saturated
+                    break
+                k0 = start + b * BLOCK
+                if k0 + lane < end:
+                    g = gauss_ids[k0 + lane]
+                    batch_splat(1, lane, splats[g], g)
+                block_sync()
+                for t in range(wp.min(BLOCK, end - k0)):
+                    if done == 0:
+                        s = stored_splat(batch_splat(0, t, splat(), 0))
+                        status, T, C, D = composite_splat(s, px, py, alpha_max, T, C, D)
+                        if status == SATURATED:
+                            done = 1
+                        elif status == COMPOSITED:
+                            n = k0 + t + 1
+                block_sync()
+        elif inside:
+            nxt = splat()
+            if start < end:
+                nxt = splats[gauss_ids[start]]
+            for k in range(start, end):
+                s = nxt
+                if k + 1 < end:  # prefetch the next Gaussian while this one is composited
+                    nxt = splats[gauss_ids[k + 1]]
+                status, T, C, D = composite_splat(s, px, py, alpha_max, T, C, D)
+                if status == SATURATED:
+                    break
+                if status == COMPOSITED:
+                    n = k + 1
+        if inside:
+            store_pixel(y * width + x, C, D, T, n, background[0], out_color, out_depth, out_alpha, last_count)
 
-    n_batches = (end - start + BLOCK - 1) / BLOCK
-    for b in range(n_batches):
-        block_sync()
-        k_hi = end - 1 - b * BLOCK  # batches run back to front
-        if k_hi - lane >= start:
-            g = gauss_ids[k_hi - lane]
-            batch_splat(1, lane, splats[g], g)
-        block_sync()
-        count = wp.min(BLOCK, k_hi - start + 1)
-        t0 = wp.max(0, k_hi - warp_last + 1)  # skip Gaussians behind every pixel of this warp
-        for t in range(t0, count):
-            k = k_hi - t
-            sg = batch_splat(0, t, splat(), 0)
-            s = splat(sg[0], sg[1], sg[2], sg[3], sg[4], sg[5], sg[6], sg[7], sg[8], sg[9])
-            valid = int(0)
-            grad = grad10()
-            if inside and k < last:
-                valid, T, S_c, S_d, grad = splat_backward(s, px, py, alpha_max, T, S_c, S_d, vC, vD, vA_bg, T_final)
-            accumulate_grad(valid, float_bits(sg[10]), grad, fixed, v_fixed, v_means2d, v_conics, v_opacities, v_colors, v_depths)
+    def rasterize_bwd(
+        ranges: wp.array2d(dtype=wp.int32),
+        gauss_ids: wp.array(dtype=wp.int32),
+        splats: wp.array(dtype=splat),
+        background: wp.array(dtype=wp.vec3),
+        width: int,
+        height: int,
+        tiles_x: int,
+        alpha_max: float,
+        out_depth: wp.array(dtype=float),
+        out_alpha: wp.array(dtype=float),
+        last_count: wp.array(dtype=wp.int32),
+        v_out_color: wp.array(dtype=wp.vec3),
+        v_out_depth: wp.array(dtype=float),
+        v_out_alpha: wp.array(dtype=float),
+        # gradients, accumulated with atomics (zero-initialised by the caller): floats, or with ``fixed``
+        # fixed-point integers in v_fixed [N, 10] (see accumulate_grad)
+        fixed: int,
+        v_fixed: wp.array2d(dtype=wp.int64),
+        v_means2d: wp.array(dtype=wp.vec2),
+        v_conics: wp.array(dtype=wp.vec3),
+        v_opacities: wp.array(dtype=float),
+        v_colors: wp.array(dtype=wp.vec3),
+        v_depths: wp.array(dtype=float),
+    ):
+        # No early return: every lane of a warp must reach the shuffles below.
+        tid = wp.tid()
+        tile, x, y = pixel_of_thread(tid, tiles_x)
+        inside = x < width and y < height
+        start = ranges[tile, 0]
+        pix = wp.min(y, height - 1) * width + wp.min(x, width - 1)
+        px = float(x) + 0.5
+        py = float(y) + 0.5
+
+        last, T_final, vC, vD, vA = pixel_grad_inputs(inside, pix, start, last_count, out_depth, out_alpha,
+                                                      v_out_color, v_out_depth, v_out_alpha)
+        vA_bg = vA - wp.dot(background[0], vC)
+        T = T_final
+        S_c = wp.vec3(0.0)
+        S_d = float(0.0)
+        warp_last = warp_max(last)
+
+        if wp.static(cuda):
+            lane = tid % BLOCK
+            end = ranges[tile, 1]
+            n_batches = (end - start + BLOCK - 1) / BLOCK
+            for b in range(n_batches):
+                block_sync()
+                k_hi = end - 1 - b * BLOCK  # batches run back to front
+                if k_hi - lane >= start:
+                    g = gauss_ids[k_hi - lane]
+                    batch_splat(1, lane, splats[g], g)
+                block_sync()
+                count = wp.min(BLOCK, k_hi - start + 1)
+                t0 = wp.max(0, k_hi - warp_last + 1)  # skip Gaussians behind every pixel of this warp
+                for t in range(t0, count):
+                    k = k_hi - t
+                    sg = batch_splat(0, t, splat(), 0)
+                    s = stored_splat(sg)
+                    g = float_bits(sg[10])
+                    valid = int(0)
+                    grad = grad10()
+                    if inside and k < last:
+                        valid, T, S_c, S_d, grad = splat_backward(s, px, py, alpha_max, T, S_c, S_d, vC, vD, vA_bg,
+                                                                  T_final)
+                    accumulate_grad(valid, g, grad, fixed, v_fixed, v_means2d, v_conics, v_opacities, v_colors,
+                                    v_depths)
+        else:
+            g_nxt = int(0)
+            s_nxt = splat()
+            if warp_last > start:
+                g_nxt = gauss_ids[warp_last - 1]
+                s_nxt = splats[g_nxt]
+            for j in range(warp_last - start):
+                k = warp_last - 1 - j
+                g = g_nxt
+                s = s_nxt
+                if k > start:  # prefetch the next (nearer) Gaussian
+                    g_nxt = gauss_ids[k - 1]
+                    s_nxt = splats[g_nxt]
+                valid = int(0)
+                grad = grad10()
+                if inside and k < last:
+                    valid, T, S_c, S_d, grad = splat_backward(s, px, py, alpha_max, T, S_c, S_d, vC, vD, vA_bg, T_final)
+                accumulate_grad(valid, g, grad, fixed, v_fixed, v_means2d, v_conics, v_opacities, v_colors, v_depths)
+
+    suffix = "_cuda" if cuda else ""
+    return (wp.kernel(rasterize_fwd, name="rasterize_fwd" + suffix),
+            wp.kernel(rasterize_bwd, name="rasterize_bwd" + suffix))
+
+
+rasterize_fwd, rasterize_bwd = _compositing_kernels(cuda=False)
+rasterize_fwd_cuda, rasterize_bwd_cuda = _compositing_kernels(cuda=True)
