@@ -15,6 +15,7 @@ from scipy.spatial.transform import Rotation
 import warpgs.pseudo.guidance as guidance_mod
 from warpgs.data import SyntheticConfig, generate_capture
 from warpgs.pseudo.guidance import (
+    PosedViews,
     UncertaintyConfig,
     effective_s1,
     guidance_and_uncertainty,
@@ -34,6 +35,11 @@ def device(request):
 
 def t32(a, device="cpu"):
     return torch.as_tensor(np.asarray(a), dtype=torch.float32, device=device)
+
+
+def views(V, K, images=None, depths=None, device="cpu") -> PosedViews:
+    """PosedViews of float32 tensors on ``device`` from numpy arrays (None stays None)."""
+    return PosedViews(*(None if a is None else t32(a, device) for a in (V, K, images, depths)))
 
 
 # ----------------------------------------------------------------------------------------------
@@ -80,8 +86,8 @@ def _apply_h(Hmat, pts):
 
 def test_plane_warp_matches_homography(device):
     V_dst, V_src, depth_dst, depth_src, img_src, Hmat = _plane_setup()
-    g, q, valid = warp_guidance(t32(img_src, device), t32(V_src, device), t32(K_SRC, device), t32(depth_dst, device),
-                                t32(V_dst, device), t32(K_DST, device))
+    g, q, valid = warp_guidance(views(V_src, K_SRC, images=img_src, device=device),
+                                views(V_dst, K_DST, depths=depth_dst, device=device))
     q_ref = _apply_h(Hmat, _pixels(H, W))
     inside = (q_ref[..., 0] >= 0) & (q_ref[..., 1] >= 0) & (q_ref[..., 0] < W) & (q_ref[..., 1] < H)
     assert inside.mean() > 0.6 and (~inside).sum() > 20  # both cases occur
@@ -97,10 +103,9 @@ def test_plane_warp_matches_homography(device):
 
 def test_plane_round_trip_and_uncertainty_terms(device):
     V_dst, V_src, depth_dst, depth_src, img_src, Hmat = _plane_setup()
-    args = (t32(img_src, device), t32(depth_src, device), t32(V_src, device), t32(K_SRC, device),
-            t32(depth_dst, device), t32(V_dst, device), t32(K_DST, device))
-    render = t32(np.zeros((H, W, 3)), device)
-    r = guidance_and_uncertainty(*args, renders=render, cfg=UncertaintyConfig(photometric=False, reference_width=None))
+    src = views(V_src, K_SRC, img_src, depth_src, device)
+    dst = views(V_dst, K_DST, np.zeros((H, W, 3)), depth_dst, device)
+    r = guidance_and_uncertainty(src, dst, cfg=UncertaintyConfig(photometric=False, reference_width=None))
     v = r.valid.cpu().numpy()
     p = _pixels(H, W)[..., :2]
     q = _apply_h(Hmat, _pixels(H, W))
@@ -113,14 +118,14 @@ def test_plane_round_trip_and_uncertainty_terms(device):
     assert r.uncertainty.cpu().numpy()[interior].max() < 1e-6
     assert np.all(r.uncertainty.cpu().numpy()[~v] == 1.0)
     # the photometric term alone: U = 1 - exp(-|I_gs - I_inp(q)|^2 / s2), |.| over RGB
-    render = r.guidance + torch.tensor([0.1, -0.2, 0.05], device=device)
-    U, _ = uncertainty_map(r.coords, r.valid, args[1], args[2], args[3], args[5], args[6], renders=render,
-                           guidance=r.guidance, geometric=False, s2=0.25)
+    dst = dst._replace(images=r.guidance + torch.tensor([0.1, -0.2, 0.05], device=device))
+    U, _ = uncertainty_map(r.coords, r.valid, src, dst, guidance=r.guidance,
+                           cfg=UncertaintyConfig(geometric=False, s2=0.25))
     expected = 1 - np.exp(-(0.01 + 0.04 + 0.0025) / 0.25)
     assert np.allclose(U.cpu().numpy()[v], expected, atol=1e-6)
     # both terms add in the exponent
-    U2, _ = uncertainty_map(r.coords, r.valid, args[1], args[2], args[3], args[5], args[6], renders=render,
-                            guidance=r.guidance, s1=100.0, s2=0.25)
+    U2, _ = uncertainty_map(r.coords, r.valid, src, dst, guidance=r.guidance,
+                            cfg=UncertaintyConfig(s1=100.0, reference_width=None, s2=0.25))
     assert torch.allclose(U2, U, atol=1e-6)
 
 
@@ -136,8 +141,8 @@ def test_geometric_term_with_wrong_input_depth(device):
     Xs = rays_q * (scale * d_src / (rays_q @ n_src))[..., None]
     Xd = (Xs - T_REL) @ R_REL  # R^T (Xs - t)
     p2_ref = (Xd @ K_DST.T)[..., :2] / (Xd @ K_DST.T)[..., 2:3]
-    r = guidance_and_uncertainty(t32(img_src, device), t32(depth_src, device), t32(V_src, device), t32(K_SRC, device),
-                                 t32(depth_dst, device), t32(V_dst, device), t32(K_DST, device),
+    r = guidance_and_uncertainty(views(V_src, K_SRC, img_src, depth_src, device),
+                                 views(V_dst, K_DST, depths=depth_dst, device=device),
                                  cfg=UncertaintyConfig(photometric=False, s1=100.0, reference_width=None))
     ok = r.valid.cpu().numpy()
     ok &= (q_ref[..., 0] > 1) & (q_ref[..., 1] > 1) & (q_ref[..., 0] < W - 1) & (q_ref[..., 1] < H - 1)
@@ -156,18 +161,30 @@ def test_effective_s1_scales_with_width():
     assert effective_s1(UncertaintyConfig(reference_width=None), 256) == 100.0
 
 
+def test_missing_view_fields_are_named():
+    V_dst, V_src, depth_dst, depth_src, img_src, _ = _plane_setup()
+    src, dst = views(V_src, K_SRC, img_src, depth_src), views(V_dst, K_DST, depths=depth_dst)
+    with pytest.raises(ValueError, match=r"src\.images"):
+        warp_guidance(src._replace(images=None), dst)
+    with pytest.raises(ValueError, match=r"dst\.depths"):
+        warp_guidance(src, dst._replace(depths=None))
+    with pytest.raises(ValueError, match=r"src\.depths"):
+        guidance_and_uncertainty(src._replace(depths=None), dst, cfg=UncertaintyConfig(photometric=False))
+    with pytest.raises(ValueError, match=r"dst\.images"):  # the photometric term compares with the renders
+        guidance_and_uncertainty(src, dst)
+    r = guidance_and_uncertainty(src, dst, cfg=UncertaintyConfig(photometric=False))
+    assert r.uncertainty.shape == (H, W)
+
+
 def test_no_depth_and_behind_camera_are_invalid(device):
     V_dst, V_src, depth_dst, depth_src, img_src, _ = _plane_setup()
     depth_dst = depth_dst.copy()
     depth_dst[:5] = 0.0  # nothing rendered there
-    r = guidance_and_uncertainty(t32(img_src, device), t32(depth_src, device), t32(V_src, device), t32(K_SRC, device),
-                                 t32(depth_dst, device), t32(V_dst, device), t32(K_DST, device),
-                                 renders=t32(np.zeros((H, W, 3)), device))
+    dst = views(V_dst, K_DST, np.zeros((H, W, 3)), depth_dst, device)
+    r = guidance_and_uncertainty(views(V_src, K_SRC, img_src, depth_src, device), dst)
     assert not r.valid[:5].any() and torch.all(r.uncertainty[:5] == 1)
     V_back = np.diag([1.0, 1.0, -1.0, 1.0]) @ np.diag([-1.0, 1.0, 1.0, 1.0])  # camera turned around (rotation)
-    r = guidance_and_uncertainty(t32(img_src, device), t32(depth_src, device), t32(V_back, device), t32(K_SRC, device),
-                                 t32(depth_dst, device), t32(V_dst, device), t32(K_DST, device),
-                                 renders=t32(np.zeros((H, W, 3)), device))
+    r = guidance_and_uncertainty(views(V_back, K_SRC, img_src, depth_src, device), dst)
     assert not r.valid.any() and torch.all(r.uncertainty == 1)
 
 
@@ -186,13 +203,11 @@ def test_batched_frames_equal_single_calls(device):
     renders = rng.random((3, H, W, 3))
     idx = [1, 0, 1]
     cfg = UncertaintyConfig()
-    batch = guidance_and_uncertainty(t32(src_img, device), t32(src_dep, device), t32(src_V, device), t32(K_SRC, device),
-                                     t32(dst_dep, device), t32(dst_V, device), t32(K_DST, device), idx,
-                                     renders=t32(renders, device), cfg=cfg)
+    batch = guidance_and_uncertainty(views(src_V, K_SRC, src_img, src_dep, device),
+                                     views(dst_V, K_DST, renders, dst_dep, device), idx, cfg=cfg)
     for f, s in enumerate(idx):
-        one = guidance_and_uncertainty(t32(src_img[s], device), t32(src_dep[s], device), t32(src_V[s], device),
-                                       t32(K_SRC, device), t32(dst_dep[f], device), t32(dst_V[f], device),
-                                       t32(K_DST, device), renders=t32(renders[f], device), cfg=cfg)
+        one = guidance_and_uncertainty(views(src_V[s], K_SRC, src_img[s], src_dep[s], device),
+                                       views(dst_V[f], K_DST, renders[f], dst_dep[f], device), cfg=cfg)
         for a, b in zip(batch, one):
             assert torch.equal(a[f], b)
 
@@ -209,7 +224,8 @@ def test_kernels_get_the_tensors_without_copies(monkeypatch):
     monkeypatch.setattr(guidance_mod, "launch", spy)
     V_dst, V_src, depth_dst, depth_src, img_src, _ = _plane_setup()
     img, dd, ds = t32(img_src), t32(depth_dst), t32(depth_src)
-    r = guidance_and_uncertainty(img, ds, t32(V_src), t32(K_SRC), dd, t32(V_dst), t32(K_DST), renders=torch.zeros(H, W, 3))
+    r = guidance_and_uncertainty(PosedViews(t32(V_src), t32(K_SRC), img, ds),
+                                 PosedViews(t32(V_dst), t32(K_DST), torch.zeros(H, W, 3), dd))
     assert len(seen) == 2
     assert {img.data_ptr(), dd.data_ptr(), r.guidance.data_ptr(), r.coords.data_ptr()} <= seen[0]
     assert {ds.data_ptr(), r.uncertainty.data_ptr(), r.reprojected.data_ptr()} <= seen[1]
@@ -292,7 +308,8 @@ def test_identity_warp_reproduces_the_input(capture, device):
     k = 5
     img, dep = t32(cap.images[k], device), t32(cap.depths[k], device)
     V, K = t32(cap.viewmats[k], device), t32(cap.K, device)
-    r = guidance_and_uncertainty(img, dep, V, K, dep, V, K, renders=img)
+    same = PosedViews(V, K, img, dep)
+    r = guidance_and_uncertainty(same, same)
     has = dep > 0
     assert torch.equal(r.valid, has)
     mse = float(((r.guidance - img) ** 2)[has].mean())
@@ -315,11 +332,11 @@ def test_uncertainty_separates_corrupted_depth(capture):
     bad[corrupt] *= 1.2
     vis = visible_from(cap, dst, depth, src)
     render = _splat_render(cap, src, dst)
-    args = (t32(cap.images[src]), t32(cap.depths[src]), t32(cap.viewmats[src]), t32(cap.K), t32(bad),
-            t32(cap.viewmats[dst]), t32(cap.K))
+    inputs = views(cap.viewmats[src], cap.K, cap.images[src], cap.depths[src])
+    frames = PosedViews(t32(cap.viewmats[dst]), t32(cap.K), render, t32(bad))
     aucs = {}
     for name, geo, pho in (("full", True, True), ("geometric", True, False), ("photometric", False, True)):
-        U = guidance_and_uncertainty(*args, renders=render, cfg=UncertaintyConfig(geometric=geo, photometric=pho))
+        U = guidance_and_uncertainty(inputs, frames, cfg=UncertaintyConfig(geometric=geo, photometric=pho))
         u = U.uncertainty.numpy()
         aucs[name] = roc_auc(u[vis], corrupt[vis])
     assert (corrupt & vis).sum() > 300 and (~corrupt & vis).sum() > 1000

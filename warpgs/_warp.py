@@ -70,6 +70,35 @@ def arg(t: torch.Tensor, dtype=None):
     return d
 
 
+def struct_arg(struct, **fields):
+    """An instance of the ``@wp.struct`` class ``struct`` with ``fields`` set, for a kernel argument.
+
+    A torch tensor given for an array field becomes the same zero-copy descriptor as ``arg`` (the field's
+    dtype groups trailing dims), written straight into the instance's native struct: Warp's own field
+    setter accepts only a ``wp.array``, and wrapping each tensor in one (``to_wp``) costs several times
+    more per launch. Reading such a field back in Python gives None; kernels see the tensor. Other
+    values are set as Warp sets them. The instance holds references to its tensors, as ``arg``'s
+    descriptors do."""
+    inst = struct()
+    tensors = []
+    for name, value in fields.items():
+        if not isinstance(value, torch.Tensor):
+            setattr(inst, name, value)
+            continue
+        field = struct.vars[name].type
+        if array_t is None:  # pragma: no cover - other Warp versions
+            setattr(inst, name, to_wp(value, field.dtype))
+        else:
+            d = arg(value, field.dtype)
+            if d.ndim != field.ndim:
+                raise ValueError(f"struct field {name!r} takes a {field.ndim}-d array of {field.dtype.__name__}, "
+                                 f"got a tensor of shape {tuple(value.shape)}")
+            setattr(inst._ctype, name, d)
+        tensors.append(value)
+    inst.__dict__["_tensors"] = tensors  # StructInstance.__setattr__ admits only the struct's fields
+    return inst
+
+
 def launch(kernel, dim, inputs, device: str, stream=None) -> None:
     if (isinstance(dim, int) and dim == 0) or (not isinstance(dim, int) and 0 in dim):
         return

@@ -23,7 +23,7 @@ from typing import NamedTuple
 import torch
 import warp as wp
 
-from warpgs._warp import arg, device_of, launch, stream_of, to_wp
+from warpgs._warp import arg, device_of, launch, stream_of, struct_arg, to_wp
 from warpgs.kernels import binning as kb
 from warpgs.kernels import projection as kp
 from warpgs.kernels import rasterize as kr
@@ -46,6 +46,17 @@ def _zeros_like_or(g: torch.Tensor | None, like: torch.Tensor) -> torch.Tensor:
     return torch.zeros_like(like) if g is None else g.contiguous()
 
 
+def _gaussians(means, quats, scales, opacities):
+    """``kp.Gaussians`` viewing the tensors (no copies); also used for the backward's gradient outputs."""
+    return struct_arg(kp.Gaussians, means=means, quats=quats, scales=scales, opacities=opacities)
+
+
+def _camera(viewmat, K, width, height, eps2d, antialiased):
+    """``kp.Camera`` of one view: viewmat [4, 4] and K [3, 3] stay on their device as one-element arrays."""
+    return struct_arg(kp.Camera, viewmat=viewmat.reshape(1, 4, 4), intrinsics=K.reshape(1, 3, 3),
+                      width=width, height=height, eps2d=eps2d, antialiased=int(antialiased))
+
+
 class _Project(torch.autograd.Function):
     @staticmethod
     def forward(ctx, means, quats, scales, opacities, viewmat, K, width, height, eps2d, near, far, antialiased):
@@ -63,9 +74,8 @@ class _Project(torch.autograd.Function):
         tiles_touched = torch.empty(n, device=means.device, dtype=torch.int32)
         launch(
             kp.project_gaussians_fwd, n,
-            [arg(means, wp.vec3), arg(quats, wp.vec4), arg(scales, wp.vec3), arg(opacities),
-             arg(viewmat.reshape(1, 4, 4), wp.mat44), arg(K.reshape(1, 3, 3), wp.mat33),
-             width, height, eps2d, near, far, int(antialiased), TILE_SIZE, tiles_x, tiles_y,
+            [_gaussians(means, quats, scales, opacities), _camera(viewmat, K, width, height, eps2d, antialiased),
+             near, far, TILE_SIZE, tiles_x, tiles_y,
              arg(means2d, wp.vec2), arg(conics, wp.vec3), arg(depths), arg(radii, wp.vec2i),
              arg(opac_eff), arg(tiles_touched)],
             dev, stream,
@@ -85,15 +95,16 @@ class _Project(torch.autograd.Function):
         v_quats = torch.empty_like(quats)
         v_scales = torch.empty_like(scales)
         v_opacities = torch.empty_like(opacities)
+        # the structs are rebuilt from the saved tensors rather than kept on ctx, so that autograd's
+        # checks of saved tensors (in-place changes since the forward) cover everything the kernel reads
         launch(
             kp.project_gaussians_bwd, n,
-            [arg(means, wp.vec3), arg(quats, wp.vec4), arg(scales, wp.vec3), arg(opacities),
-             arg(viewmat.reshape(1, 4, 4), wp.mat44), arg(K.reshape(1, 3, 3), wp.mat33),
-             width, height, eps2d, int(antialiased), arg(radii, wp.vec2i), arg(conics, wp.vec3),
+            [_gaussians(means, quats, scales, opacities), _camera(viewmat, K, width, height, eps2d, antialiased),
+             arg(radii, wp.vec2i), arg(conics, wp.vec3),
              arg(_zeros_like_or(v_means2d, means[:, :2]), wp.vec2),
              arg(_zeros_like_or(v_conics, conics), wp.vec3),
              arg(_zeros_like_or(v_depths, opacities)), arg(_zeros_like_or(v_opac_eff, opacities)),
-             arg(v_means, wp.vec3), arg(v_quats, wp.vec4), arg(v_scales, wp.vec3), arg(v_opacities)],
+             _gaussians(v_means, v_quats, v_scales, v_opacities)],
             dev, stream_of(dev),
         )
         return v_means, v_quats, v_scales, v_opacities, None, None, None, None, None, None, None, None

@@ -6,7 +6,10 @@ dilation, optional antialiasing compensation sqrt(det S2 / det(S2 + eps I)), con
 covariance, and an opacity-aware screen box: extent = min(3.33, sqrt(2 ln(255 o))) sigmas per axis
 (gsplat 1.5's tight box; a pixel outside it has alpha < 1/255, the compositing cut-off).
 
-Only Warp code lives here; the launches are in ``warpgs/render.py``.
+Both kernels take the Gaussians and the camera as structs (``Gaussians``, ``Camera``), so the forward and
+the backward read one definition of what they share; the backward writes its gradients into a second
+``Gaussians`` laid out like the first. Only Warp code lives here; the launches, which build the structs
+from torch tensors without copies, are in ``warpgs/render.py``.
 """
 
 import warp as wp
@@ -142,20 +145,38 @@ def persp_jacobian(p: wp.vec3, fx: float, fy: float, cx: float, cy: float, width
     return J
 
 
+@wp.struct
+class Gaussians:
+    """Per-Gaussian arrays [N]: world means, quaternions (w, x, y, z, not necessarily unit), scales
+    (standard deviations) and opacities. The backward kernel's ``v_gs`` holds their gradients."""
+
+    means: wp.array(dtype=wp.vec3)
+    quats: wp.array(dtype=wp.vec4)
+    scales: wp.array(dtype=wp.vec3)
+    opacities: wp.array(dtype=float)
+
+
+@wp.struct
+class Camera:
+    """The view both kernels project through: world-to-camera ``viewmat`` and pinhole ``intrinsics``
+    (one-element arrays, so a pose on the GPU is read there without a host copy), the image size in
+    pixels, and the screen-space filter: ``eps2d`` added to the 2D covariance's diagonal and, when
+    ``antialiased`` != 0, opacity scaled by sqrt(det S2 / det(S2 + eps2d I)) to compensate."""
+
+    viewmat: wp.array(dtype=wp.mat44)
+    intrinsics: wp.array(dtype=wp.mat33)
+    width: int
+    height: int
+    eps2d: float
+    antialiased: int
+
+
 @wp.kernel
 def project_gaussians_fwd(
-    means: wp.array(dtype=wp.vec3),
-    quats: wp.array(dtype=wp.vec4),
-    scales: wp.array(dtype=wp.vec3),
-    opacities: wp.array(dtype=float),
-    viewmat: wp.array(dtype=wp.mat44),
-    intrinsics: wp.array(dtype=wp.mat33),
-    width: int,
-    height: int,
-    eps2d: float,
+    gs: Gaussians,
+    cam: Camera,
     near: float,
     far: float,
-    antialiased: int,
     tile_size: int,
     tiles_x: int,
     tiles_y: int,
@@ -175,30 +196,30 @@ def project_gaussians_fwd(
     depths[i] = 0.0
     opac_eff[i] = 0.0
 
-    V = viewmat[0]
+    V = cam.viewmat[0]
     R = view_rotation(V)
-    p = R * means[i] + wp.vec3(V[0, 3], V[1, 3], V[2, 3])
+    p = R * gs.means[i] + wp.vec3(V[0, 3], V[1, 3], V[2, 3])
     if p[2] < near or p[2] > far:
         return
 
-    Kc = intrinsics[0]
+    Kc = cam.intrinsics[0]
     fx = Kc[0, 0]
     fy = Kc[1, 1]
     cx = Kc[0, 2]
     cy = Kc[1, 2]
-    W = float(width)
-    H = float(height)
+    W = float(cam.width)
+    H = float(cam.height)
 
     J = persp_jacobian(p, fx, fy, cx, cy, W, H)
-    cv = covariance_2d(quats[i], scales[i], R, J, eps2d)
+    cv = covariance_2d(gs.quats[i], gs.scales[i], R, J, cam.eps2d)
     a = cv[0]
     c = cv[1]
     det_orig = cv[2]
     det = cv[3]
     if det <= 0.0:
         return
-    o = opacities[i]
-    if antialiased != 0:
+    o = gs.opacities[i]
+    if cam.antialiased != 0:
         o = o * wp.sqrt(wp.max(0.0, det_orig / det))
     if o < ALPHA_MIN:
         return
@@ -230,16 +251,8 @@ def project_gaussians_fwd(
 
 @wp.kernel
 def project_gaussians_bwd(
-    means: wp.array(dtype=wp.vec3),
-    quats: wp.array(dtype=wp.vec4),
-    scales: wp.array(dtype=wp.vec3),
-    opacities: wp.array(dtype=float),
-    viewmat: wp.array(dtype=wp.mat44),
-    intrinsics: wp.array(dtype=wp.mat33),
-    width: int,
-    height: int,
-    eps2d: float,
-    antialiased: int,
+    gs: Gaussians,
+    cam: Camera,
     radii: wp.array(dtype=wp.vec2i),
     conics: wp.array(dtype=wp.vec3),
     # gradients of the outputs
@@ -247,36 +260,33 @@ def project_gaussians_bwd(
     v_conics: wp.array(dtype=wp.vec3),
     v_depths: wp.array(dtype=float),
     v_opac_eff: wp.array(dtype=float),
-    # gradients of the inputs
-    v_means: wp.array(dtype=wp.vec3),
-    v_quats: wp.array(dtype=wp.vec4),
-    v_scales: wp.array(dtype=wp.vec3),
-    v_opacities: wp.array(dtype=float),
+    # gradients of the inputs, written here: dL/d(gs.means) to v_gs.means, ...
+    v_gs: Gaussians,
 ):
     i = wp.tid()
     r = radii[i]
     if r[0] <= 0 and r[1] <= 0:
-        v_means[i] = wp.vec3(0.0)
-        v_quats[i] = wp.vec4(0.0)
-        v_scales[i] = wp.vec3(0.0)
-        v_opacities[i] = 0.0
+        v_gs.means[i] = wp.vec3(0.0)
+        v_gs.quats[i] = wp.vec4(0.0)
+        v_gs.scales[i] = wp.vec3(0.0)
+        v_gs.opacities[i] = 0.0
         return
 
-    V = viewmat[0]
+    V = cam.viewmat[0]
     R = view_rotation(V)
-    p = R * means[i] + wp.vec3(V[0, 3], V[1, 3], V[2, 3])
-    Kc = intrinsics[0]
+    p = R * gs.means[i] + wp.vec3(V[0, 3], V[1, 3], V[2, 3])
+    Kc = cam.intrinsics[0]
     fx = Kc[0, 0]
     fy = Kc[1, 1]
     cx = Kc[0, 2]
     cy = Kc[1, 2]
-    W = float(width)
-    H = float(height)
+    W = float(cam.width)
+    H = float(cam.height)
 
-    q = quats[i]
+    q = gs.quats[i]
     qlen = wp.length(q)
     qn = q / qlen
-    s = scales[i]
+    s = gs.scales[i]
     Rq = quat_to_rotmat(qn)
     M = Rq * wp.diag(s)
     cov = M * wp.transpose(M)
@@ -291,24 +301,24 @@ def project_gaussians_bwd(
     G = wp.mat22(vc[0], 0.5 * vc[1], 0.5 * vc[1], vc[2])
     v_cov2 = -(Y * G * Y)
 
-    o = opacities[i]
+    o = gs.opacities[i]
     v_oe = v_opac_eff[i]
-    if antialiased != 0:
+    if cam.antialiased != 0:
         # comp = sqrt(det(S) / det(S + eps I)); d comp^2/dS = (adj S - comp^2 adj(S + eps I)) / det(S + eps I)
         det_orig = cov2[0, 0] * cov2[1, 1] - cov2[0, 1] * cov2[1, 0]
-        a = cov2[0, 0] + eps2d
-        c = cov2[1, 1] + eps2d
+        a = cov2[0, 0] + cam.eps2d
+        c = cov2[1, 1] + cam.eps2d
         det_b = a * c - cov2[0, 1] * cov2[1, 0]
         comp2 = wp.max(0.0, det_orig / det_b)
         comp = wp.sqrt(comp2)
-        v_opacities[i] = v_oe * comp
+        v_gs.opacities[i] = v_oe * comp
         if comp > 0.0:
             v_comp = v_oe * o
             adj = wp.mat22(cov2[1, 1], -cov2[0, 1], -cov2[1, 0], cov2[0, 0])
             adj_b = wp.mat22(c, -cov2[0, 1], -cov2[1, 0], a)
             v_cov2 = v_cov2 + (v_comp * 0.5 / comp) * (adj - comp2 * adj_b) / det_b
     else:
-        v_opacities[i] = v_oe
+        v_gs.opacities[i] = v_oe
 
     # cov2 = J cov_c J^T
     v_cov_c = wp.transpose(J) * v_cov2 * J
@@ -343,16 +353,16 @@ def project_gaussians_bwd(
     vz = vz - fx * rz2 * v_J[0, 0] - fy * rz2 * v_J[1, 1] + 2.0 * fx * tx * rz3 * v_J[0, 2] + 2.0 * fy * ty * rz3 * v_J[1, 2]
 
     # p = R mean + t; cov_c = R cov R^T
-    v_means[i] = wp.transpose(R) * wp.vec3(vx, vy, vz)
+    v_gs.means[i] = wp.transpose(R) * wp.vec3(vx, vy, vz)
     v_cov = wp.transpose(R) * v_cov_c * R
 
     # cov = M M^T, M = Rq diag(s)
     v_M = (v_cov + wp.transpose(v_cov)) * M
     v_Rq = v_M * wp.diag(s)
-    v_scales[i] = wp.vec3(
+    v_gs.scales[i] = wp.vec3(
         v_M[0, 0] * Rq[0, 0] + v_M[1, 0] * Rq[1, 0] + v_M[2, 0] * Rq[2, 0],
         v_M[0, 1] * Rq[0, 1] + v_M[1, 1] * Rq[1, 1] + v_M[2, 1] * Rq[2, 1],
         v_M[0, 2] * Rq[0, 2] + v_M[1, 2] * Rq[1, 2] + v_M[2, 2] * Rq[2, 2],
     )
     v_qn = quat_to_rotmat_vjp(qn, v_Rq)
-    v_quats[i] = (v_qn - qn * wp.dot(qn, v_qn)) / qlen
+    v_gs.quats[i] = (v_qn - qn * wp.dot(qn, v_qn)) / qlen

@@ -15,7 +15,8 @@ Pieces, each usable alone:
   cubic spline), optional perturbation towards the most uncertain candidate.
 - ``guidance`` (Warp kernels in ``warpgs/kernels/warping.py``, CPU and CUDA): ``warp_guidance``
   (q = K P_inp P_guid^-1 D_guid(p) K^-1 p), ``uncertainty_map`` (backward projection with the input's
-  depth, U = 1 - exp(-|p - p'|^2/s1 - |I_gs(p) - I_inp(q)|^2/s2), U = 1 without a correspondence).
+  depth, U = 1 - exp(-|p - p'|^2/s1 - |I_gs(p) - I_inp(q)|^2/s2), U = 1 without a correspondence), both
+  between two ``PosedViews`` (the inputs and the guidance frames: poses, intrinsics, images, depths).
 - ``sampler``: ``sample_video``, EDM Euler steps with per-pixel fusion of x0_hat and the encoded guidance
   (gamma = 1/(U + eps) where U < delta, until the frame's tau = k mean(U) + b), forward and reversed
   backward passes blended with beta_i = (N - 1 - i)/(N - 1). Backend-agnostic.
@@ -32,7 +33,7 @@ video prior (SVD), which completes such regions with plausible content.
 """
 
 from .backends import DefaultBackendConfig, GaussianVideoBackend, SVDBackend, SVDConfig, SVDWeightsNotFound, make_backend
-from .guidance import UncertaintyConfig, WarpResult, guidance_and_uncertainty, uncertainty_map, warp_guidance
+from .guidance import PosedViews, UncertaintyConfig, WarpResult, guidance_and_uncertainty, uncertainty_map, warp_guidance
 from .sampler import SampleResult, SamplerConfig, VideoBackend, sample_video
 from .trajectory import (
     Trajectory,
@@ -56,6 +57,7 @@ def __getattr__(name):  # views (and torch) are imported on first use
 __all__ = [
     "DefaultBackendConfig",
     "GaussianVideoBackend",
+    "PosedViews",
     "PseudoConfig",
     "PseudoSequence",
     "SVDBackend",

@@ -1,24 +1,28 @@
 """Warped guidance and cross-view uncertainty (paper Sec. 3.2): torch tensors in, torch tensors out.
 
-    g = warp_guidance(src_images, src_viewmats, src_Ks, dst_depths, dst_viewmats, dst_Ks)
-    U, p2 = uncertainty_map(g.coords, g.valid, src_depths, src_viewmats, src_Ks, dst_viewmats, dst_Ks,
-                            renders=renders, guidance=g.guidance)
-    r = guidance_and_uncertainty(...)      # both, as one ``WarpResult``
+    src = PosedViews(src_viewmats, src_Ks, images=src_images, depths=src_depths)  # the input views
+    dst = PosedViews(dst_viewmats, dst_Ks, images=renders, depths=dst_depths)     # the guidance frames
+    g, q, valid = warp_guidance(src, dst)
+    U, p2 = uncertainty_map(q, valid, src, dst, guidance=g, cfg=UncertaintyConfig())
+    r = guidance_and_uncertainty(src, dst)      # both, as one ``WarpResult``
 
 A guidance frame ``f`` (pose ``P_guid``, depth ``D_guid`` rendered by 3D-GS there) is filled by inverse
 warping input ``src_index[f]``: ``q = K P_inp P_guid^-1 D_guid(p) K^-1 p``, ``g(p) = I_inp(q)``. The
 backward projection ``p' = K P_guid P_inp^-1 D_inp(q) K^-1 q`` uses the depth rendered at the input,
 and ``U(p) = 1 - exp(-|p - p'|^2 / s1 - |I_gs(p) - I_inp(q)|^2 / s2)`` (s1 in pixels^2, colours in
-[0, 1], ``|.|`` the Euclidean norm over RGB). ``uncertainty_map`` takes s1 in the image's own pixels;
-``guidance_and_uncertainty`` converts the config's s1, given for 1024-wide frames as in the paper's SVD
-setting, to the image's width (``effective_s1``). Pixels with no correspondence (no depth, q outside the
-input image, no input depth at q, a point behind a camera) get ``U = 1``.
+[0, 1], ``|.|`` the Euclidean norm over RGB). The settings come from ``UncertaintyConfig``, whose s1 is
+given for 1024-wide frames as in the paper's SVD setting and converted to the image's width
+(``effective_s1``; ``reference_width=None`` takes it in the image's own pixels). Pixels with no
+correspondence (no depth, q outside the input image, no input depth at q, a point behind a camera)
+get ``U = 1``.
 
-Shapes: inputs stacked ``src_images [S, Hs, Ws, 3]``, ``src_depths [S, Hs, Ws]``, ``src_viewmats
-[S, 4, 4]``, ``src_Ks [S, 3, 3]`` or ``[3, 3]``; guidance frames ``dst_depths [F, H, W]``,
-``dst_viewmats [F, 4, 4]``, ``dst_Ks [F, 3, 3]`` or ``[3, 3]``, ``renders [F, H, W, 3]``;
+Both sets of views are ``PosedViews``; each function reads the fields it needs: ``warp_guidance`` the
+inputs' images and the frames' depths, ``uncertainty_map`` the inputs' depths and, for the photometric
+term, the frames' images (the 3D-GS renders ``I_gs``). Shapes: inputs stacked ``images [S, Hs, Ws, 3]``,
+``depths [S, Hs, Ws]``, ``viewmats [S, 4, 4]``, ``Ks [S, 3, 3]`` or ``[3, 3]``; guidance frames
+``depths [F, H, W]``, ``images [F, H, W, 3]``, ``viewmats [F, 4, 4]``, ``Ks [F, 3, 3]`` or ``[3, 3]``;
 ``src_index [F]`` (default: input 0 for every frame when S == 1, else frame f from input f).
-Unbatched arguments (one image ``[H, W, 3]``, one pose ``[4, 4]``, one depth ``[H, W]``) are accepted
+Unbatched views (one image ``[H, W, 3]``, one pose ``[4, 4]``, one depth ``[H, W]``) are accepted
 and give unbatched results. Tensors stay on their device and go to the Warp kernels without copies
 (``warpgs._warp.arg``); float32 contiguous tensors are used as they are.
 """
@@ -43,6 +47,33 @@ class UncertaintyConfig:
     geometric: bool = True  # keep the |p - p'|^2 / s1 term
     photometric: bool = True  # keep the |I_gs(p) - I_inp(q)|^2 / s2 term
     min_depth: float = 1e-6  # depths at or below this count as "no surface"
+
+
+def effective_s1(cfg: UncertaintyConfig, width: int) -> float:
+    """s1 in this image's pixels^2: the paper measures the reprojection error on SVD's 1024-wide frames,
+    so an image ``width`` pixels wide uses ``s1 * (width / reference_width)^2`` (the same angular tolerance)."""
+    if cfg.reference_width is None:
+        return cfg.s1
+    return cfg.s1 * (width / cfg.reference_width) ** 2
+
+
+class PosedViews(NamedTuple):
+    """Views of the scene, stacked ``[N, ...]`` or one unbatched: world-to-camera ``viewmats [N, 4, 4]``,
+    pinhole ``Ks [N, 3, 3]`` (or one ``[3, 3]`` for all), and the ``images [N, H, W, 3]`` (RGB in [0, 1])
+    and ``depths [N, H, W]`` (z-depth, 0 where nothing is seen) where a function reads them."""
+
+    viewmats: torch.Tensor
+    Ks: torch.Tensor
+    images: torch.Tensor | None = None
+    depths: torch.Tensor | None = None
+
+
+def _field(views: PosedViews, name: str, who: str, role: str) -> torch.Tensor:
+    """``views.<name>``, which function ``who`` reads of its ``role`` (src or dst) views; an error if not given."""
+    t = getattr(views, name)
+    if t is None:
+        raise ValueError(f"{who} needs {role}.{name}")
+    return t
 
 
 class WarpResult(NamedTuple):
@@ -104,33 +135,30 @@ def _inv3(K: torch.Tensor) -> torch.Tensor:
 
 
 def warp_guidance(
-    src_images: torch.Tensor,
-    src_viewmats: torch.Tensor,
-    src_Ks: torch.Tensor,
-    dst_depths: torch.Tensor,
-    dst_viewmats: torch.Tensor,
-    dst_Ks: torch.Tensor,
+    src: PosedViews,
+    dst: PosedViews,
     src_index=None,
     *,
     min_depth: float = 1e-6,
 ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-    """Inverse-warps input views into guidance frames -> (guidance [F,H,W,3], coords q [F,H,W,2], valid [F,H,W]).
+    """Inverse-warps input views ``src`` (their images) into guidance frames ``dst`` (their depths)
+    -> (guidance [F,H,W,3], coords q [F,H,W,2], valid [F,H,W]).
 
     ``guidance`` is ``I_inp(q)`` sampled bilinearly, 0 where ``valid`` is False (no depth at p, the point
     behind the input camera, or q outside the input image)."""
-    src_images, _ = _stack(src_images, 3)
-    dst_depths, batched = _stack(dst_depths, 2)
-    src_viewmats, _ = _stack(src_viewmats, 2)
-    dst_viewmats, _ = _stack(dst_viewmats, 2)
+    src_images, _ = _stack(_field(src, "images", "warp_guidance", "src"), 3)
+    dst_depths, batched = _stack(_field(dst, "depths", "warp_guidance", "dst"), 2)
+    src_viewmats, _ = _stack(src.viewmats, 2)
+    dst_viewmats, _ = _stack(dst.viewmats, 2)
     n_src, n = src_images.shape[0], dst_depths.shape[0]
     dev_t = dst_depths.device
     idx = _check_index(src_index, n_src, n, dev_t)
     if src_images.shape[-1] != 3:
-        raise ValueError(f"src_images must be [S, H, W, 3], got {tuple(src_images.shape)}")
+        raise ValueError(f"src.images must be [S, H, W, 3], got {tuple(src_images.shape)}")
     if src_viewmats.shape[0] != n_src or dst_viewmats.shape[0] != n:
         raise ValueError("one viewmat per input view and one per guidance frame are needed")
-    src_K = _per_frame(src_Ks.to(dev_t), n_src, "src_Ks")[idx.long()]
-    dst_K = _per_frame(dst_Ks.to(dev_t), n, "dst_Ks")
+    src_K = _per_frame(src.Ks.to(dev_t), n_src, "src.Ks")[idx.long()]
+    dst_K = _per_frame(dst.Ks.to(dev_t), n, "dst.Ks")
     to_src, _ = relative_transforms(src_viewmats.to(dev_t), dst_viewmats, idx)
     F, H, W = dst_depths.shape
     guidance = torch.empty(F, H, W, 3, device=dev_t, dtype=torch.float32)
@@ -156,51 +184,46 @@ def warp_guidance(
 def uncertainty_map(
     coords: torch.Tensor,
     valid: torch.Tensor,
-    src_depths: torch.Tensor,
-    src_viewmats: torch.Tensor,
-    src_Ks: torch.Tensor,
-    dst_viewmats: torch.Tensor,
-    dst_Ks: torch.Tensor,
+    src: PosedViews,
+    dst: PosedViews,
     src_index=None,
     *,
-    renders: torch.Tensor | None = None,
     guidance: torch.Tensor | None = None,
-    s1: float = 100.0,
-    s2: float = 0.25,
-    geometric: bool = True,
-    photometric: bool = True,
-    min_depth: float = 1e-6,
+    cfg: UncertaintyConfig | None = None,
 ) -> tuple[torch.Tensor, torch.Tensor]:
     """Cross-view uncertainty from ``warp_guidance``'s correspondences -> (U [F,H,W], p' [F,H,W,2]).
 
-    The photometric term needs ``renders`` (I_gs at the guidance poses) and ``guidance`` (I_inp(q));
-    ``geometric=False`` / ``photometric=False`` drop a term (the paper's ablations)."""
+    Reads the depths of the inputs ``src``; the photometric term also needs the guidance frames' images
+    ``dst.images`` (I_gs, the 3D-GS renders at their poses) and ``guidance`` (I_inp(q)). ``cfg``
+    (default: the paper's settings) gives s1, s2, the terms to keep (the paper's ablations) and min_depth."""
+    cfg = cfg or UncertaintyConfig()
     coords, batched = _stack(coords, 3)
     valid, _ = _stack(valid, 2)
-    src_depths, _ = _stack(src_depths, 2)
-    src_viewmats, _ = _stack(src_viewmats, 2)
-    dst_viewmats, _ = _stack(dst_viewmats, 2)
+    src_depths, _ = _stack(_field(src, "depths", "uncertainty_map", "src"), 2)
+    src_viewmats, _ = _stack(src.viewmats, 2)
+    dst_viewmats, _ = _stack(dst.viewmats, 2)
     F, H, W, _ = coords.shape
     n_src = src_depths.shape[0]
     dev_t = coords.device
     idx = _check_index(src_index, n_src, F, dev_t)
     if src_viewmats.shape[0] != n_src or dst_viewmats.shape[0] != F:
         raise ValueError("one viewmat per input view and one per guidance frame are needed")
+    s1, s2, photometric = effective_s1(cfg, W), cfg.s2, cfg.photometric
     if s1 <= 0 or s2 <= 0:
         raise ValueError(f"s1 and s2 must be positive, got {s1}, {s2}")
     if photometric:
-        if renders is None or guidance is None:
-            raise ValueError("the photometric term needs renders (I_gs) and guidance (I_inp(q)); "
-                             "pass them or set photometric=False")
-        renders, _ = _stack(renders, 3)
+        if dst.images is None or guidance is None:
+            raise ValueError("the photometric term needs dst.images (I_gs, the renders at the guidance poses) "
+                             "and guidance (I_inp(q)); pass them or set photometric=False")
+        renders, _ = _stack(dst.images, 3)
         guidance, _ = _stack(guidance, 3)
         renders, guidance = _f32(renders.to(dev_t)), _f32(guidance.to(dev_t))
         if renders.shape != (F, H, W, 3) or guidance.shape != (F, H, W, 3):
-            raise ValueError(f"renders and guidance must be [{F}, {H}, {W}, 3]")
+            raise ValueError(f"dst.images and guidance must be [{F}, {H}, {W}, 3]")
     else:  # the kernel reads them but multiplies by inv_s2 = 0
         renders = guidance = torch.zeros(F, H, W, 3, device=dev_t)
-    src_K = _per_frame(src_Ks.to(dev_t), n_src, "src_Ks")[idx.long()]
-    dst_K = _f32(_per_frame(dst_Ks.to(dev_t), F, "dst_Ks"))
+    src_K = _per_frame(src.Ks.to(dev_t), n_src, "src.Ks")[idx.long()]
+    dst_K = _f32(_per_frame(dst.Ks.to(dev_t), F, "dst.Ks"))
     _, to_dst = relative_transforms(src_viewmats.to(dev_t), dst_viewmats.to(dev_t), idx)
     U = torch.empty(F, H, W, device=dev_t, dtype=torch.float32)
     p2 = torch.empty(F, H, W, 2, device=dev_t, dtype=torch.float32)
@@ -214,7 +237,7 @@ def uncertainty_map(
         kw.reproject_uncertainty, (F, H, W),
         [arg(coords, wp.vec2), arg(valid_i), arg(src_depths), arg(idx), arg(to_dst, wp.mat44),
          arg(src_Kinv, wp.mat33), arg(dst_K, wp.mat33), arg(renders, wp.vec3), arg(guidance, wp.vec3),
-         1.0 / s1 if geometric else 0.0, 1.0 / s2 if photometric else 0.0, float(min_depth),
+         1.0 / s1 if cfg.geometric else 0.0, 1.0 / s2 if photometric else 0.0, float(cfg.min_depth),
          arg(U), arg(p2, wp.vec2)],
         dev, stream_of(dev),
     )
@@ -223,43 +246,21 @@ def uncertainty_map(
     return U, p2
 
 
-def effective_s1(cfg: UncertaintyConfig, width: int) -> float:
-    """s1 in this image's pixels^2: the paper measures the reprojection error on SVD's 1024-wide frames,
-    so an image ``width`` pixels wide uses ``s1 * (width / reference_width)^2`` (the same angular tolerance)."""
-    if cfg.reference_width is None:
-        return cfg.s1
-    return cfg.s1 * (width / cfg.reference_width) ** 2
-
-
 def guidance_and_uncertainty(
-    src_images: torch.Tensor,
-    src_depths: torch.Tensor,
-    src_viewmats: torch.Tensor,
-    src_Ks: torch.Tensor,
-    dst_depths: torch.Tensor,
-    dst_viewmats: torch.Tensor,
-    dst_Ks: torch.Tensor,
+    src: PosedViews,
+    dst: PosedViews,
     src_index=None,
     *,
-    renders: torch.Tensor | None = None,
     cfg: UncertaintyConfig | None = None,
 ) -> WarpResult:
-    """``warp_guidance`` then ``uncertainty_map`` with the settings of ``cfg`` (paper defaults)."""
+    """``warp_guidance`` then ``uncertainty_map`` with the settings of ``cfg`` (paper defaults): ``src``
+    needs images and depths, ``dst`` depths, and images (the renders) for the photometric term."""
     cfg = cfg or UncertaintyConfig()
-    photometric = cfg.photometric and renders is not None
-    width = dst_depths.shape[-1]
-    if cfg.photometric and renders is None:
-        raise ValueError("renders (I_gs at the guidance poses) are needed for the photometric term; "
-                         "pass them or set photometric=False")
-    g, q, valid = warp_guidance(src_images, src_viewmats, src_Ks, dst_depths, dst_viewmats, dst_Ks, src_index,
-                                min_depth=cfg.min_depth)
-    batched = dst_depths.dim() == 3
+    g, q, valid = warp_guidance(src, dst, src_index, min_depth=cfg.min_depth)
     idx = src_index
     if idx is None:
-        n_src = src_images.shape[0] if src_images.dim() == 4 else 1
-        n = dst_depths.shape[0] if batched else 1
-        idx = _check_index(None, n_src, n, dst_depths.device)
-    U, p2 = uncertainty_map(q, valid, src_depths, src_viewmats, src_Ks, dst_viewmats, dst_Ks, idx,
-                            renders=renders, guidance=g, s1=effective_s1(cfg, width), s2=cfg.s2, geometric=cfg.geometric,
-                            photometric=photometric, min_depth=cfg.min_depth)
+        n_src = src.images.shape[0] if src.images.dim() == 4 else 1
+        n = dst.depths.shape[0] if dst.depths.dim() == 3 else 1
+        idx = _check_index(None, n_src, n, dst.depths.device)
+    U, p2 = uncertainty_map(q, valid, src, dst, idx, guidance=g, cfg=cfg)
     return WarpResult(g, U, q, p2, valid)

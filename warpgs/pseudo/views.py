@@ -31,7 +31,7 @@ import torch
 from warpgs.configio import apply_values, parse_override, read_yaml
 
 from .backends import DefaultBackendConfig, SVDConfig, make_backend
-from .guidance import UncertaintyConfig, WarpResult, guidance_and_uncertainty
+from .guidance import PosedViews, UncertaintyConfig, WarpResult, guidance_and_uncertainty
 from .sampler import SamplerConfig, sample_video
 from .trajectory import (
     Trajectory,
@@ -179,6 +179,7 @@ def generate_pseudo_views(
     if input_depths is None:
         input_depths = [render_fn(c.viewmat.to(dev), c.K.to(dev), c.width, c.height)[1] for c in cams]
     src_D = torch.stack([d.to(dev).float() for d in input_depths])
+    src_views = PosedViews(src_V, src_K, src_images, src_D)  # what the warps read of the inputs
     centers = camera_centres(src_V.double().cpu().numpy())
 
     if trajectories is None:
@@ -203,8 +204,7 @@ def generate_pseudo_views(
             best = src_map = None
             for c in choices:
                 idx = torch.as_tensor(c, device=dev)
-                r = guidance_and_uncertainty(src_images, src_D, src_V, src_K, depths, viewmats, K, idx,
-                                             renders=renders, cfg=uc)
+                r = guidance_and_uncertainty(src_views, PosedViews(viewmats, K, renders, depths), idx, cfg=uc)
                 m = idx.view(-1, 1, 1).expand(r.uncertainty.shape).contiguous()
                 if best is None:
                     best, src_map = r, m
