@@ -100,7 +100,6 @@ def run_one(case: str, method: str, seed: int, device: str, preset: str, work: P
     from warpgs.config import ConfigError
     from warpgs.data.scene import SceneError
     from warpgs.data.stress import stress_scene
-    from warpgs.pipelines.full import finish_full, train_full
     from warpgs.pipelines.sparse import make_trainer
     from warpgs.train import CHECKPOINT, TrainingDiverged, TrainingInterrupted
 
@@ -123,8 +122,8 @@ def run_one(case: str, method: str, seed: int, device: str, preset: str, work: P
                                      if k != "true_viewmat"}}
         cfg.method = method
         trainer = make_trainer(cfg, scene, out)
-        train_full(trainer) if method == "full" else trainer.train()
-        m = finish_full(trainer) if method == "full" else trainer.finish()
+        trainer.run()
+        m = trainer.finish()
         row["status"] = "finished"
         row["metrics"] = {k: m.get(k) for k in ("psnr", "ssim", "lpips", "initial_psnr", "train_psnr", "num_gaussians",
                                                 "train_time_s", "iterations", "skipped_steps", "lr_scale",

@@ -58,13 +58,14 @@ def test_ablation_switches_reach_the_config(tmp_path):
 def test_appended_gaussians_train_with_fresh_adam_state():
     from warpgs.config import build_config
     from warpgs.data import load_scene
-    from warpgs.pipelines.full import GenerativeTrainer
+    from warpgs.pipelines.full import FullMethod
+    from warpgs.train import Trainer
 
     cfg = build_config([{"method": "full", "train": {"device": "cpu", "progress": False, "iterations": 2},
                          "model": {"init": "box", "init_num": 50, "init_box": [-1, -1, 2, 1, 1, 4]},
                          "full": {"pseudo_loss": "l1"}}])
     scene = load_scene("synthetic", views=3, downscale=2)
-    tr = GenerativeTrainer(cfg, scene, None)
+    tr = Trainer(cfg, scene, None, method=FullMethod())
     tr.train(1)
     n0 = len(tr.model)
     added = append_gaussians(tr, torch.tensor([[0.0, 0.0, 3.0], [0.1, 0.0, 3.0]]), torch.tensor([[1.0, 0, 0], [0, 1.0, 0]]),
@@ -128,14 +129,14 @@ def test_growth_budget_caps_the_cycles_and_bad_settings_are_named(tmp_path):
     _, tr = small_full_trainer(tmp_path, "--set", "full.growth_budget=1.5")
     configured = tr.cfg.strategy.max_gaussians
     assert tr.strategy.max_gaussians == configured > 300  # the baseline phase runs under the configured budget
-    tr.history = [{"cycle": 0, "num_gaussians": 10 * configured}]
-    tr.apply_growth_budget()
+    tr.method.history = [{"cycle": 0, "num_gaussians": 10 * configured}]
+    tr.method.apply_growth_budget()
     assert tr.strategy.max_gaussians == configured  # the growth budget never raises the configured one
-    tr.history = [{"cycle": 0, "num_gaussians": 200}]
-    tr.apply_growth_budget()
+    tr.method.history = [{"cycle": 0, "num_gaussians": 200}]
+    tr.method.apply_growth_budget()
     assert tr.strategy.max_gaussians == 300  # 1.5 x the baseline phase's 200
-    tr.history = [{"cycle": 0, "num_gaussians": 100}]
-    tr.apply_growth_budget()
+    tr.method.history = [{"cycle": 0, "num_gaussians": 100}]
+    tr.method.apply_growth_budget()
     assert tr.strategy.max_gaussians == len(tr.model)  # never below what the model has
     assert tr.cfg.strategy.max_gaussians == configured  # the config itself is left as it was
     for bad, msg in (({"pseudo_mask": "all"}, "pseudo_mask"), ({"growth_budget": -1.0}, "growth_budget"),

@@ -80,7 +80,9 @@ def test_an_exploding_loss_is_caught_and_rolled_back_exactly(scene, monkeypatch)
 
     def explode_from_70_until_a_rollback(out, cam):
         loss, parts = real(out, cam)
-        return (loss * 1e4, parts) if tr.step >= 70 and not tr.recoveries else (loss, parts)
+        if tr.step >= 70 and not tr.recoveries:  # the input views' loss explodes (what the guard judges)
+            return loss * 1e4, {**parts, "inputs": parts["inputs"] * 1e4}
+        return loss, parts
 
     monkeypatch.setattr(tr, "compute_loss", explode_from_70_until_a_rollback)
     tr.train()
@@ -195,8 +197,6 @@ def test_the_cli_stops_with_one_paragraph_and_a_nonzero_code(tmp_path, capsys):
 
 
 def test_the_full_method_rolls_back_inside_a_cycle(tmp_path, monkeypatch):
-    from warpgs.pipelines.full import train_full
-
     cfg, tr = small_full_trainer(tmp_path, "--set", "train.snapshot_every=5")
     real = tr.compute_loss
 
@@ -207,9 +207,9 @@ def test_the_full_method_rolls_back_inside_a_cycle(tmp_path, monkeypatch):
         return loss, parts
 
     monkeypatch.setattr(tr, "compute_loss", explode_from_30_until_a_rollback)
-    train_full(tr)  # phases end at 16, 28, 40: step 30 is in the second cycle
+    tr.run()  # phases end at 16, 28, 40: step 30 is in the second cycle
     assert [(r["step"], r["rolled_back_to"]) for r in tr.recoveries] == [(32, 30)]  # its snapshot at 30
-    assert tr.step == 40 and tr.cycles_done == 2 and _finite(tr) and len(tr.pseudo_cams) > 0
+    assert tr.step == 40 and tr.method.cycles_done == 2 and _finite(tr) and len(tr.method.pseudo_cams) > 0
 
 
 # ----------------------------------------------------------------------------------------------
@@ -301,17 +301,15 @@ def test_unknown_stress_cases_are_named():
 def test_pseudo_view_losses_never_trip_the_guard(tmp_path, monkeypatch):
     """The first steps with pseudo views can cost many times the input-only phase's loss (seen on a real
     capture: 15-44x, and the run was stopped); the guard judges the input views' loss alone."""
-    from warpgs.pipelines.full import train_full
-
     cfg, tr = small_full_trainer(tmp_path)
-    real = tr.pseudo_loss
+    real = tr.method.pseudo_loss
 
     def far_off(out, cam):  # four pseudo views in a row 1000x off: a divergence if the guard counted them
         return real(out, cam) * (1000.0 if 30 <= tr.step < 34 else 1.0)
 
-    monkeypatch.setattr(tr, "pseudo_loss", far_off)
-    train_full(tr)
-    assert tr.step == 40 and tr.cycles_done == 2 and not tr.recoveries
+    monkeypatch.setattr(tr.method, "pseudo_loss", far_off)
+    tr.run()
+    assert tr.step == 40 and tr.method.cycles_done == 2 and not tr.recoveries
     assert all(np.isfinite(tr.losses)) and tr.guard.max_loss_ratio < cfg.train.explode_factor  # no step skipped
 
 
@@ -323,26 +321,24 @@ def test_the_depth_prior_a_cycle_brings_never_trips_the_guard(tmp_path, monkeypa
     import torch
 
     from warpgs import losses
-    from warpgs.pipelines.full import train_full
-
     # a heavy prior weight: in this small scene the photometric loss is 0.2, on castle_p30 it was 0.03
     cfg, tr = small_full_trainer(tmp_path, "--set", "full.restart_lr=false", "--set", "full.input_depth_weight=20")
-    real_update = tr.update_pseudo_views
+    real_update = tr.method.update_pseudo_views
 
     def with_prior(cycle):  # a depth prior that disagrees with the model's depth
         times = real_update(cycle)
         g = torch.Generator().manual_seed(cycle)
         for c in tr.train_cams:
-            tr.input_depths[c.name] = torch.rand(c.height, c.width, generator=g) + 0.5
+            tr.method.input_depths[c.name] = torch.rand(c.height, c.width, generator=g) + 0.5
         return times
 
-    monkeypatch.setattr(tr, "update_pseudo_views", with_prior)
-    train_full(tr)
-    assert tr.step == 40 and tr.cycles_done == 2 and not tr.recoveries
+    monkeypatch.setattr(tr.method, "update_pseudo_views", with_prior)
+    tr.run()
+    assert tr.step == 40 and tr.method.cycles_done == 2 and not tr.recoveries
     cam = tr.train_cams[0]
     with torch.no_grad():
         out = tr.model.render(cam.viewmat, cam.K, cam.width, cam.height, background=tr.background)
-        prior = tr.input_depths[cam.name]
+        prior = tr.method.input_depths[cam.name]
         depth_term = float(losses.pearson_depth_loss(out.depth, prior, prior > 0))
     # the test can fail: the depth term alone is far above what the guard allows over the photometric losses
     assert 20 * depth_term > cfg.train.explode_factor * float(np.median(tr.losses))

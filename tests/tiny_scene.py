@@ -127,16 +127,15 @@ def same_params(a: dict, b: dict) -> bool:
 
 
 def small_full_trainer(tmp_path, *extra):
-    """(config, GenerativeTrainer): the full method, 40 steps on the CPU, on the 3-view stress scene at a
+    """(config, trainer): the full method, 40 steps on the CPU, on the 3-view stress scene at a
     quarter size, without densification; ``extra``: more command-line arguments."""
     from warpgs.data.stress import stress_scene
-    from warpgs.pipelines.full import GenerativeTrainer
-    from warpgs.pipelines.sparse import build_parser, make_config
+    from warpgs.pipelines.sparse import build_parser, make_config, make_trainer
 
     args = build_parser().parse_args([
         "--method", "full", "--iterations", "40", "--device", "cpu", "--no-progress", "--set", "pseudo.trajectory.n_frames=4",
         "--set", "pseudo.sampler.steps=3", "--set", "model.init_num=300", "--set", "full.densify=false",
         "--set", "eval.lpips_weights=/nonexistent/alexnet.pth", *extra])
     cfg, _ = make_config(args)
-    return cfg, GenerativeTrainer(cfg, stress_scene("views_3", downscale=4), tmp_path)
+    return cfg, make_trainer(cfg, stress_scene("views_3", downscale=4), tmp_path)
 

@@ -82,7 +82,7 @@ def importance_cameras(trainer, cfg: CompactConfig) -> list:
     if "virtual" in cfg.importance_views:
         cams += virtual_cameras(trainer.train_cams, cfg.virtual_frames)
     if "pseudo" in cfg.importance_views:
-        cams += list(getattr(trainer, "pseudo_cams", None) or [])
+        cams += list(trainer.method.extra_views())
     return cams
 
 
@@ -259,7 +259,7 @@ def search(trainer, cfg: CompactConfig | None = None) -> dict:
     before = {**size_report(model), "train_psnr": _psnr(trainer, trainer.train_cams)}
     if test:
         before["test_psnr"] = _psnr(trainer, trainer.test_cams)
-    start = trainer.model_state()
+    start = trainer.state_dict(("model",))
     steps = trainer.reserved_steps or cfg.finetune_steps  # compact mode reserved the run's last steps for them
     cams = importance_cameras(trainer, cfg)
     scores = importance(model, cams, trainer.background, cfg.importance, cfg.volume_power).to(trainer.device)
@@ -268,7 +268,7 @@ def search(trainer, cfg: CompactConfig | None = None) -> dict:
 
     def run_point(kind: str, ratio: float, degree: int) -> dict:
         """One point: from the trained model, prune ``ratio``, truncate to ``degree``, fine-tune, measure."""
-        trainer.load_model_state(start)
+        trainer.load_state_dict(start)
         if ratio > 0:
             prune_lowest(trainer.model, trainer.optimizer, trainer.state, scores, ratio)
         if degree < trainer.model.max_sh_degree:
@@ -280,7 +280,7 @@ def search(trainer, cfg: CompactConfig | None = None) -> dict:
             row["skipped_steps"] = skipped
         if test:
             row["test_psnr"] = _psnr(trainer, trainer.test_cams)
-        kept[len(points)] = trainer.model_state()
+        kept[len(points)] = trainer.state_dict(("model",))
         points.append(row)
         trainer.log(f"warpgs: compact: {kind} ratio {ratio:.2f} degree {row['sh_degree']}: {row['num_gaussians']} "
                     f"Gaussians, train PSNR {row['train_psnr']:.3f}"
@@ -313,9 +313,9 @@ def search(trainer, cfg: CompactConfig | None = None) -> dict:
         active = start["active_sh_degree"]
         for d in range(max_deg):
             if d >= active:  # the model never rendered above ``active``: dropping the rest changes nothing
-                trainer.load_model_state(kept[chosen])
+                trainer.load_state_dict(kept[chosen])
                 truncate_sh(trainer.model, d, trainer.optimizer)
-                kept[len(points)] = trainer.model_state()
+                kept[len(points)] = trainer.state_dict(("model",))
                 points.append({**points[chosen], "kind": "sh", **size_report(trainer.model),
                                "note": f"the active SH degree was {active}: same model, fewer stored coefficients"})
                 chosen = len(points) - 1
@@ -325,7 +325,7 @@ def search(trainer, cfg: CompactConfig | None = None) -> dict:
                 break
     chosen = min((i for i, p in enumerate(points) if ok(p) and p["num_gaussians"] == points[chosen]["num_gaussians"]),
                  key=lambda i: (points[i]["param_bytes"], -points[i]["train_psnr"]))
-    trainer.load_model_state(kept[chosen])
+    trainer.load_state_dict(kept[chosen])
     for p in points:
         p["within_tolerance"] = ok(p)
     final = points[chosen]

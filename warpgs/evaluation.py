@@ -4,6 +4,7 @@ scene's protocol says), the renders beside their ground truth, metrics.json and 
     ev = evaluate_views(trainer.render, scene.test, masked=..., scene_name=..., lpips_weights=..., device=...)
     metrics = run_metrics(trainer, ev, train_ev, fps)
     write_run_outputs(trainer, metrics)      # point_cloud.ply, init_points.ply, checkpoint, config.yaml, metrics.json
+    write_flythrough(trainer, path); write_report(out, metrics, history, baseline)   # the full method's extras
 """
 
 from __future__ import annotations
@@ -18,13 +19,7 @@ import torch
 from warpgs.config import save_config
 from warpgs.metrics import LPIPSMetric, mean_or_none, peak_memory_mb, psnr, ssim
 from warpgs.model import size_report
-
-
-def save_png(path: Path, image: np.ndarray) -> None:
-    from PIL import Image
-
-    path.parent.mkdir(parents=True, exist_ok=True)
-    Image.fromarray((np.clip(image, 0, 1) * 255 + 0.5).astype(np.uint8)).save(path)
+from warpgs.viz import save_image
 
 
 def evaluate_views(render, cams, *, masked: bool, scene_name: str, lpips_weights, device, save_dir=None,
@@ -45,7 +40,7 @@ def evaluate_views(render, cams, *, masked: bool, scene_name: str, lpips_weights
             views.append(row)
             if save_dir is not None:
                 pair = torch.cat([img, cam.image], dim=1).cpu().numpy()
-                save_png(Path(save_dir) / f"{i:03d}_{cam.name}.png", pair)
+                save_image(Path(save_dir) / f"{i:03d}_{cam.name}.png", pair)
     mean = {"psnr": mean_or_none([v["psnr"] for v in views]), "ssim": mean_or_none([v["ssim"] for v in views])}
     result = {"mean": mean, "views": views, "masked": masked}
     if lp is not None:
@@ -119,9 +114,109 @@ def write_run_outputs(trainer, metrics: dict) -> None:
         save_origin_ply(out / "init_points.ply", geo.xyz, geo.rgb)
     trainer.save_checkpoint()
     save_config(trainer.cfg, out / "config.yaml")
+    write_metrics(out, metrics)
+
+
+def write_metrics(out: Path, metrics: dict) -> Path:
+    """``out``/metrics.json, through a temporary file and a rename (never half written)."""
     tmp = out / "metrics.json.tmp"
     tmp.write_text(json.dumps(metrics, indent=2))
-    tmp.replace(out / "metrics.json")
+    return tmp.replace(out / "metrics.json")
 
 
-__all__ = ["evaluate_views", "run_metrics", "save_png", "write_run_outputs"]
+# ----------------------------------------------------------------------------------------------------
+# the full method's outputs beside these: fly-through, charts, report
+
+
+def write_flythrough(trainer, path: Path, frames_per_segment: int = 24, order: str | None = None) -> Path | None:
+    """A GIF along the interpolated path through the inputs (the trajectories the pseudo views use;
+    ``order`` as ``trajectory.order``)."""
+    from PIL import Image
+
+    from warpgs.pseudo.trajectory import path_trajectories
+
+    cams = trainer.train_cams
+    if len(cams) < 2:
+        return None
+    V = np.stack([c.viewmat.detach().cpu().double().numpy() for c in cams])
+    cam0 = cams[0]
+    frames = []
+    with torch.no_grad():
+        for traj in path_trajectories(V, max(frames_per_segment, 2), order):
+            for vm in traj.viewmats:
+                v = torch.as_tensor(vm, dtype=torch.float32, device=trainer.device)
+                img = trainer.model.render(v, cam0.K, cam0.width, cam0.height, background=trainer.background).image
+                frames.append(Image.fromarray((img.clamp(0, 1).cpu().numpy() * 255 + 0.5).astype(np.uint8)))
+    path.parent.mkdir(parents=True, exist_ok=True)
+    frames[0].save(path, save_all=True, append_images=frames[1:], duration=80, loop=0)
+    return path
+
+
+def write_report(out: Path, metrics: dict, history: list[dict], baseline: dict | None = None) -> Path:
+    """report.md with PNG charts: test PSNR per cycle (baseline as a line) and time per stage."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    charts = out / "charts"
+    charts.mkdir(parents=True, exist_ok=True)
+    cyc = [h["cycle"] for h in history]
+    fig, ax = plt.subplots(figsize=(5, 3.2))
+    ax.plot(cyc, [h["psnr"] for h in history], "o-", label="full method")
+    if baseline is not None and baseline.get("psnr") is not None:
+        ax.axhline(baseline["psnr"], color="gray", ls="--", label=f"baseline ({baseline['iterations']} it)")
+    ax.set_xlabel("cycle (0 = before the first pseudo views)")
+    ax.set_ylabel("test PSNR (dB)")
+    ax.grid(alpha=0.3)
+    ax.legend()
+    fig.tight_layout()
+    fig.savefig(charts / "psnr_per_cycle.png", dpi=120)
+    plt.close(fig)
+
+    stages = [("train_s", "training"), ("pseudo_views_s", "pseudo views"), ("densify_s", "densification")]
+    fig, ax = plt.subplots(figsize=(5, 3.2))
+    bottom = np.zeros(len(history))
+    for key, label in stages:
+        vals = np.array([h.get(key, 0.0) or 0.0 for h in history])
+        ax.bar(cyc, vals, bottom=bottom, label=label)
+        bottom += vals
+    ax.set_xlabel("cycle")
+    ax.set_ylabel("wall time (s)")
+    ax.legend()
+    fig.tight_layout()
+    fig.savefig(charts / "time_per_stage.png", dpi=120)
+    plt.close(fig)
+
+    def f(v, fmt):
+        return "n/a" if v is None else format(v, fmt)
+
+    lines = [f"# {metrics['method']} on {metrics['scene']}", "",
+             f"{metrics['train_views']} training views, {metrics['test_views']} test views at "
+             f"{metrics['resolution'][0]}x{metrics['resolution'][1]}, {metrics['iterations']} iterations on "
+             f"{metrics['device']}.", "",
+             "| run | PSNR | SSIM | LPIPS | Gaussians | training time (s) |", "|---|---|---|---|---|---|"]
+    for name, m in (("baseline", baseline), ("full method", metrics)):
+        if m is not None:
+            lines.append(f"| {name} | {f(m['psnr'], '.2f')} | {f(m['ssim'], '.3f')} | {f(m.get('lpips'), '.3f')} | "
+                         f"{m['num_gaussians']} | {f(m['train_time_s'], '.1f')} |")
+    lines += ["", "## Per cycle", "", "| cycle | step | PSNR | SSIM | Gaussians | added | pseudo views (s) | "
+              "densification (s) | training (s) |", "|---|---|---|---|---|---|---|---|---|"]
+    for h in history:
+        lines.append(f"| {h['cycle']} | {h['step']} | {f(h['psnr'], '.2f')} | {f(h['ssim'], '.3f')} | "
+                     f"{h['num_gaussians']} | {h.get('added', '-')} | {f(h.get('pseudo_views_s'), '.1f')} | "
+                     f"{f(h.get('densify_s'), '.1f')} | {f(h.get('train_s'), '.1f')} |")
+    lines += ["", f"Pseudo-view loss: {metrics.get('pseudo_loss', 'n/a')}"
+              + (f" (LPIPS unavailable: {metrics['lpips_fallback_reason']})" if metrics.get("lpips_fallback_reason")
+                 else ""), "",
+              "![test PSNR per cycle](charts/psnr_per_cycle.png)", "", "![time per stage](charts/time_per_stage.png)",
+              "", "Outputs: `cycle_N/pseudo/` (pseudo views, guidance, uncertainty), `cycle_N/densified.ply` "
+              "(`python -m warpgs.viz` colours kept / added / removed), `point_cloud.ply`, `test/`, "
+              "`flythrough.gif`, `metrics.json`."]
+    path = out / "report.md"
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+__all__ = ["evaluate_views", "run_metrics", "write_flythrough", "write_metrics", "write_report",
+           "write_run_outputs"]

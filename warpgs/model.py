@@ -198,8 +198,7 @@ class GaussianModel(nn.Module):
     def load_ply(cls, path: str | Path, device=None) -> "GaussianModel":
         """Reads a 3D-GS PLY (the layout ``save_ply`` writes, and what 3D-GS / gsplat export)."""
         v = ply.read_vertices(path)
-        need = ["x", "y", "z", "f_dc_0", "f_dc_1", "f_dc_2", "opacity", "scale_0", "scale_1", "scale_2",
-                "rot_0", "rot_1", "rot_2", "rot_3"]
+        need = [k for k in ply.gaussian_fields(0) if k not in ("nx", "ny", "nz")]  # normals are not read
         missing = [k for k in need if k not in v]
         if missing:
             raise ValueError(f"{path}: not a 3D Gaussian Splatting PLY (missing properties {missing}); "

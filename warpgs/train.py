@@ -1,8 +1,18 @@
 """Training and evaluation of a 3D-GS model on a ``Scene``: the sparse-view baseline.
 
-    trainer = Trainer(cfg, scene, out_dir)       # initialises the model (or resumes: trainer.resume())
-    trainer.train()                               # progress bar with loss / PSNR, checkpoints, Ctrl-C
+    trainer = Trainer(cfg, scene, out_dir)       # initialises the model (trainer.load_checkpoint() resumes)
+    trainer.run()                                 # the method's phases: progress bar, checkpoints, Ctrl-C
     result = trainer.finish()                     # compaction, test metrics, renders, PLY, metrics.json
+
+One loop serves every method: a ``Method`` (below; the baseline's adds nothing, the paper's is
+``warpgs.pipelines.full.FullMethod``) adds loss terms, among them extra views, keeps its part of the
+training state, runs its phases and adds its records after training.
+
+The training state has one serialisation, ``Trainer.state_dict(parts)`` / ``load_state_dict``, in three
+parts: ``model`` (parameters, Adam's moments, densification statistics), ``progress`` (step, RNGs, view
+order) and ``history`` (times, losses, recoveries, curve). Checkpoints hold all three, the in-memory
+snapshot of a divergence rollback ``model`` and ``progress``, compact mode's search (warpgs/compact.py)
+``model``.
 
 One input view per iteration (3D-GS's shuffled order); loss = 0.8 L1 + 0.2 D-SSIM (+ a Pearson depth term
 when ``loss.depth_weight`` > 0 and the view has a depth prior); Adam with 3D-GS's learning rates and an
@@ -221,8 +231,60 @@ def _atomic_torch_save(obj, path: Path) -> None:
     os.replace(tmp, path)
 
 
+STATE_PARTS = ("model", "progress", "history")
+
+
+class Method:
+    """What a training method adds to the one loop of ``Trainer``; this base is the baseline, which adds
+    nothing. Hooks, each called by the trainer:
+
+    - ``attach(trainer)``: once, at the end of ``Trainer.__init__`` (the method keeps ``self.trainer``);
+    - ``loss_terms(out, cam, loss, parts)``: the training loss of a step from the inputs' ``loss``; extra
+      views are rendered and added here, and each term's value goes into ``parts``;
+    - ``extra_views()``: the views it trains on besides the inputs (compact mode's importance counts them);
+    - ``state_dict(parts)`` / ``load_state_dict(st)``: the method's share of ``Trainer.state_dict``;
+    - ``run()``: the phases of training (``Trainer.run``);
+    - ``finish(metrics, baseline)``: records and outputs after ``Trainer.finish``'s own."""
+
+    name = "baseline"
+
+    def attach(self, trainer) -> None:
+        self.trainer = trainer
+
+    def loss_terms(self, out, cam, loss: torch.Tensor, parts: dict) -> torch.Tensor:
+        return loss
+
+    def extra_views(self) -> list:
+        return []
+
+    def state_dict(self, parts=STATE_PARTS) -> dict:
+        return {}
+
+    def load_state_dict(self, st: dict) -> None:
+        pass
+
+    def run(self) -> None:
+        self.trainer.train()
+
+    def finish(self, metrics: dict, baseline: dict | None = None) -> dict:
+        return metrics
+
+
+def _upgrade_format_1(ck: dict, sh_degree_interval: int) -> dict:
+    """A checkpoint of format 1 (the same keys; the full method's under ``full``, no SH degree in use) as
+    ``Trainer.state_dict`` writes it."""
+    ck = dict(ck)
+    full = ck.pop("full", None)
+    ck["active_sh_degree"] = min(int(ck["step"]) // max(sh_degree_interval, 1), ck["max_sh_degree"])
+    ck["method"] = {"cycle": full} if full is not None else {}
+    if full is not None:
+        ck["phase"] = tuple(full["phase"])
+    return ck
+
+
 class Trainer:
-    def __init__(self, cfg: Config, scene, out_dir: str | Path | None = None, *, log=None):
+    def __init__(self, cfg: Config, scene, out_dir: str | Path | None = None, *, method: Method | None = None,
+                 log=None):
         self.cfg, self.scene = cfg, scene
         self.out = Path(out_dir) if out_dir is not None else None
         self.log = log or (lambda msg: print(msg, file=sys.stderr))
@@ -282,9 +344,15 @@ class Trainer:
         # that ``finish`` calls in order, after training and before the test metrics. They are attached by
         # whoever builds the trainer (warpgs.pipelines.sparse.make_trainer), so this module imports none of them.
         self.stages: list = []
+        self.method = method if method is not None else Method()
+        self.method.attach(self)
 
     # ------------------------------------------------------------------------------------------
     # training
+
+    def run(self) -> None:
+        """Trains (or resumes) to ``train.iterations`` steps, phase by phase as the method runs them."""
+        self.method.run()
 
     @property
     def total_steps(self) -> int:
@@ -320,7 +388,10 @@ class Trainer:
             dl = losses.pearson_depth_loss(out.depth, cam.depth)
             loss = loss + lc.depth_weight * dl
             parts["depth"] = dl
-        return loss, parts
+        # what the divergence guard judges: the inputs' loss, which the method's terms (extra views, priors
+        # that appear in a later phase) leave out
+        parts["inputs"] = loss
+        return self.method.loss_terms(out, cam, loss, parts), parts
 
     def with_training_background(self, cam, generator: torch.Generator):
         """(camera, background) for one training step: with ``train.random_background`` and an alpha
@@ -421,69 +492,88 @@ class Trainer:
             tensors += [v for v in st.values() if isinstance(v, torch.Tensor)]
         return not self.nonfinite_parameters() and _all_finite(tensors)
 
-    def model_state(self) -> dict:
-        """A CPU copy of what training changes besides the step and the RNGs: the parameters (and SH
-        degrees), Adam's moments, the densification statistics and what the method adds (``method_state``).
-        ``load_model_state`` puts it back: the state to return to of a divergence rollback and of compact
-        mode's search (warpgs/compact.py)."""
-        st = {
-            "params": _cpu_copy(dict(self.model.params)),
-            "max_sh_degree": self.model.max_sh_degree,
-            "active_sh_degree": self.model.active_sh_degree,
-            "optimizer": _cpu_copy(self.optimizer.state_dict()),
-            "strategy_state": _cpu_copy(self.state),
-        }
-        st.update(self.method_state())
+    # ------------------------------------------------------------------------------------------
+    # the training state: one serialisation for checkpoints, rollback snapshots and compact mode
+
+    def state_dict(self, parts=STATE_PARTS) -> dict:
+        """A CPU copy of the training state, in ``parts`` (module docstring):
+
+        - ``model``: the parameters (and SH degrees), Adam's moments, the densification statistics;
+        - ``progress``: the step, the RNGs, the view order, where the guard's statistic starts;
+        - ``history``: training time, losses, learning-rate scale, recoveries, curve, initial metrics,
+          the running learning-rate schedule;
+
+        and the method's share of each (``Method.state_dict``) under ``method``."""
+        st: dict = {"parts": list(parts)}
+        if "model" in parts:
+            st.update(params=_cpu_copy(dict(self.model.params)), max_sh_degree=self.model.max_sh_degree,
+                      active_sh_degree=self.model.active_sh_degree, optimizer=_cpu_copy(self.optimizer.state_dict()),
+                      strategy_state=_cpu_copy(self.state))
+        if "progress" in parts:
+            st.update(step=self.step, split_gen=self.split_gen.get_state(), drop_gen=self.drop_gen.get_state(),
+                      view_rng=copy.deepcopy(self.view_rng.bit_generator.state), order=list(self.order),
+                      torch_rng=torch.get_rng_state(), stat_start=self.guard.stat_start)
+        if "history" in parts:
+            st.update(train_time=self.train_time, losses=list(self.losses), lr_scale=self.lr_scale,
+                      recoveries=copy.deepcopy(self.recoveries), curve=copy.deepcopy(self.curve),
+                      initial=copy.deepcopy(self.initial), n_before_compaction=self.n_before_compaction,
+                      phase=(self.phase_start, self.phase_len))
+        st["method"] = self.method.state_dict(parts)
         return st
 
-    def method_state(self) -> dict:
-        """What a method adds to ``model_state`` (a rollback replays it); the baseline adds nothing."""
-        return {}
-
-    def load_method_state(self, st: dict) -> None:
-        """Puts back what ``method_state`` added to a ``model_state``."""
-
-    def load_model_state(self, st: dict) -> None:
-        """Puts back a ``model_state`` (copies of it: ``st`` stays usable); learning rates as saved in it."""
-        for k, v in st["params"].items():  # the model object stays (the strategy may hold it)
-            self.model.params[k] = torch.nn.Parameter(v.to(self.device, copy=True))
-        self.model.max_sh_degree, self.model.active_sh_degree = st["max_sh_degree"], st["active_sh_degree"]
-        self.optimizer = make_optimizer(self.model, self.cfg, self.scene_scale)
-        self.optimizer.load_state_dict(copy.deepcopy(st["optimizer"]))
-        self.state = {k: v.to(self.device, copy=True) for k, v in st["strategy_state"].items()}
-        self.load_method_state(st)
+    def load_state_dict(self, st: dict) -> None:
+        """Puts back the parts ``st`` holds (copies of them: ``st`` stays usable). The model object stays
+        (the strategy may hold it); with ``progress`` the learning rates are set for the restored step and
+        learning-rate scale, else they are as saved in the optimiser's state."""
+        parts = st.get("parts", STATE_PARTS)
+        if "model" in parts:
+            for k, v in st["params"].items():
+                self.model.params[k] = torch.nn.Parameter(v.to(self.device, copy=True))
+            self.model.max_sh_degree = st["max_sh_degree"]
+            self.model.active_sh_degree = st.get("active_sh_degree", self.model.max_sh_degree)
+            self.optimizer = make_optimizer(self.model, self.cfg, self.scene_scale)
+            self.optimizer.load_state_dict(copy.deepcopy(st["optimizer"]))
+            self.state = {k: v.to(self.device, copy=True) for k, v in st["strategy_state"].items()}
+        if "history" in parts:
+            self.train_time = float(st["train_time"])
+            self.losses = list(st["losses"])
+            self.lr_scale = float(st.get("lr_scale", 1.0))
+            self.recoveries = copy.deepcopy(st.get("recoveries", []))
+            self.curve = copy.deepcopy(st.get("curve", []))
+            self.initial = copy.deepcopy(st.get("initial"))
+            self.n_before_compaction = st.get("n_before_compaction")
+            if "phase" in st:
+                self.phase_start, self.phase_len = st["phase"]
+        if "progress" in parts:
+            self.step = int(st["step"])
+            self.split_gen.set_state(st["split_gen"])
+            if "drop_gen" in st:
+                self.drop_gen.set_state(st["drop_gen"])
+            self.view_rng.bit_generator.state = copy.deepcopy(st["view_rng"])
+            self.order = list(st["order"])
+            torch.set_rng_state(st["torch_rng"])
+            if "stat_start" in st:
+                self.guard.stat_start = st["stat_start"]
+            self.apply_lr_scale()
+        self.method.load_state_dict(st.get("method", {}))
 
     def take_snapshot(self, step: int | None = None) -> bool:
-        """Keeps the current state in memory (on the CPU) as the last good one, if it is all finite;
-        returns whether it did. The full method's pseudo-view order is kept too, so a rollback replays it."""
+        """Keeps the current ``model`` and ``progress`` in memory (on the CPU) as the last good state, if it
+        is all finite; returns whether it did."""
         if not self.state_is_finite():
             return False
-        self._snapshot = {
-            **self.model_state(),
-            "step": self.step if step is None else step,
-            "split_gen": self.split_gen.get_state(),
-            "drop_gen": self.drop_gen.get_state(),
-            "view_rng": copy.deepcopy(self.view_rng.bit_generator.state),
-            "order": list(self.order),
-            "torch_rng": torch.get_rng_state(),
-            "stat_start": self.guard.stat_start,
-        }
+        self._snapshot = self.state_dict(("model", "progress"))
+        if step is not None:
+            self._snapshot["step"] = step
         return True
 
     def restore_snapshot(self) -> int:
-        """Puts the last good state back (the learning-rate scale stays as it is now); returns its step."""
-        snap = self._snapshot
-        self.load_model_state(snap)
-        self.split_gen.set_state(snap["split_gen"])
-        self.drop_gen.set_state(snap["drop_gen"])
-        self.view_rng.bit_generator.state = copy.deepcopy(snap["view_rng"])
-        self.order = list(snap["order"])
-        torch.set_rng_state(snap["torch_rng"])
-        self.step = int(snap["step"])
-        self.apply_lr_scale()
+        """Puts the last good state back (the learning-rate scale stays as it is now; the losses and curve
+        after its step go); returns its step."""
+        self.load_state_dict(self._snapshot)
         del self.losses[self.step:]
         self.curve = [row for row in self.curve if row["step"] <= self.step]
-        self.guard.restart(snap["stat_start"])
+        self.guard.restart(self._snapshot["stat_start"])
         self.guard.healthy()
         return self.step
 
@@ -617,30 +707,6 @@ class Trainer:
     # ------------------------------------------------------------------------------------------
     # checkpoints
 
-    def checkpoint_state(self) -> dict:
-        return {
-            "format": 1,
-            "step": self.step,
-            "config": to_dict(self.cfg),
-            "scene": self.scene.name,
-            "params": {k: v.detach().cpu() for k, v in self.model.params.items()},
-            "max_sh_degree": self.model.max_sh_degree,
-            "optimizer": self.optimizer.state_dict(),
-            "strategy_state": {k: v.cpu() for k, v in self.state.items()},
-            "split_gen": self.split_gen.get_state(),
-            "drop_gen": self.drop_gen.get_state(),
-            "view_rng": self.view_rng.bit_generator.state,
-            "order": list(self.order),
-            "torch_rng": torch.get_rng_state(),
-            "train_time": self.train_time,
-            "losses": list(self.losses),
-            "lr_scale": self.lr_scale,
-            "recoveries": list(self.recoveries),
-            "curve": list(self.curve),
-            "initial": self.initial,
-            "n_before_compaction": self.n_before_compaction,
-        }
-
     def save_checkpoint(self, path: str | Path | None = None) -> Path | None:
         """Writes a checkpoint (atomically); returns its path, or None when there is no output folder or
         the state is not finite (a checkpoint is never written from a diverged state: the one on disk
@@ -655,7 +721,8 @@ class Trainer:
                      "(the checkpoint there, if any, is the last good one)")
             return None
         path.parent.mkdir(parents=True, exist_ok=True)
-        _atomic_torch_save(self.checkpoint_state(), path)
+        _atomic_torch_save({"format": 2, "config": to_dict(self.cfg), "scene": self.scene.name,
+                            "method_name": self.method.name, **self.state_dict()}, path)
         return path
 
     def load_checkpoint(self, path: str | Path | None = None) -> None:
@@ -667,28 +734,9 @@ class Trainer:
         for section in ("model", "optim", "loss", "strategy"):
             if to_dict(getattr(saved, section)) != to_dict(getattr(self.cfg, section)):
                 self.log(f"warpgs: note: the checkpoint's {section} config differs from this run's; using this run's")
-        p = ck["params"]
-        self.model = GaussianModel(p["means"], p["quats"], p["scales"], p["opacities"], p["sh0"], p["shN"],
-                                   max_sh_degree=ck["max_sh_degree"]).to(self.device)
-        self.optimizer = make_optimizer(self.model, self.cfg, self.scene_scale)
-        self.optimizer.load_state_dict(ck["optimizer"])
-        self.state = {k: v.to(self.device) for k, v in ck["strategy_state"].items()}
-        self.split_gen.set_state(ck["split_gen"])
-        if "drop_gen" in ck:
-            self.drop_gen.set_state(ck["drop_gen"])
-        self.view_rng.bit_generator.state = ck["view_rng"]
-        self.order = list(ck["order"])
-        torch.set_rng_state(ck["torch_rng"])
-        self.step = int(ck["step"])
-        self.model.active_sh_degree = min(self.step // max(self.cfg.train.sh_degree_interval, 1), self.model.max_sh_degree)
-        self.train_time = float(ck["train_time"])
-        self.losses = list(ck["losses"])
-        self.lr_scale = float(ck.get("lr_scale", 1.0))
-        self.recoveries = list(ck.get("recoveries", []))
-        self.apply_lr_scale()
-        self.curve = list(ck.get("curve", []))
-        self.initial = ck.get("initial")
-        self.n_before_compaction = ck.get("n_before_compaction")
+        if ck.get("format", 1) == 1:
+            ck = _upgrade_format_1(ck, self.cfg.train.sh_degree_interval)
+        self.load_state_dict(ck)
 
     # ------------------------------------------------------------------------------------------
     # evaluation and outputs
@@ -712,8 +760,9 @@ class Trainer:
     def export_ply(self, path: str | Path | None = None) -> Path:
         return self.model.save_ply(Path(path) if path is not None else self.out / "point_cloud.ply")
 
-    def finish(self) -> dict:
-        """After training: compaction, test metrics and renders, FPS, PLY, final checkpoint, metrics.json."""
+    def finish(self, baseline: dict | None = None) -> dict:
+        """After training: compaction, test metrics and renders, FPS, PLY, final checkpoint, metrics.json,
+        then the method's records and outputs (``baseline``: the baseline run's metrics, for its report)."""
         out = self.out
         if self.cfg.train.compact:
             removed = self.compact()
@@ -728,7 +777,7 @@ class Trainer:
         metrics = run_metrics(self, ev, train_ev, fps)
         if out is not None:
             write_run_outputs(self, metrics)
-        return metrics
+        return self.method.finish(metrics, baseline)
 
 
 def load_trained(path: str | Path, device="cpu") -> GaussianModel:

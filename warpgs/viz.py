@@ -33,6 +33,17 @@ import numpy as np
 
 from warpgs.ply import write_vertices
 
+def save_image(path: str | Path, image) -> Path:
+    """Saves [H, W, 3] or [H, W] values in [0, 1] (numpy or torch) as an 8-bit PNG; NaN is written as 0."""
+    from PIL import Image
+
+    a = image.detach().float().cpu().numpy() if hasattr(image, "detach") else np.asarray(image, np.float32)
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    Image.fromarray((np.clip(np.nan_to_num(a), 0.0, 1.0) * 255.0 + 0.5).astype(np.uint8)).save(path)
+    return path
+
+
 ORIGIN_KEPT = 0  # an existing Gaussian centre      (values of the PLY's 'origin' property)
 ORIGIN_ADDED = 1  # a new Gaussian from the stereo cloud
 ORIGIN_REMOVED = 2  # a stereo point dropped as an outlier

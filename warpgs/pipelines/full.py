@@ -1,10 +1,12 @@
-"""The generation-guided method (the paper's loop) on top of the baseline trainer.
+"""The generation-guided method (the paper's loop) as a ``Method`` of the one training loop
+(``warpgs.train``): ``Trainer(cfg, scene, out, method=FullMethod())``.
 
     baseline phase (inputs only)
     for each cycle:
         pseudo views along trajectories between neighbouring inputs   (warpgs.pseudo)
         densification from them: stereo -> outlier removal -> radius-gated insertion   (warpgs.densify)
-        training on one input and one pseudo view per iteration, learning-rate schedule restarted
+        training on one input and one pseudo view per iteration (full.restart_lr: the learning-rate
+        schedule restarts, as in the paper)
 
 Losses: inputs w1 L1 + w2 D-SSIM (+ w3 Pearson depth when a prior exists, as in the baseline); pseudo
 views w4 LPIPS + w5 D-SSIM + w6 Pearson depth (against the plane-sweep depth of the views the stereo
@@ -20,7 +22,6 @@ from __future__ import annotations
 
 import copy
 import dataclasses
-import json
 import math
 import time
 from dataclasses import asdict
@@ -31,7 +32,7 @@ import torch
 from warpgs import losses
 from warpgs.config import FullConfig
 from warpgs.model import rgb_to_sh
-from warpgs.train import CHECKPOINT, Trainer
+from warpgs.train import STATE_PARTS, Method, Trainer
 
 ABLATIONS = {
     # name: what it switches, as a config layer -- the paper's Table 4
@@ -90,14 +91,18 @@ def append_gaussians(trainer: Trainer, means, colors, scales, opacity: float) ->
     return n
 
 
-class GenerativeTrainer(Trainer):
-    """The baseline trainer plus pseudo views: one input and one pseudo view per iteration."""
+class FullMethod(Method):
+    """The paper's loop as a ``Method`` of the one training loop: a baseline phase, then per cycle pseudo
+    views and densification from them, and training on one input and one pseudo view per iteration."""
 
-    def __init__(self, cfg, scene, out_dir=None, *, log=None):
-        super().__init__(cfg, scene, out_dir, log=log)
+    name = "full"
+
+    def attach(self, trainer) -> None:
+        super().attach(trainer)
+        cfg = trainer.cfg
         self.settings = check_settings(cfg.full)
         if self.settings.drop_rate is not None:
-            self.drop_rate = self.settings.drop_rate
+            trainer.drop_rate = self.settings.drop_rate
         self.pseudo_cams: list = []
         self.pseudo_order: list[int] = []
         self.pseudo_rng = np.random.default_rng(cfg.train.seed + 3)
@@ -108,11 +113,11 @@ class GenerativeTrainer(Trainer):
         self._lpips = None
         if self.settings.pseudo_loss == "lpips" and self.settings.lpips_weight > 0:
             try:
-                self._lpips = losses.LPIPS(cfg.eval.lpips_weights).to(self.device)
+                self._lpips = losses.LPIPS(cfg.eval.lpips_weights).to(trainer.device)
             except Exception as e:  # LPIPSUnavailable or a broken install
                 self.lpips_missing = losses.one_line(e)
-                self.log("warpgs: LPIPS weights are not available, so pseudo views are trained with L1 in place of "
-                         f"LPIPS (the paper's 'L1 instead of LPIPS' ablation). Reason: {self.lpips_missing}")
+                trainer.log("warpgs: LPIPS weights are not available, so pseudo views are trained with L1 in place of "
+                            f"LPIPS (the paper's 'L1 instead of LPIPS' ablation). Reason: {self.lpips_missing}")
 
     @property
     def pseudo_loss_used(self) -> str:
@@ -143,12 +148,11 @@ class GenerativeTrainer(Trainer):
                 loss = loss + s.depth_weight * losses.pearson_depth_loss(out.depth, cam.depth, valid)
         return loss
 
-    def compute_loss(self, out, cam):
-        loss, parts = super().compute_loss(out, cam)
-        # what the divergence guard judges (warpgs/train.py): the inputs' photometric loss, the same before and
-        # after a cycle starts. The depth prior below appears with the first cycle's stereo, and its Pearson
-        # term (about 1 at first) made the input loss jump 30x there and stopped a run (castle_p30, 3 views)
-        parts["inputs"] = loss
+    def loss_terms(self, out, cam, loss, parts):
+        """The inputs' depth prior (from the cycles' stereo) and one pseudo view. The divergence guard judges
+        ``parts["inputs"]`` without them: the prior appears with the first cycle, and its Pearson term (about 1
+        at first) made the input loss jump 30x there and stopped a run."""
+        tr = self.trainer
         prior = self.input_depths.get(cam.name)
         if prior is not None and self.settings.input_depth_weight > 0:
             valid = prior > 0
@@ -158,19 +162,23 @@ class GenerativeTrainer(Trainer):
                 parts["input_depth"] = dl
         if self.pseudo_cams and self.settings.pseudo_weight > 0:
             pc = self.pseudo_cams[self.next_pseudo()]
-            po = self.model.render(pc.viewmat, pc.K, pc.width, pc.height, background=self.background,
-                                   opacity_scale=self.dropout_scale(self.step))
+            po = tr.model.render(pc.viewmat, pc.K, pc.width, pc.height, background=tr.background,
+                                 opacity_scale=tr.dropout_scale(tr.step))
             pl = self.pseudo_loss(po, pc)
             loss = loss + self.settings.pseudo_weight * pl
             parts["pseudo"] = pl
-        return loss, parts
+        return loss
+
+    def extra_views(self) -> list:
+        """This cycle's pseudo views."""
+        return self.pseudo_cams
 
     # ------------------------------------------------------------------------------------------
     # one cycle's pseudo views and densification
 
     def pseudo_config(self):
         """``cfg.pseudo``, unguided for the render-guidance ablation."""
-        pcfg = copy.deepcopy(self.cfg.pseudo)
+        pcfg = copy.deepcopy(self.trainer.cfg.pseudo)
         if self.settings.guidance == "render":
             pcfg.sampler.guided = False
         return pcfg
@@ -179,17 +187,17 @@ class GenerativeTrainer(Trainer):
         """Generates this cycle's pseudo views and densifies from them; returns stage times (s)."""
         from warpgs.pseudo.views import generate_pseudo_views, model_renderer, save_sequence
 
+        tr = self.trainer
         times = {}
         t0 = time.perf_counter()
         pcfg = self.pseudo_config()
-        seqs = generate_pseudo_views(model_renderer(self.model, self.background), self.train_cams, pcfg,
-                                     device=self.device)
+        seqs = generate_pseudo_views(model_renderer(tr.model, tr.background), tr.train_cams, pcfg, device=tr.device)
         times["pseudo_views_s"] = time.perf_counter() - t0
         cams = []
         limit = pcfg.sampler.delta if self.settings.pseudo_mask == "reliable" else 1.0
         for seq in seqs:
             cams += seq.pseudo_cameras(prefix=f"c{cycle}_{seq.start}_{seq.end}", max_uncertainty=limit)
-        cycle_dir = self.out / f"cycle_{cycle}" if self.out is not None else None
+        cycle_dir = tr.out / f"cycle_{cycle}" if tr.out is not None else None
         if cycle_dir is not None:
             for seq in seqs:
                 save_sequence(seq, cycle_dir / "pseudo")
@@ -200,38 +208,39 @@ class GenerativeTrainer(Trainer):
         times["densify_s"] = time.perf_counter() - t0
         self.pseudo_cams = cams
         self.pseudo_order = []
-        self.log(f"warpgs: cycle {cycle}: {len(cams)} pseudo views ({times['pseudo_views_s']:.1f} s), "
-                 f"{added} Gaussians added by densification ({times['densify_s']:.1f} s), {len(self.model)} in all")
+        tr.log(f"warpgs: cycle {cycle}: {len(cams)} pseudo views ({times['pseudo_views_s']:.1f} s), "
+               f"{added} Gaussians added by densification ({times['densify_s']:.1f} s), {len(tr.model)} in all")
         times["added"] = added
         return times
 
     def apply_growth_budget(self) -> None:
         """With ``growth_budget``: the cycles grow the model to at most that x the Gaussians the baseline
         phase ended with (or what it has now, if more)."""
+        tr = self.trainer
         if self.settings.growth_budget > 0 and self.history:
             cap = int(self.settings.growth_budget * self.history[0]["num_gaussians"])
-            if self.cfg.strategy.max_gaussians > 0:  # within strategy.max_gaussians, too
-                cap = min(cap, self.cfg.strategy.max_gaussians)
-            self.strategy = dataclasses.replace(self.strategy, max_gaussians=max(cap, len(self.model)))
+            if tr.cfg.strategy.max_gaussians > 0:  # within strategy.max_gaussians, too
+                cap = min(cap, tr.cfg.strategy.max_gaussians)
+            tr.strategy = dataclasses.replace(tr.strategy, max_gaussians=max(cap, len(tr.model)))
 
     def densify(self, cams, cycle_dir: Path | None) -> int:
         from warpgs.densify import densify_gaussians, neighbour_views, select_views
         from warpgs.viz import save_origin_ply
 
+        tr = self.trainer
         s = self.settings
-        dcfg = copy.deepcopy(self.cfg.densify)
+        dcfg = copy.deepcopy(tr.cfg.densify)
         if not s.point_filter:
             dcfg.filter.std_ratio = float("inf")  # keeps every point: the 'no point filtering' ablation
         # the inputs take part as stereo references and sources (real multi-view evidence); the pseudo
         # views with the lowest covisibility to them and to each other are the other references.
         # stereo_sources 'inputs': every reference is matched against the inputs only. A pseudo view that
         # was filled from the current model's render carries the model's depth, so matching against
-        # pseudo views reconstructs that depth, wrong where the model is (synthetic room: median depth
-        # error 19% against 0.8% with the inputs as the only sources).
-        views = list(self.train_cams) + list(cams)
-        n_in = len(self.train_cams)
+        # pseudo views reconstructs that depth, wrong where the model is.
+        views = list(tr.train_cams) + list(cams)
+        n_in = len(tr.train_cams)
         if s.stereo_sources == "inputs" and n_in < 2:
-            self.log("warpgs: densification skipped: stereo against the inputs needs at least 2 input views")
+            tr.log("warpgs: densification skipped: stereo against the inputs needs at least 2 input views")
             return 0
         images = torch.stack([c.image for c in views]).float()
         viewmats = torch.stack([c.viewmat for c in views]).float()
@@ -243,75 +252,130 @@ class GenerativeTrainer(Trainer):
         refs = list(range(n_in)) + [int(i) for i in select_views(
             viewmats, dcfg.select.views, fixed=list(range(n_in)), translation_scale=dcfg.select.translation_scale,
             rotation_weight=dcfg.select.rotation_weight)]
-        dens = densify_gaussians(self.model.means.detach(), images, Ks, viewmats, depth_range=self.scene.bounds,
+        dens = densify_gaussians(tr.model.means.detach(), images, Ks, viewmats, depth_range=tr.scene.bounds,
                                  config=dcfg, references=refs, neighbours=neighbours)
         # the plane-sweep depth of the references, where confident, is their depth prior (w3 / w6)
         for v, ref in enumerate(dens.references):
             depth = torch.where(dens.stereo.mask[v], dens.stereo.depth[v], torch.zeros_like(dens.stereo.depth[v]))
             if ref < n_in:
-                self.input_depths[views[ref].name] = depth.to(self.device)
+                self.input_depths[views[ref].name] = depth.to(tr.device)
             else:
-                views[ref].depth = depth.to(self.device)
+                views[ref].depth = depth.to(tr.device)
         ins = dens.insertion
         keep = slice(None) if not s.max_new or len(ins.means) <= s.max_new else slice(0, s.max_new)
         if cycle_dir is not None:
             with torch.no_grad():
                 from warpgs.model import sh_to_rgb
 
-                colors = sh_to_rgb(self.model.params["sh0"][:, 0]).clamp(0, 1)
-            pts, cols, origin = dens.origin_cloud(self.model.means.detach(), colors)
+                colors = sh_to_rgb(tr.model.params["sh0"][:, 0]).clamp(0, 1)
+            pts, cols, origin = dens.origin_cloud(tr.model.means.detach(), colors)
             save_origin_ply(cycle_dir / "densified.ply", pts, cols, origin)
-        return append_gaussians(self, ins.means[keep], ins.colors[keep], ins.scales[keep], s.init_opacity)
+        return append_gaussians(tr, ins.means[keep], ins.colors[keep], ins.scales[keep], s.init_opacity)
 
     # ------------------------------------------------------------------------------------------
-    # checkpoints: the baseline state plus the cycle and its pseudo views
+    # the method's share of the training state
 
-    def method_state(self) -> dict:
-        """The pseudo-view order and its generator: a rollback replays the same pseudo views."""
-        return {"pseudo": (copy.deepcopy(self.pseudo_rng.bit_generator.state), list(self.pseudo_order))}
+    def state_dict(self, parts=STATE_PARTS) -> dict:
+        """``model``: the pseudo-view order and its generator (a rollback replays the same pseudo views);
+        ``history``: the cycle reached, its pseudo views and input depth priors, the per-cycle records."""
+        st = {}
+        if "model" in parts:
+            st["pseudo"] = (copy.deepcopy(self.pseudo_rng.bit_generator.state), list(self.pseudo_order))
+        if "history" in parts:
+            st["cycle"] = {
+                "settings": asdict(self.settings),
+                "cycles_done": self.cycles_done,
+                "history": copy.deepcopy(self.history),
+                "input_depths": {k: v.cpu() for k, v in self.input_depths.items()},
+                "pseudo_cams": [{"name": c.name, "viewmat": c.viewmat.cpu(), "K": c.K.cpu(), "width": c.width,
+                                 "height": c.height, "image": c.image.cpu(),
+                                 "mask": None if c.mask is None else c.mask.cpu(),
+                                 "depth": None if c.depth is None else c.depth.cpu()} for c in self.pseudo_cams],
+            }
+        return st
 
-    def load_method_state(self, st: dict) -> None:
+    def load_state_dict(self, st: dict) -> None:
+        from warpgs.data.scene import CameraTensors
+
         if "pseudo" in st:
             self.pseudo_rng.bit_generator.state = copy.deepcopy(st["pseudo"][0])
             self.pseudo_order = list(st["pseudo"][1])
-
-    def checkpoint_state(self) -> dict:
-        st = super().checkpoint_state()
-        st["full"] = {
-            "settings": asdict(self.settings),
-            "cycles_done": self.cycles_done,
-            "phase": (self.phase_start, self.phase_len),
-            "history": self.history,
-            "pseudo_rng": self.pseudo_rng.bit_generator.state,
-            "pseudo_order": list(self.pseudo_order),
-            "input_depths": {k: v.cpu() for k, v in self.input_depths.items()},
-            "pseudo_cams": [{"name": c.name, "viewmat": c.viewmat.cpu(), "K": c.K.cpu(), "width": c.width,
-                             "height": c.height, "image": c.image.cpu(),
-                             "mask": None if c.mask is None else c.mask.cpu(),
-                             "depth": None if c.depth is None else c.depth.cpu()} for c in self.pseudo_cams],
-        }
-        return st
-
-    def load_checkpoint(self, path=None) -> None:
-        super().load_checkpoint(path)
-        from warpgs.data.scene import CameraTensors
-
-        path = Path(path) if path is not None else self.out / CHECKPOINT
-        ck = torch.load(path, map_location="cpu", weights_only=False).get("full")
+        ck = st.get("cycle")
         if ck is None:
             return
         self.cycles_done = int(ck["cycles_done"])
-        self.phase_start, self.phase_len = ck["phase"]
-        self.history = list(ck["history"])
-        self.pseudo_rng.bit_generator.state = ck["pseudo_rng"]
-        self.pseudo_order = list(ck["pseudo_order"])
-        dev = self.device
+        self.history = copy.deepcopy(ck["history"])
+        if "pseudo_rng" in ck:  # format-1 checkpoints keep the generator here
+            self.pseudo_rng.bit_generator.state = ck["pseudo_rng"]
+            self.pseudo_order = list(ck["pseudo_order"])
+        dev = self.trainer.device
         self.input_depths = {k: v.to(dev) for k, v in ck.get("input_depths", {}).items()}
         self.pseudo_cams = [CameraTensors(name=c["name"], viewmat=c["viewmat"].to(dev), K=c["K"].to(dev),
                                           width=c["width"], height=c["height"], image=c["image"].to(dev),
                                           mask=None if c["mask"] is None else c["mask"].to(dev),
                                           depth=None if c["depth"] is None else c["depth"].to(dev))
                             for c in ck["pseudo_cams"]]
+
+    # ------------------------------------------------------------------------------------------
+    # the phases, and what the method adds after training
+
+    def run(self) -> None:
+        """Runs (or resumes) the whole loop up to ``train.iterations`` steps."""
+        tr, s = self.trainer, self.settings
+        bounds = phase_boundaries(tr.total_steps, s)
+        if tr.phase_len is None:
+            tr.phase_start, tr.phase_len = 0, bounds[0] if s.restart_lr else tr.total_steps
+        tr.train(bounds[0])
+        if not self.history:  # the baseline phase, as cycle 0 of the PSNR-per-cycle chart
+            self.history.append(self.record(0, {}))
+        for c in range(self.cycles_done, s.cycles):
+            start, end = bounds[c], bounds[c + 1]
+            if tr.step <= start:  # this cycle's pseudo views are not made yet
+                times = self.update_pseudo_views(c + 1)
+                if s.restart_lr:  # the means' learning-rate schedule restarts (the paper)
+                    tr.phase_start, tr.phase_len = start, end - start
+                tr.save_checkpoint()
+            else:
+                times = {}
+            self.apply_growth_budget()  # every cycle, a resumed one too (the strategy's budget is not checkpointed)
+            t0 = time.perf_counter()
+            tr.train(end)
+            times["train_s"] = time.perf_counter() - t0
+            self.history.append(self.record(c + 1, times))
+            self.cycles_done = c + 1
+            tr.save_checkpoint()
+        if tr.step < tr.total_steps:  # a resumed run given more iterations: continue the last phase
+            tr.train(tr.total_steps)
+
+    def record(self, cycle: int, times: dict) -> dict:
+        """One row of the per-cycle history: test PSNR/SSIM now, Gaussians, stage times."""
+        tr = self.trainer
+        ev = tr.evaluate(lpips=False)["mean"] if tr.test_cams else {}
+        row = {"cycle": cycle, "step": tr.step, "psnr": ev.get("psnr"), "ssim": ev.get("ssim"),
+               "num_gaussians": len(tr.model)}
+        if cycle == 0:
+            row["train_s"] = round(tr.train_time, 2)
+        row.update({k: round(v, 2) if isinstance(v, float) else v for k, v in times.items()})
+        return row
+
+    def finish(self, metrics: dict, baseline: dict | None = None) -> dict:
+        """The method's records in metrics.json, the fly-through and the report."""
+        from warpgs.evaluation import write_flythrough, write_metrics, write_report
+
+        tr = self.trainer
+        metrics["full"] = asdict(self.settings)
+        metrics["cycles"] = self.history
+        metrics["pseudo_loss"] = self.pseudo_loss_used
+        if self.lpips_missing:
+            metrics["lpips_fallback_reason"] = self.lpips_missing
+        if tr.out is not None:
+            # the method's records go into metrics.json before the slower fly-through and report, so a run
+            # stopped while those are written keeps them
+            write_metrics(tr.out, metrics)
+            write_flythrough(tr, tr.out / "flythrough.gif", self.settings.flythrough_frames,
+                             self.pseudo_config().trajectory.order)
+            write_report(tr.out, metrics, self.history, baseline)
+        return metrics
 
 
 def phase_boundaries(total: int, settings: FullConfig) -> list[int]:
@@ -321,151 +385,3 @@ def phase_boundaries(total: int, settings: FullConfig) -> list[int]:
     first = int(round(total * settings.baseline_fraction))
     per = (total - first) / settings.cycles
     return [first] + [int(round(first + per * (c + 1))) for c in range(settings.cycles)]
-
-
-def train_full(trainer: GenerativeTrainer) -> None:
-    """Runs (or resumes) the whole loop up to ``train.iterations`` steps."""
-    s = trainer.settings
-    bounds = phase_boundaries(trainer.total_steps, s)
-    if trainer.phase_len is None:
-        trainer.phase_start, trainer.phase_len = 0, bounds[0] if s.restart_lr else trainer.total_steps
-    trainer.train(bounds[0])
-    if not trainer.history:  # the baseline phase, as cycle 0 of the PSNR-per-cycle chart
-        ev = trainer.evaluate(lpips=False)["mean"] if trainer.test_cams else {}
-        trainer.history.append({"cycle": 0, "step": trainer.step, "psnr": ev.get("psnr"), "ssim": ev.get("ssim"),
-                                "num_gaussians": len(trainer.model), "train_s": round(trainer.train_time, 2)})
-    for c in range(trainer.cycles_done, s.cycles):
-        start, end = bounds[c], bounds[c + 1]
-        if trainer.step <= start:  # this cycle's pseudo views are not made yet
-            times = trainer.update_pseudo_views(c + 1)
-            if s.restart_lr:  # the means' learning-rate schedule restarts (the paper)
-                trainer.phase_start, trainer.phase_len = start, end - start
-            trainer.save_checkpoint()
-        else:
-            times = {}
-        trainer.apply_growth_budget()  # every cycle, a resumed one too (the strategy's budget is not checkpointed)
-        t0 = time.perf_counter()
-        trainer.train(end)
-        times["train_s"] = time.perf_counter() - t0
-        ev = trainer.evaluate(lpips=False)["mean"] if trainer.test_cams else {}
-        trainer.history.append({"cycle": c + 1, "step": trainer.step, "psnr": ev.get("psnr"), "ssim": ev.get("ssim"),
-                                "num_gaussians": len(trainer.model), **{k: round(v, 2) if isinstance(v, float) else v
-                                                                         for k, v in times.items()}})
-        trainer.cycles_done = c + 1
-        trainer.save_checkpoint()
-    if trainer.step < trainer.total_steps:  # a resumed run given more iterations: continue the last phase
-        trainer.train(trainer.total_steps)
-
-
-# ----------------------------------------------------------------------------------------------------
-# outputs beside the baseline's: fly-through, charts, report
-
-
-def write_flythrough(trainer: Trainer, path: Path, frames_per_segment: int = 24, order: str | None = None) -> Path | None:
-    """A GIF along the interpolated path through the inputs (the trajectories the pseudo views use;
-    ``order`` as ``trajectory.order``)."""
-    from PIL import Image
-
-    from warpgs.pseudo.trajectory import path_trajectories
-
-    cams = trainer.train_cams
-    if len(cams) < 2:
-        return None
-    V = np.stack([c.viewmat.detach().cpu().double().numpy() for c in cams])
-    cam0 = cams[0]
-    frames = []
-    with torch.no_grad():
-        for traj in path_trajectories(V, max(frames_per_segment, 2), order):
-            for vm in traj.viewmats:
-                v = torch.as_tensor(vm, dtype=torch.float32, device=trainer.device)
-                img = trainer.model.render(v, cam0.K, cam0.width, cam0.height, background=trainer.background).image
-                frames.append(Image.fromarray((img.clamp(0, 1).cpu().numpy() * 255 + 0.5).astype(np.uint8)))
-    path.parent.mkdir(parents=True, exist_ok=True)
-    frames[0].save(path, save_all=True, append_images=frames[1:], duration=80, loop=0)
-    return path
-
-
-def write_report(out: Path, metrics: dict, history: list[dict], baseline: dict | None = None) -> Path:
-    """report.md with PNG charts: test PSNR per cycle (baseline as a line) and time per stage."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    charts = out / "charts"
-    charts.mkdir(parents=True, exist_ok=True)
-    cyc = [h["cycle"] for h in history]
-    fig, ax = plt.subplots(figsize=(5, 3.2))
-    ax.plot(cyc, [h["psnr"] for h in history], "o-", label="full method")
-    if baseline is not None and baseline.get("psnr") is not None:
-        ax.axhline(baseline["psnr"], color="gray", ls="--", label=f"baseline ({baseline['iterations']} it)")
-    ax.set_xlabel("cycle (0 = before the first pseudo views)")
-    ax.set_ylabel("test PSNR (dB)")
-    ax.grid(alpha=0.3)
-    ax.legend()
-    fig.tight_layout()
-    fig.savefig(charts / "psnr_per_cycle.png", dpi=120)
-    plt.close(fig)
-
-    stages = [("train_s", "training"), ("pseudo_views_s", "pseudo views"), ("densify_s", "densification")]
-    fig, ax = plt.subplots(figsize=(5, 3.2))
-    bottom = np.zeros(len(history))
-    for key, label in stages:
-        vals = np.array([h.get(key, 0.0) or 0.0 for h in history])
-        ax.bar(cyc, vals, bottom=bottom, label=label)
-        bottom += vals
-    ax.set_xlabel("cycle")
-    ax.set_ylabel("wall time (s)")
-    ax.legend()
-    fig.tight_layout()
-    fig.savefig(charts / "time_per_stage.png", dpi=120)
-    plt.close(fig)
-
-    def f(v, fmt):
-        return "n/a" if v is None else format(v, fmt)
-
-    lines = [f"# {metrics['method']} on {metrics['scene']}", "",
-             f"{metrics['train_views']} training views, {metrics['test_views']} test views at "
-             f"{metrics['resolution'][0]}x{metrics['resolution'][1]}, {metrics['iterations']} iterations on "
-             f"{metrics['device']}.", "",
-             "| run | PSNR | SSIM | LPIPS | Gaussians | training time (s) |", "|---|---|---|---|---|---|"]
-    for name, m in (("baseline", baseline), ("full method", metrics)):
-        if m is not None:
-            lines.append(f"| {name} | {f(m['psnr'], '.2f')} | {f(m['ssim'], '.3f')} | {f(m.get('lpips'), '.3f')} | "
-                         f"{m['num_gaussians']} | {f(m['train_time_s'], '.1f')} |")
-    lines += ["", "## Per cycle", "", "| cycle | step | PSNR | SSIM | Gaussians | added | pseudo views (s) | "
-              "densification (s) | training (s) |", "|---|---|---|---|---|---|---|---|---|"]
-    for h in history:
-        lines.append(f"| {h['cycle']} | {h['step']} | {f(h['psnr'], '.2f')} | {f(h['ssim'], '.3f')} | "
-                     f"{h['num_gaussians']} | {h.get('added', '-')} | {f(h.get('pseudo_views_s'), '.1f')} | "
-                     f"{f(h.get('densify_s'), '.1f')} | {f(h.get('train_s'), '.1f')} |")
-    lines += ["", f"Pseudo-view loss: {metrics.get('pseudo_loss', 'n/a')}"
-              + (f" (LPIPS unavailable: {metrics['lpips_fallback_reason']})" if metrics.get("lpips_fallback_reason")
-                 else ""), "",
-              "![test PSNR per cycle](charts/psnr_per_cycle.png)", "", "![time per stage](charts/time_per_stage.png)",
-              "", "Outputs: `cycle_N/pseudo/` (pseudo views, guidance, uncertainty), `cycle_N/densified.ply` "
-              "(`python -m warpgs.viz` colours kept / added / removed), `point_cloud.ply`, `test/`, "
-              "`flythrough.gif`, `metrics.json`."]
-    path = out / "report.md"
-    path.write_text("\n".join(lines) + "\n")
-    return path
-
-
-def finish_full(trainer: GenerativeTrainer, baseline: dict | None = None) -> dict:
-    """``Trainer.finish`` plus the method's own records, the fly-through and the report."""
-    metrics = trainer.finish()
-    metrics["full"] = asdict(trainer.settings)
-    metrics["cycles"] = trainer.history
-    metrics["pseudo_loss"] = trainer.pseudo_loss_used
-    if trainer.lpips_missing:
-        metrics["lpips_fallback_reason"] = trainer.lpips_missing
-    if trainer.out is not None:
-        # the method's records go into metrics.json before the slower fly-through and report, so a run
-        # stopped while those are written keeps them
-        tmp = trainer.out / "metrics.json.tmp"
-        tmp.write_text(json.dumps(metrics, indent=2))
-        tmp.replace(trainer.out / "metrics.json")
-        write_flythrough(trainer, trainer.out / "flythrough.gif", trainer.settings.flythrough_frames,
-                         trainer.pseudo_config().trajectory.order)
-        write_report(trainer.out, metrics, trainer.history, baseline)
-    return metrics

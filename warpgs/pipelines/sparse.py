@@ -173,13 +173,23 @@ def print_metrics(m: dict, out: Path) -> None:
     print(f"  wrote {out / 'metrics.json'}, {out / 'point_cloud.ply'}, {out / 'test'}/")
 
 
+def training_methods() -> dict:
+    """The training methods by name: each a ``warpgs.train.Method`` class."""
+    from warpgs.pipelines.full import FullMethod
+    from warpgs.train import Method
+
+    return {"baseline": Method, "full": FullMethod}
+
+
 def make_trainer(cfg, scene, out: Path | None = None, **kwargs):
     """The trainer of ``cfg.method`` with the stages its config asks for (compact mode)."""
     from warpgs.compact import attach
-    from warpgs.pipelines.full import GenerativeTrainer
     from warpgs.train import Trainer
 
-    trainer = (GenerativeTrainer if cfg.method == "full" else Trainer)(cfg, scene, out, **kwargs)
+    methods = training_methods()
+    if cfg.method not in methods:
+        raise ValueError(f"method={cfg.method!r}: the training methods are {', '.join(methods)}")
+    trainer = Trainer(cfg, scene, out, method=methods[cfg.method](), **kwargs)
     attach(trainer)
     return trainer
 
@@ -197,7 +207,6 @@ def run_method(method: str, cfg, scene, out: Path, resume: bool, baseline_metric
                resume_hint: str | None = None) -> dict:
     """Trains one method into ``out``; returns its metrics (``stopped_early`` set when it diverged and the
     last good state's were written). Raises ``RunStopped`` when it ends without them."""
-    from warpgs.pipelines.full import finish_full, train_full
     from warpgs.train import TrainingDiverged, TrainingInterrupted
 
     cfg = copy.deepcopy(cfg)
@@ -217,7 +226,7 @@ def run_method(method: str, cfg, scene, out: Path, resume: bool, baseline_metric
     save_config(cfg, out / "config.yaml")
     resume_hint = resume_hint or f"--resume {out}"
     try:
-        train_full(trainer) if method == "full" else trainer.train()
+        trainer.run()
     except TrainingInterrupted as e:
         print(f"\nwarpgs: stopped at step {e.step}; checkpoint {e.checkpoint}. Continue with:\n"
               f"  python -m warpgs.pipelines.sparse {resume_hint}", file=sys.stderr)
@@ -229,7 +238,7 @@ def run_method(method: str, cfg, scene, out: Path, resume: bool, baseline_metric
         # the model is at its last good state: its metrics, renders and PLY are written all the same
         print("\n" + diverged_message(method, e, out), file=sys.stderr)
         trainer.stopped_early = {"reason": "diverged", "step": e.step, "cause": e.cause}
-    metrics = finish_full(trainer, baseline_metrics) if method == "full" else trainer.finish()
+    metrics = trainer.finish(baseline_metrics)
     print_metrics(metrics, out)
     return metrics
 
@@ -339,7 +348,7 @@ def compare_parallel(cfg, scene, out: Path, resume: bool, hint: str):
     --resume continues both."""
     import multiprocessing as mp
 
-    from warpgs.pipelines.full import write_report
+    from warpgs.evaluation import write_report
 
     bcfg = copy.deepcopy(cfg)
     bcfg.train.progress = False

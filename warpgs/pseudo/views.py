@@ -29,6 +29,7 @@ import numpy as np
 import torch
 
 from warpgs.configio import apply_values, parse_override, read_yaml
+from warpgs.viz import save_image
 
 from .backends import DefaultBackendConfig, SVDConfig, make_backend
 from .guidance import PosedViews, UncertaintyConfig, WarpResult, guidance_and_uncertainty
@@ -237,21 +238,6 @@ def generate_pseudo_views(
 
 # ----------------------------------------------------------------------------------------------
 # images
-
-
-def to_uint8(image: torch.Tensor | np.ndarray) -> np.ndarray:
-    a = image.detach().float().cpu().numpy() if isinstance(image, torch.Tensor) else np.asarray(image, np.float32)
-    return (np.clip(np.nan_to_num(a), 0.0, 1.0) * 255.0 + 0.5).astype(np.uint8)
-
-
-def save_image(path: str | Path, image) -> Path:
-    """Saves [H, W, 3] or [H, W] values in [0, 1] as an 8-bit PNG."""
-    from PIL import Image
-
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    Image.fromarray(to_uint8(image)).save(path)
-    return path
 
 
 def save_sequence(seq: PseudoSequence, out_dir: str | Path) -> Path:
