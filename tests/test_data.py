@@ -6,6 +6,7 @@ when that folder is absent. Everything else writes its own small scenes into tmp
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 from pathlib import Path
@@ -317,6 +318,17 @@ def test_nerfstudio_and_colmap_agree(tmp_path):
     assert np.allclose(c.forward, -np.asarray(_look([0, 0, 0], 0.05)[:3, 2]), atol=1e-6)
     t = c.to_torch("cpu")
     assert tuple(t.image.shape) == (12, 16, 3) and t.viewmat.dtype.is_floating_point and t.viewmat.shape == (4, 4)
+
+
+def test_capture_bounds_without_depth_or_points_are_left_to_the_geometry(tmp_path):
+    """A capture with poses only has no depth to bound: the loader's camera-extent guess (1% to 10x) is
+    flagged, and the summary says the bounds come from the initial geometry rather than print the guess."""
+    bare = load_nerfstudio(write_capture(tmp_path / "bare"), views=3)
+    assert bare.bounds_guessed and "measured on the initial geometry" in bare.summary()
+    near, far = bare.bounds
+    assert far / near == pytest.approx(1000.0)  # the guess spans three decades (only the last-resort frustum init uses it)
+    measured = dataclasses.replace(bare, bounds=(2.0, 9.5), bounds_guessed=False)
+    assert "bounds 2..9.5" in measured.summary()
 
 
 def test_downscale_folders_and_in_memory(tmp_path):

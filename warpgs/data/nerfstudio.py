@@ -305,6 +305,7 @@ def load_nerfstudio(
 
     bounds = _bounds(train, pts_world)
     return Scene(
+        bounds_guessed=_bounds_guessed(train, pts_world),
         name=name or _scene_name(root),
         train=train,
         test=test,
@@ -357,9 +358,18 @@ def _load_depth(root: Path, rel: str, shape: tuple[int, int], png_scale: float, 
     raise SceneError(f"{p}: depth is {d.shape[1]}x{d.shape[0]} but the image is {shape[1]}x{shape[0]} ({src})")
 
 
+def _bounds_guessed(cams: list[Camera], points: np.ndarray | None) -> bool:
+    """Whether ``_bounds`` falls back to the cameras' extent (no depth maps, no points)."""
+    return not _has_depth(cams) and not (points is not None and len(points) > 10)
+
+
+def _has_depth(cams: list[Camera]) -> bool:
+    return sum(int((c.depth > 0).sum()) for c in cams if c.depth is not None) > 100
+
+
 def _bounds(cams: list[Camera], points: np.ndarray | None) -> tuple[float, float]:
     depths = [c.depth[c.depth > 0] for c in cams if c.depth is not None]
-    if depths and sum(d.size for d in depths) > 100:
+    if _has_depth(cams):
         z = np.concatenate(depths)
         return float(max(np.percentile(z, 0.1) * 0.9, 1e-3)), float(z.max() * 1.1)
     c2ws = [c.c2w for c in cams]
@@ -469,6 +479,7 @@ def load_colmap(
         train=train,
         test=test,
         bounds=_bounds(train, pts_xyz),
+        bounds_guessed=_bounds_guessed(train, pts_xyz),
         world_transform=np.eye(4),
         points3d=None if not (load_points and pts_xyz is not None) else pts_xyz.astype(np.float32),
         points_rgb=None if not (load_points and pts_xyz is not None) else (pts.rgb / 255.0).astype(np.float32),

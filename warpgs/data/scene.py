@@ -119,6 +119,9 @@ class Scene:
     eval_masked: bool = False  # evaluate test views inside Camera.mask only (DTU protocol)
     metadata: dict[str, Any] = field(default_factory=dict)
     geometry: Any = None  # warpgs.points.Geometry found from the training views (model.init sfm / stereo)
+    # True when the loader had no depth and no points and ``bounds`` is ``bounds_from_cameras``'s loose guess:
+    # the initial geometry measures them (warpgs.train.prepare_geometry)
+    bounds_guessed: bool = False
 
     @property
     def cameras(self) -> list[Camera]:
@@ -129,7 +132,8 @@ class Scene:
         res = f"{v.width}x{v.height}" if v is not None else "-"
         return (
             f"{self.name}: {len(self.train)} train / {len(self.test)} test views at {res}, "
-            f"bounds {self.bounds[0]:.3g}..{self.bounds[1]:.3g}"
+            + ("depth bounds to be measured on the initial geometry" if self.bounds_guessed
+               else f"bounds {self.bounds[0]:.3g}..{self.bounds[1]:.3g}")
             + (f", {len(self.points3d)} points" if self.points3d is not None else "")
         )
 
