@@ -1,4 +1,4 @@
-"""Densification: clone / split / prune / reset on constructed gradients, the budget, compaction."""
+"""Densification: clone / split / prune / reset on constructed gradients, the budget, pruning the unseen."""
 
 import math
 from types import SimpleNamespace
@@ -171,19 +171,19 @@ def test_contribution_is_the_blending_weight():
     assert torch.allclose(contribution(one, [Cam])[0], one.render(V, K, 32, 32).alpha.sum(), rtol=1e-5)
 
 
-def test_compact_drops_unseen_and_transparent():
+def test_prune_unseen_drops_unseen_and_transparent():
     V, K = torch.eye(4), torch.tensor([[30.0, 0, 16], [0, 30.0, 16], [0, 0, 1]])
 
     Cam = SimpleNamespace(viewmat=V, K=K, width=32, height=32)
 
-    s = DefaultStrategy(prune_opa=0.005, compact_min_weight=0.05)
+    s = DefaultStrategy(prune_opa=0.005, unseen_min_weight=0.05)
     m = _model([0.3, 0.3, 0.3, 0.3], [0.7, 0.7, 0.003, 0.7], seed=4)
     with torch.no_grad():
         m.params["means"][:] = torch.tensor([[0.0, 0, 4], [0.0, 0, -4], [0.2, 0, 4], [50.0, 0, 4]])
     opt = make_optimizer(m, Config(), 1.0)
     st = s.initialize_state(4, "cpu")
     keep = m.params["means"][0].detach().clone()
-    assert s.compact(m, opt, st, [Cam]) == 3  # behind, transparent, off-screen
+    assert s.prune_unseen(m, opt, st, [Cam]) == 3  # behind, transparent, off-screen
     assert len(m) == 1 and torch.equal(m.params["means"][0], keep)
     assert st["grad2d"].shape == (1,)
 

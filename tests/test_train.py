@@ -267,6 +267,11 @@ def test_keys_of_earlier_versions_are_read_where_they_live_now():
     assert cfg.pseudo.sampler.steps == 3 and cfg.densify.stereo.min_score == 0.8 and cfg.full.cycles == 1
     later = build_config([{"pseudo": {"trajectory": {"n_frames": 7}}}, {"full": {"n_frames": 4}}])
     assert later.pseudo.trajectory.n_frames == 4  # a later layer wins, whichever spelling it uses
+    # "compact" meant three things; two of them have their own names now
+    renamed = build_config([{"train": {"compact": True, "seed": 3},
+                             "strategy": {"compact_when_full": False, "compact_min_weight": 0.5}}])
+    assert renamed.train.prune_unseen_at_end is True and renamed.train.seed == 3
+    assert renamed.strategy.prune_unseen_when_full is False and renamed.strategy.unseen_min_weight == 0.5
 
 
 def test_alpha_loss_is_the_mean_absolute_alpha_error():

@@ -138,7 +138,7 @@ def truncate_sh(model: GaussianModel, degree: int, optimizer=None) -> GaussianMo
 
 class ScheduledPruning:
     """The trainer's strategy plus importance pruning at scheduled steps. Every other attribute is the
-    wrapped strategy's (``Trainer.train_step`` reads ``compact_when_full`` etc. through it). It wraps a
+    wrapped strategy's (``Trainer.train_step`` reads ``prune_unseen_when_full`` etc. through it). It wraps a
     copy, so the run's config is untouched. With ``cap_after_prune`` the count after each pruning becomes
     the copy's ``max_gaussians``: densification can still move Gaussians to where the views need them
     (the budget's compaction frees room), but cannot grow back what was pruned."""

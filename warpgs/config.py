@@ -88,7 +88,7 @@ class TrainConfig:
     #   rising linearly from 0 to this at the last step, the rest's opacity x 1 / (1 - rate); 0: off. The paper: 0.2
     random_background: bool = False  # views with an alpha channel: a random background each step (no floaters
                                      # that mimic the background colour); evaluation keeps ``background``
-    compact: bool = False  # at the end, drop Gaussians no training view needs (costs novel-view PSNR)
+    prune_unseen_at_end: bool = False  # at the end, drop Gaussians no training view needs (costs novel-view PSNR)
     # divergence (warpgs/train.py): a non-finite loss or gradient, or a loss above explode_factor x the median
     # of the phase's last explode_window finite losses, skips the step; max_nan_steps skipped steps in a row,
     # explode_patience exploding ones in a row, or non-finite parameters after the optimiser step roll back to
@@ -215,22 +215,24 @@ MOVED = {("full", "n_frames"): ("pseudo", "trajectory", "n_frames"),
          ("full", "geometric"): ("pseudo", "uncertainty", "geometric"),
          ("full", "photometric"): ("pseudo", "uncertainty", "photometric"),
          ("full", "pseudo"): ("pseudo",),
-         ("full", "densify_config"): ("densify",)}
+         ("full", "densify_config"): ("densify",),
+         ("train", "compact"): ("train", "prune_unseen_at_end"),
+         ("strategy", "compact_when_full"): ("strategy", "prune_unseen_when_full"),
+         ("strategy", "compact_min_weight"): ("strategy", "unseen_min_weight")}
 
 
 def upgrade(layer: dict) -> dict:
     """A config layer with the keys of earlier versions moved to where they live now (``MOVED``)."""
-    if not isinstance(layer, dict) or not isinstance(layer.get("full"), dict):
+    if not isinstance(layer, dict):
         return layer
-    layer = {**layer, "full": dict(layer["full"])}
-    for old, new in MOVED.items():
-        if old[1] in layer["full"]:
-            value = layer["full"].pop(old[1])
-            for key in reversed(new):
-                value = {key: value}
+    for (section, key), new in MOVED.items():
+        if isinstance(layer.get(section), dict) and key in layer[section]:
+            value = layer[section][key]
+            layer = {**layer, section: {k: v for k, v in layer[section].items() if k != key}}
+            for name in reversed(new):
+                value = {name: value}
             layer = merge(layer, value)
     return layer
-
 
 def build_config(layers: list[dict]) -> Config:
     """Defaults, then each layer in order (nested dicts, later ones winning); every key is checked."""

@@ -1,4 +1,4 @@
-"""Densification and pruning: gsplat's DefaultStrategy (the 3D-GS rules), with a Gaussian budget and compaction.
+"""Densification and pruning: gsplat's DefaultStrategy (the 3D-GS rules), with a Gaussian budget and the pruning of unseen Gaussians.
 
 Every ``refine_every`` steps between ``refine_start_iter`` and ``refine_stop_iter``:
 
@@ -10,12 +10,13 @@ Every ``refine_every`` steps between ``refine_start_iter`` and ``refine_stop_ite
 - every ``reset_every`` steps opacities are clamped to 2 x ``prune_opa``.
 
 ``max_gaussians`` caps the count: when growth would pass it, only the candidates with the largest
-gradients grow. ``compact`` removes what the training views do not need: Gaussians whose total
-blending weight over all training views is below ``compact_min_weight`` pixels, and transparent ones.
-The trainer compacts whenever a refinement finds the budget spent (``compact_when_full``), so growth
-goes on where the views need it, and optionally once more at the end (``train.compact``). Note that in
+gradients grow. ``prune_unseen`` removes what the training views do not need: Gaussians whose total
+blending weight over all training views is below ``unseen_min_weight`` pixels, and transparent ones.
+The trainer does so whenever a refinement finds the budget spent (``prune_unseen_when_full``), so growth
+goes on where the views need it, and optionally once more at the end (``train.prune_unseen_at_end``).
+(Compact mode, ``warpgs/compact.py``, is something else: importance pruning and a size search.) Note that in
 sparse-view training the Gaussians no input view sees still fill the novel views: dropping them at
-the end lowered test PSNR by 0.4 dB on the synthetic scene, so the final compaction is off by default.
+the end lowered test PSNR by 0.4 dB on the synthetic scene, so the final pruning is off by default.
 
 New Gaussians get zeroed Adam moments, as in gsplat. The strategy's running state (gradient sums and
 counts) is a plain dict of tensors, saved in checkpoints.
@@ -48,8 +49,8 @@ class DefaultStrategy:
     refine_every: int = 100
     pause_refine_after_reset: int = 0
     max_gaussians: int = 0  # 0 = no budget
-    compact_when_full: bool = True  # compact when a refinement finds the budget spent
-    compact_min_weight: float = 0.05  # compaction keeps Gaussians with at least this total weight (pixels)
+    prune_unseen_when_full: bool = True  # prune_unseen when a refinement finds the budget spent
+    unseen_min_weight: float = 0.05  # prune_unseen keeps Gaussians with at least this total weight (pixels)
     verbose: bool = False
 
     # ------------------------------------------------------------------------------------------
@@ -129,11 +130,11 @@ class DefaultStrategy:
             remove(model, optimizer, state, is_prune)
         return n
 
-    def compact(self, model, optimizer, state, cameras, background=None) -> int:
-        """Removes Gaussians that add less than ``compact_min_weight`` pixels of blending weight to all
+    def prune_unseen(self, model, optimizer, state, cameras, background=None) -> int:
+        """Removes Gaussians that add less than ``unseen_min_weight`` pixels of blending weight to all
         ``cameras`` together, and those below ``prune_opa``. Returns how many went."""
         weight = contribution(model, cameras, background)
-        drop = (weight < self.compact_min_weight) | (model.opacities.detach() < self.prune_opa)
+        drop = (weight < self.unseen_min_weight) | (model.opacities.detach() < self.prune_opa)
         n = int(drop.sum())
         if n == 0 or n == len(model):  # nothing to drop, or nothing would be left: keep everything
             return 0

@@ -2,7 +2,7 @@
 
     trainer = Trainer(cfg, scene, out_dir)       # initialises the model (trainer.load_checkpoint() resumes)
     trainer.run()                                 # the method's phases: progress bar, checkpoints, Ctrl-C
-    result = trainer.finish()                     # compaction, test metrics, renders, PLY, metrics.json
+    result = trainer.finish()                     # stages, test metrics, renders, PLY, metrics.json
 
 One loop serves every method: a ``Method`` (below; the baseline's adds nothing, the paper's is
 ``warpgs.pipelines.full.FullMethod``) adds loss terms, among them extra views, keeps its part of the
@@ -436,10 +436,10 @@ class Trainer:
         info = self.strategy.step_post_backward(self.model, self.optimizer, self.state, step, out,
                                                 cam.width, cam.height, self.scene_scale, generator=self.split_gen)
         s = self.strategy
-        if (s.compact_when_full and s.max_gaussians > 0 and (info["cloned"] or info["split"] or info["pruned"])
+        if (s.prune_unseen_when_full and s.max_gaussians > 0 and (info["cloned"] or info["split"] or info["pruned"])
                 and len(self.model) >= s.max_gaussians):
             # the budget is spent: free what the training views do not use, so growth can go on where it helps
-            info["compacted"] = s.compact(self.model, self.optimizer, self.state, self.train_cams, self.background)
+            info["pruned_unseen"] = s.prune_unseen(self.model, self.optimizer, self.state, self.train_cams, self.background)
         bad = self.nonfinite_parameters()
         if bad:
             return self._diverge(step, f"the parameters {', '.join(bad)} are not finite after the optimiser step")
@@ -751,11 +751,11 @@ class Trainer:
                               lpips_weights=self.cfg.eval.lpips_weights, device=self.device, save_dir=save_dir,
                               lpips=lpips)
 
-    def compact(self) -> int:
-        """Final compaction (``train.compact``): drops what no training view uses."""
+    def prune_unseen(self) -> int:
+        """The final pruning (``train.prune_unseen_at_end``): drops what no training view uses."""
         if self.n_before_compaction is None:
             self.n_before_compaction = len(self.model)
-        return self.strategy.compact(self.model, self.optimizer, self.state, self.train_cams, self.background)
+        return self.strategy.prune_unseen(self.model, self.optimizer, self.state, self.train_cams, self.background)
 
     def export_ply(self, path: str | Path | None = None) -> Path:
         return self.model.save_ply(Path(path) if path is not None else self.out / "point_cloud.ply")
@@ -764,10 +764,10 @@ class Trainer:
         """After training: compaction, test metrics and renders, FPS, PLY, final checkpoint, metrics.json,
         then the method's records and outputs (``baseline``: the baseline run's metrics, for its report)."""
         out = self.out
-        if self.cfg.train.compact:
-            removed = self.compact()
+        if self.cfg.train.prune_unseen_at_end:
+            removed = self.prune_unseen()
             if removed:
-                self.log(f"warpgs: compaction removed {removed} of {self.n_before_compaction} Gaussians")
+                self.log(f"warpgs: pruning the unseen removed {removed} of {self.n_before_compaction} Gaussians")
         for stage in self.stages:
             stage.before_evaluation(self)
         ev = self.evaluate(save_dir=(out / "test") if out is not None and self.cfg.eval.save_images else None)
