@@ -530,7 +530,7 @@ class Trainer:
             for k, v in st["params"].items():
                 self.model.params[k] = torch.nn.Parameter(v.to(self.device, copy=True))
             self.model.max_sh_degree = st["max_sh_degree"]
-            self.model.active_sh_degree = st.get("active_sh_degree", self.model.max_sh_degree)
+            self.model.active_sh_degree = st["active_sh_degree"]
             self.optimizer = make_optimizer(self.model, self.cfg, self.scene_scale)
             self.optimizer.load_state_dict(copy.deepcopy(st["optimizer"]))
             self.state = {k: v.to(self.device, copy=True) for k, v in st["strategy_state"].items()}
@@ -761,8 +761,9 @@ class Trainer:
         return self.model.save_ply(Path(path) if path is not None else self.out / "point_cloud.ply")
 
     def finish(self, baseline: dict | None = None) -> dict:
-        """After training: compaction, test metrics and renders, FPS, PLY, final checkpoint, metrics.json,
-        then the method's records and outputs (``baseline``: the baseline run's metrics, for its report)."""
+        """After training: the final pruning (if asked), the stages, test metrics and renders, FPS, PLY, final
+        checkpoint, metrics.json, then the method's records and outputs (``baseline``: the baseline run's
+        metrics, for its report)."""
         out = self.out
         if self.cfg.train.prune_unseen_at_end:
             removed = self.prune_unseen()
