@@ -88,6 +88,9 @@ class TrainConfig:
     #   rising linearly from 0 to this at the last step, the rest's opacity x 1 / (1 - rate); 0: off. The paper: 0.2
     random_background: bool = False  # views with an alpha channel: a random background each step (no floaters
                                      # that mimic the background colour); evaluation keeps ``background``
+    far_field: str = "none"  # none | elevation: behind the Gaussians, a colour per elevation band fitted on the
+    #   inputs instead of ``background`` (warpgs/farfield.py; captures without alpha)
+    far_field_bins: int = 16  # elevation bands of the far field
     prune_unseen_at_end: bool = False  # at the end, drop Gaussians no training view needs (costs novel-view PSNR)
     # divergence (warpgs/train.py): a non-finite loss or gradient, or a loss above explode_factor x the median
     # of the phase's last explode_window finite losses, skips the step; max_nan_steps skipped steps in a row,

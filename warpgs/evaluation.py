@@ -12,6 +12,7 @@ from __future__ import annotations
 import json
 import math
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import torch
@@ -113,6 +114,8 @@ def write_run_outputs(trainer, metrics: dict) -> None:
     if geo is not None and len(geo.xyz):
         save_origin_ply(out / "init_points.ply", geo.xyz, geo.rgb)
     trainer.save_checkpoint()
+    if trainer.far_field is not None:
+        trainer.far_field.save(out / "far_field.json")
     save_config(trainer.cfg, out / "config.yaml")
     write_metrics(out, metrics)
 
@@ -145,7 +148,8 @@ def write_flythrough(trainer, path: Path, frames_per_segment: int = 24, order: s
         for traj in path_trajectories(V, max(frames_per_segment, 2), order):
             for vm in traj.viewmats:
                 v = torch.as_tensor(vm, dtype=torch.float32, device=trainer.device)
-                img = trainer.model.render(v, cam0.K, cam0.width, cam0.height, background=trainer.background).image
+                view = SimpleNamespace(viewmat=v, K=cam0.K, width=cam0.width, height=cam0.height)
+                img = trainer.model.render(v, cam0.K, cam0.width, cam0.height, background=trainer.background_for(view)).image
                 frames.append(Image.fromarray((img.clamp(0, 1).cpu().numpy() * 255 + 0.5).astype(np.uint8)))
     path.parent.mkdir(parents=True, exist_ok=True)
     frames[0].save(path, save_all=True, append_images=frames[1:], duration=80, loop=0)

@@ -288,7 +288,9 @@ def rasterize(
         colors: [N, 3] RGB, or [N, K, 3] SH coefficients with ``sh_degree`` in 0..3 and K >= (d+1)^2
             (colour = max(0, SH + 0.5), 3D-GS convention).
         viewmat [4, 4] world-to-camera (OpenCV axes), K [3, 3] intrinsics in pixels, width, height.
-        background [3]: colour behind the Gaussians (default black).
+        background [3]: colour behind the Gaussians (default black); or [H, W, 3], one colour per pixel
+            (a far field, ``warpgs.farfield``), composited as image + (1 - alpha) background, with gradients
+            to it if it requires them.
         near_plane / far_plane: camera-z range kept (gsplat's 0.01 default; 3D-GS uses 0.2).
         eps2d: screen-space dilation added to the 2D covariance (0.3 px).
         antialiased: scale opacity by sqrt(det S / det(S + eps2d I)) (gsplat's antialiased mode).
@@ -320,10 +322,14 @@ def rasterize(
     _check_tensor("K", K, (3, 3), device)
     if background is None:
         background = torch.zeros(3, device=device)
-    _check_tensor("background", background, (3,), device)
     for name, v in (("width", width), ("height", height)):
         if not isinstance(v, int) or v <= 0:
             _fail(name, f"must be a positive int, got {v!r}")
+    backdrop = None  # a per-pixel background, composited after the kernels (which take one colour)
+    if isinstance(background, torch.Tensor) and background.dim() == 3:
+        _check_tensor("background", background, (height, width, 3), device)
+        backdrop, background = background, torch.zeros(3, device=device)
+    _check_tensor("background", background, (3,), device)
     if not (0.0 < alpha_max < 1.0):
         _fail("alpha_max", f"must lie in (0, 1), got {alpha_max}")
     if not (0.0 < near_plane < far_plane):
@@ -333,7 +339,7 @@ def rasterize(
     viewmat, K, background = (t.detach().float().contiguous() for t in (viewmat, K, background))
     if check_finite:
         _check_finite(dict(means=means, quats=quats, scales=scales, opacities=opacities, colors=colors,
-                           viewmat=viewmat, K=K, background=background))
+                           viewmat=viewmat, K=K, background=background if backdrop is None else backdrop))
         if n and bool((scales < 0).any()):
             _fail("scales", "must be >= 0 (they are standard deviations, not log-scales)")
         if n and bool((quats.detach().norm(dim=-1) == 0).any()):
@@ -358,6 +364,8 @@ def rasterize(
         means2d, conics, opac_eff, rgb, depths, background, ranges, gauss_ids, width, height, alpha_max,
         deterministic
     )
+    if backdrop is not None:
+        image = image + (1.0 - alpha)[..., None] * backdrop.float()
     return RenderOutput(image, depth, alpha, means2d, radii, depths, total)
 
 

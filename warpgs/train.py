@@ -63,6 +63,7 @@ import torch
 from warpgs import losses
 from warpgs.config import Config, config_from_dict, to_dict
 from warpgs.evaluation import evaluate_views, run_metrics, write_run_outputs
+from warpgs.farfield import make_far_field
 from warpgs.guard import DivergenceGuard
 from warpgs.metrics import render_fps
 from warpgs.model import PARAM_NAMES, GaussianModel, read_point_cloud
@@ -306,6 +307,8 @@ class Trainer:
         if bg is None:
             bg = [1.0, 1.0, 1.0] if scene.white_background else [0.0, 0.0, 0.0]
         self.background = torch.tensor(bg, dtype=torch.float32, device=self.device)
+        # fitted on the training views only, deterministic: a resumed run computes the same one
+        self.far_field = make_far_field(cfg.train.far_field, self.train_cams, cfg.train.far_field_bins)
         self.scene_scale = cfg.optim.scene_scale or scene_scale_of(scene.train)
         self.strategy = cfg.strategy
         seed = cfg.train.seed
@@ -393,11 +396,18 @@ class Trainer:
         parts["inputs"] = loss
         return self.method.loss_terms(out, cam, loss, parts), parts
 
+    def background_for(self, cam) -> torch.Tensor:
+        """What ``cam`` (anything with viewmat, K, width, height) sees behind the Gaussians: the far field's
+        [H, W, 3] image when ``train.far_field`` is on, else the [3] ``background`` colour."""
+        if self.far_field is None:
+            return self.background
+        return self.far_field.image(cam.viewmat, cam.K, cam.width, cam.height)
+
     def with_training_background(self, cam, generator: torch.Generator):
         """(camera, background) for one training step: with ``train.random_background`` and an alpha
         channel, a random colour from ``generator`` and the target composited over it; else as they are."""
         if not (self.cfg.train.random_background and cam.alpha is not None):
-            return cam, self.background
+            return cam, self.background_for(cam)
         # target over a random colour: image = rgb a + bg (1 - a)  ->  image + (1 - a) (new_bg - bg)
         bg = torch.rand(3, device=self.device, generator=generator)
         return dataclasses.replace(cam, image=cam.image + (1 - cam.alpha)[..., None] * (bg - self.background)), bg
@@ -742,7 +752,7 @@ class Trainer:
     # evaluation and outputs
 
     def render(self, cam):
-        return self.model.render(cam.viewmat, cam.K, cam.width, cam.height, background=self.background)
+        return self.model.render(cam.viewmat, cam.K, cam.width, cam.height, background=self.background_for(cam))
 
     def evaluate(self, cameras=None, save_dir: str | Path | None = None, lpips: bool = True) -> dict:
         """Metrics over ``cameras`` (default: the test views); ``warpgs.evaluation.evaluate_views``."""

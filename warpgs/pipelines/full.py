@@ -162,7 +162,7 @@ class FullMethod(Method):
                 parts["input_depth"] = dl
         if self.pseudo_cams and self.settings.pseudo_weight > 0:
             pc = self.pseudo_cams[self.next_pseudo()]
-            po = tr.model.render(pc.viewmat, pc.K, pc.width, pc.height, background=tr.background,
+            po = tr.model.render(pc.viewmat, pc.K, pc.width, pc.height, background=tr.background_for(pc),
                                  opacity_scale=tr.dropout_scale(tr.step))
             pl = self.pseudo_loss(po, pc)
             loss = loss + self.settings.pseudo_weight * pl
@@ -191,7 +191,7 @@ class FullMethod(Method):
         times = {}
         t0 = time.perf_counter()
         pcfg = self.pseudo_config()
-        seqs = generate_pseudo_views(model_renderer(tr.model, tr.background), tr.train_cams, pcfg, device=tr.device)
+        seqs = generate_pseudo_views(model_renderer(tr.model, tr.background_for), tr.train_cams, pcfg, device=tr.device)
         times["pseudo_views_s"] = time.perf_counter() - t0
         cams = []
         limit = pcfg.sampler.delta if self.settings.pseudo_mask == "reliable" else 1.0

@@ -23,6 +23,7 @@ from __future__ import annotations
 import argparse
 from dataclasses import dataclass, field
 from pathlib import Path
+from types import SimpleNamespace
 from typing import Callable, Sequence
 
 import numpy as np
@@ -118,12 +119,18 @@ class PseudoSequence:
 
 
 def model_renderer(model, background=None) -> RenderFn:
-    """``render_fn`` of a ``GaussianModel`` (no gradients): colour and expected depth."""
+    """``render_fn`` of a ``GaussianModel`` (no gradients): colour and expected depth. ``background``: a
+    colour, or a function of a view (viewmat, K, width, height attributes) giving its background
+    (``Trainer.background_for``)."""
 
     def render(viewmat, K, width, height):
         with torch.no_grad():
-            bg = background if background is None else torch.as_tensor(background, dtype=torch.float32,
-                                                                       device=model.device)
+            if callable(background):
+                bg = background(SimpleNamespace(viewmat=viewmat.to(model.device), K=K.to(model.device),
+                                                width=width, height=height))
+            else:
+                bg = background if background is None else torch.as_tensor(background, dtype=torch.float32,
+                                                                           device=model.device)
             out = model.render(viewmat.to(model.device), K.to(model.device), width, height, background=bg)
         return out.image, out.depth
 

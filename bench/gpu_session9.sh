@@ -1,0 +1,23 @@
+#!/usr/bin/env bash
+# GPU runs of session 9 (issue #13): the far field (train.far_field=elevation, warpgs/farfield.py) on the real
+# captures at images_8, 3,000 iterations (the setting of issue 13's 3-view and 9-view points), seed 0.
+#   bash bench/gpu_session9.sh PHASE D RUNS      (D: the scenes; RUNS: the runs folder)
+set -u
+P=$1; D=$2; R=$3; mkdir -p "$R"
+GPUS=${GPUS:-1}; source bench/gpu_runs.sh
+i8() { local name=$1 sc=$2 v=$3; shift 3; sp "$name" --data "$D/$sc" --downscale 8 --views "$v" --iterations 3000 "$@"; }
+FF="--set train.far_field=elevation"
+case $P in
+a)
+  i8 c3_b castle_p30 3 --method baseline & i8 h3_b herz_jesus_p25 3 --method baseline &
+  i8 c3_ff castle_p30 3 --method baseline $FF & i8 h3_ff herz_jesus_p25 3 --method baseline $FF &
+  i8 c9_ff castle_p30 9 --method baseline $FF & i8 h9_ff herz_jesus_p25 9 --method baseline $FF &
+  wait
+  i8 c6_ff castle_p30 6 --method baseline $FF & i8 h6_ff herz_jesus_p25 6 --method baseline $FF &
+  i8 c3_ff_s2d castle_p30 3 --method baseline $FF --set strategy.refine_scale2d_stop_iter=3000 &
+  i8 c3_ff32 castle_p30 3 --method baseline $FF --set train.far_field_bins=32 &
+  i8 c3_f_ff castle_p30 3 --method full $FF & i8 h3_f_ff herz_jesus_p25 3 --method full $FF &
+  ;;
+esac
+wait
+python3 bench/gather_runs.py "$R" "$OUT/runs_$P.json" --logs "$OUT/logs_$P.txt"

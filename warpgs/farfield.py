@@ -1,0 +1,118 @@
+"""The far field: what a view shows where no Gaussian covers it.
+
+A few inputs of a walk-around capture leave much of a novel view unseen by any of them (bench/covisibility.py:
+on castle_p30 with 3 views a test view's training views see 32% of it on average). Over a black background
+those regions render black, and during training Gaussians grow to cover the inputs' sky and distant walls
+with whatever depth they happen to have, then float in front of the novel views.
+
+``ElevationFarField`` is a background that depends on the viewing direction only through its elevation
+above the capture's horizon: a colour per elevation band, the mean of the training pixels whose rays fall in
+that band (linearly interpolated between band centres; bands no input sees take the nearest seen band's
+colour). Sky, distant facades and the ground repeat around a capture far more than they change with the
+azimuth, so this is the least-squares guess for an unseen direction that the inputs support, and it needs no
+weights. It is fitted once on the training views only (never the test views) and stays fixed, so a run and
+its resume compute the same one. "Up" is the mean of the training cameras' up axes (OpenCV: -y).
+
+    ff = ElevationFarField.fit(train_cams, bins=16)
+    out = model.render(cam.viewmat, cam.K, W, H, background=ff.image(cam.viewmat, cam.K, W, H))
+
+The PLY holds only the Gaussians; ``far_field.json`` in the run folder holds the bands.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import torch
+
+FAR_FIELDS = ("none", "elevation")
+
+
+def ray_directions(viewmat: torch.Tensor, K: torch.Tensor, width: int, height: int) -> torch.Tensor:
+    """[H, W, 3] unit world-space directions of the pixel centres of a pinhole camera (OpenCV axes)."""
+    dev = viewmat.device
+    v, u = torch.meshgrid(torch.arange(height, device=dev, dtype=torch.float32) + 0.5,
+                          torch.arange(width, device=dev, dtype=torch.float32) + 0.5, indexing="ij")
+    K = K.float()
+    x = (u - K[0, 2]) / K[0, 0]
+    y = (v - K[1, 2]) / K[1, 1]
+    d = torch.stack([x, y, torch.ones_like(x)], -1) @ viewmat[:3, :3].float()  # R^T d, as row vectors
+    return d / d.norm(dim=-1, keepdim=True)
+
+
+class ElevationFarField:
+    """A colour per elevation band (module docstring). ``up`` [3] unit vector, ``colors`` [bins, 3]."""
+
+    def __init__(self, up: torch.Tensor, colors: torch.Tensor):
+        self.up = up.float()
+        self.colors = colors.float()
+
+    @property
+    def bins(self) -> int:
+        return int(self.colors.shape[0])
+
+    @classmethod
+    def fit(cls, cameras, bins: int = 16) -> "ElevationFarField":
+        """From ``cameras`` (``CameraTensors`` or ``Camera``s: viewmat, K, width, height, image)."""
+        if bins < 1:
+            raise ValueError(f"far field: bins must be >= 1, got {bins}")
+        if not cameras:
+            raise ValueError("far field: no views to fit it on")
+        mats = [torch.as_tensor(c.viewmat, dtype=torch.float32) for c in cameras]
+        dev = mats[0].device
+        up = -torch.stack([m[1, :3] for m in mats]).mean(0)
+        if float(up.norm()) < 1e-6:  # up axes that cancel out (cameras rolled all around): the first one's
+            up = -mats[0][1, :3]
+        up = up / up.norm()
+        sums = torch.zeros(bins, 3, dtype=torch.float64, device=dev)
+        counts = torch.zeros(bins, dtype=torch.float64, device=dev)
+        total = torch.zeros(3, dtype=torch.float64, device=dev)
+        for c, m in zip(cameras, mats):
+            img = torch.as_tensor(c.image, dtype=torch.float32, device=dev).reshape(-1, 3).double()
+            e = ray_directions(m, torch.as_tensor(c.K, device=dev), c.width, c.height) @ up
+            b = ((e.reshape(-1) + 1) * 0.5 * bins).long().clamp(0, bins - 1)
+            sums.index_add_(0, b, img)
+            counts.index_add_(0, b, torch.ones_like(b, dtype=torch.float64))
+            total += img.sum(0)
+        seen = torch.nonzero(counts > 0).flatten()
+        colors = sums / counts.clamp(min=1)[:, None]
+        if len(seen) < bins:  # unseen bands: the nearest seen band's colour
+            near = seen[(torch.arange(bins, device=dev)[:, None] - seen[None]).abs().argmin(1)]
+            colors = colors[near]
+        return cls(up, colors.float())
+
+    def elevation_coordinate(self, dirs: torch.Tensor) -> torch.Tensor:
+        """Continuous band coordinate of unit directions: band i's centre is at i."""
+        return (dirs @ self.up.to(dirs.device) + 1) * 0.5 * self.bins - 0.5
+
+    def image(self, viewmat: torch.Tensor, K: torch.Tensor, width: int, height: int) -> torch.Tensor:
+        """[H, W, 3] far-field colour seen by a camera, on the viewmat's device."""
+        x = self.elevation_coordinate(ray_directions(viewmat, K, width, height)).clamp(0, self.bins - 1)
+        i0 = x.floor().long().clamp(max=self.bins - 1)
+        i1 = (i0 + 1).clamp(max=self.bins - 1)
+        w = (x - i0.float())[..., None]
+        colors = self.colors.to(viewmat.device)
+        return colors[i0] * (1 - w) + colors[i1] * w
+
+    def to_dict(self) -> dict:
+        return {"kind": "elevation", "up": [float(v) for v in self.up.cpu()],
+                "colors": [[round(float(v), 6) for v in row] for row in self.colors.cpu()]}
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "ElevationFarField":
+        return cls(torch.tensor(d["up"], dtype=torch.float32), torch.tensor(d["colors"], dtype=torch.float32))
+
+    def save(self, path: str | Path) -> Path:
+        path = Path(path)
+        path.write_text(json.dumps(self.to_dict(), indent=1))
+        return path
+
+
+def make_far_field(kind: str, cameras, bins: int) -> ElevationFarField | None:
+    """The far field ``train.far_field`` asks for, fitted on ``cameras`` (the training views); None for none."""
+    if kind == "none":
+        return None
+    if kind == "elevation":
+        return ElevationFarField.fit(cameras, bins)
+    raise ValueError(f"train.far_field={kind!r}: expected one of {', '.join(FAR_FIELDS)}")
