@@ -18,6 +18,16 @@ a)
   i8 c3_ff32 castle_p30 3 --method baseline $FF --set train.far_field_bins=32 &
   i8 c3_f_ff castle_p30 3 --method full $FF & i8 h3_f_ff herz_jesus_p25 3 --method full $FF &
   ;;
+b)  # seeds 1 and 2 of the far field; the full method at 9 views; i8 baselines at 6 views and c9 seed 0 again
+  i8 c9_ff_s1 castle_p30 9 --method baseline $FF --seed 1 & i8 c9_ff_s2 castle_p30 9 --method baseline $FF --seed 2 &
+  i8 c3_ff_s1 castle_p30 3 --method baseline $FF --seed 1 & i8 c3_ff_s2 castle_p30 3 --method baseline $FF --seed 2 &
+  i8 h3_ff_s1 herz_jesus_p25 3 --method baseline $FF --seed 1 & i8 h3_ff_s2 herz_jesus_p25 3 --method baseline $FF --seed 2 &
+  wait
+  i8 h9_ff_s1 herz_jesus_p25 9 --method baseline $FF --seed 1 & i8 c9_b castle_p30 9 --method baseline &
+  i8 c9_f_ff castle_p30 9 --method full $FF & i8 h9_f_ff herz_jesus_p25 9 --method full $FF &
+  i8 c6_b castle_p30 6 --method baseline & i8 h6_b herz_jesus_p25 6 --method baseline &
+  ;;
 esac
 wait
 python3 bench/gather_runs.py "$R" "$OUT/runs_$P.json" --logs "$OUT/logs_$P.txt"
+mkdir -p "$OUT/metrics_$P"; for d in "$R"/*/; do [ -f "$d/metrics.json" ] && cp "$d/metrics.json" "$OUT/metrics_$P/$(basename "$d").json"; done
