@@ -27,6 +27,11 @@ b)  # seeds 1 and 2 of the far field; the full method at 9 views; i8 baselines a
   i8 c9_f_ff castle_p30 9 --method full $FF & i8 h9_f_ff herz_jesus_p25 9 --method full $FF &
   i8 c6_b castle_p30 6 --method baseline & i8 h6_b herz_jesus_p25 6 --method baseline &
   ;;
+c)  # the full method with the far field (full.far_field=elevation) at issue 13's acceptance setting: images_4,
+    # 10,000 iterations, seed 0 (stopped with SIGINT after T s; phase d resumes)
+  METHODS=full SUF=_ff_s0 acceptance_i4 "${T:-500}" --seed 0 --set full.far_field=elevation
+  ;;
+d) for d in "$R"/*_i4_*; do [ -d "$d" ] && [ ! -f "$d/metrics.json" ] && spt "${T:-500}" "$(basename "$d")" --resume "$d" & done ;;
 esac
 wait
 python3 bench/gather_runs.py "$R" "$OUT/runs_$P.json" --logs "$OUT/logs_$P.txt"

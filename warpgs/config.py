@@ -141,6 +141,7 @@ class FullConfig:
     #   reliable (U < the sampler's delta: where guidance was fused)
     growth_budget: float = 0.0  # > 0: at most this x the baseline phase's Gaussians during the cycles (0: no cap)
     drop_rate: float | None = None  # DropGaussian's final rate for this method (train.drop_rate); None: train's
+    far_field: str | None = None  # the far field for this method (train.far_field: none | elevation); None: train's
     flythrough_frames: int = 24  # frames per trajectory in flythrough.gif
 
 

@@ -31,6 +31,7 @@ import numpy as np
 import torch
 from warpgs import losses
 from warpgs.config import FullConfig
+from warpgs.farfield import FAR_FIELDS, make_far_field
 from warpgs.model import rgb_to_sh
 from warpgs.train import STATE_PARTS, Method, Trainer
 
@@ -54,6 +55,8 @@ def check_settings(s: FullConfig) -> FullConfig:
         raise ValueError(f"full.guidance must be warped or render, got {s.guidance!r}")
     if s.pseudo_mask not in ("seen", "reliable"):
         raise ValueError(f"full.pseudo_mask must be seen or reliable, got {s.pseudo_mask!r}")
+    if s.far_field is not None and s.far_field not in FAR_FIELDS:
+        raise ValueError(f"full.far_field must be null or one of {', '.join(FAR_FIELDS)}, got {s.far_field!r}")
     if s.drop_rate is not None and not 0.0 <= s.drop_rate < 1.0:
         raise ValueError(f"full.drop_rate must be in [0, 1), got {s.drop_rate}")
     if s.growth_budget < 0:
@@ -103,6 +106,8 @@ class FullMethod(Method):
         self.settings = check_settings(cfg.full)
         if self.settings.drop_rate is not None:
             trainer.drop_rate = self.settings.drop_rate
+        if self.settings.far_field is not None:
+            trainer.far_field = make_far_field(self.settings.far_field, trainer.train_cams, cfg.train.far_field_bins)
         self.pseudo_cams: list = []
         self.pseudo_order: list[int] = []
         self.pseudo_rng = np.random.default_rng(cfg.train.seed + 3)
