@@ -31,6 +31,14 @@ c)  # the full method with the far field (full.far_field=elevation) at issue 13'
     # 10,000 iterations, seed 0 (stopped with SIGINT after T s; phase d resumes)
   METHODS=full SUF=_ff_s0 acceptance_i4 "${T:-500}" --seed 0 --set full.far_field=elevation
   ;;
+e)  # the far field above the horizon only (train.far_field=sky) at images_8, 3,000 it: castle 9 views' test view
+    # 0008 went dark under the elevation far field (a large translucent ground Gaussian in front of it)
+  SKY="--set train.far_field=sky"
+  i8 c9_sky castle_p30 9 --method baseline $SKY & i8 h9_sky herz_jesus_p25 9 --method baseline $SKY &
+  i8 c3_sky castle_p30 3 --method baseline $SKY & i8 h3_sky herz_jesus_p25 3 --method baseline $SKY &
+  i8 c9_f_sky castle_p30 9 --method full --set full.far_field=sky & i8 h3_f_sky herz_jesus_p25 3 --method full --set full.far_field=sky &
+  i8 c6_sky castle_p30 6 --method baseline $SKY &
+  ;;
 d) for d in "$R"/*_i4_*; do [ -d "$d" ] && [ ! -f "$d/metrics.json" ] && spt "${T:-500}" "$(basename "$d")" --resume "$d" & done ;;
 esac
 wait

@@ -26,7 +26,7 @@ from pathlib import Path
 
 import torch
 
-FAR_FIELDS = ("none", "elevation")
+FAR_FIELDS = ("none", "elevation", "sky")
 
 
 def ray_directions(viewmat: torch.Tensor, K: torch.Tensor, width: int, height: int) -> torch.Tensor:
@@ -109,10 +109,17 @@ class ElevationFarField:
         return path
 
 
-def make_far_field(kind: str, cameras, bins: int) -> ElevationFarField | None:
-    """The far field ``train.far_field`` asks for, fitted on ``cameras`` (the training views); None for none."""
+def make_far_field(kind: str, cameras, bins: int, background=None) -> ElevationFarField | None:
+    """The far field ``train.far_field`` asks for, fitted on ``cameras`` (the training views); None for none.
+    ``sky``: the bands above the horizon only; below it, ``background`` (default black): the ground is
+    geometry for the Gaussians, not a backdrop."""
     if kind == "none":
         return None
-    if kind == "elevation":
-        return ElevationFarField.fit(cameras, bins)
+    if kind in ("elevation", "sky"):
+        ff = ElevationFarField.fit(cameras, bins)
+        if kind == "sky":
+            below = (torch.arange(ff.bins, dtype=torch.float32) + 0.5) / ff.bins * 2 - 1 < 0
+            bg = torch.zeros(3) if background is None else torch.as_tensor(background, dtype=torch.float32).cpu()
+            ff.colors = torch.where(below.to(ff.colors.device)[:, None], bg.to(ff.colors.device), ff.colors)
+        return ff
     raise ValueError(f"train.far_field={kind!r}: expected one of {', '.join(FAR_FIELDS)}")

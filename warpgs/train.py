@@ -308,7 +308,7 @@ class Trainer:
             bg = [1.0, 1.0, 1.0] if scene.white_background else [0.0, 0.0, 0.0]
         self.background = torch.tensor(bg, dtype=torch.float32, device=self.device)
         # fitted on the training views only, deterministic: a resumed run computes the same one
-        self.far_field = make_far_field(cfg.train.far_field, self.train_cams, cfg.train.far_field_bins)
+        self.far_field = make_far_field(cfg.train.far_field, self.train_cams, cfg.train.far_field_bins, self.background)
         self.scene_scale = cfg.optim.scene_scale or scene_scale_of(scene.train)
         self.strategy = cfg.strategy
         seed = cfg.train.seed

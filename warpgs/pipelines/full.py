@@ -107,7 +107,8 @@ class FullMethod(Method):
         if self.settings.drop_rate is not None:
             trainer.drop_rate = self.settings.drop_rate
         if self.settings.far_field is not None:
-            trainer.far_field = make_far_field(self.settings.far_field, trainer.train_cams, cfg.train.far_field_bins)
+            trainer.far_field = make_far_field(self.settings.far_field, trainer.train_cams, cfg.train.far_field_bins,
+                                               trainer.background)
         self.pseudo_cams: list = []
         self.pseudo_order: list[int] = []
         self.pseudo_rng = np.random.default_rng(cfg.train.seed + 3)
