@@ -1,0 +1,187 @@
+"""The far field (warpgs/farfield.py) and the rasterizer's per-pixel background: against the torch oracle
+(tests/reference.py, which composites any background that broadcasts over [H, W, 3]), analytic gradients,
+and scenes whose colour is a known function of elevation."""
+
+import math
+
+import numpy as np
+import pytest
+import torch
+
+import reference as ref
+from test_rasterizer import DEVICES, assert_close, look_at_viewmat, make_scene, run_warp, weighted_loss
+from warpgs.farfield import ElevationFarField, make_far_field, ray_directions
+
+
+def backdrop(scene, seed=7):
+    g = torch.Generator().manual_seed(seed)
+    return torch.rand(scene["height"], scene["width"], 3, generator=g, dtype=torch.float64)
+
+
+@pytest.mark.parametrize("device", DEVICES)
+def test_per_pixel_background_matches_reference_forward_and_gradients(device):
+    scene = make_scene(n=14, seed=21)
+    bg = backdrop(scene)
+    bg_w = bg.float().to(device).requires_grad_(True)
+    out, ins = run_warp(scene, device, grad=True, background=bg_w)
+    names = ["means", "quats", "scales", "opacities", "colors"]
+    rins = {k: scene[k].clone().requires_grad_(True) for k in names}
+    bg_r = bg.clone().requires_grad_(True)
+    image, depth, alpha, _ = ref.render(**rins, viewmat=scene["viewmat"], K=scene["K"], width=scene["width"],
+                                        height=scene["height"], background=bg_r)
+    assert_close(out.image, image, 2e-5, what="image")
+    weighted_loss(out.image, out.depth, out.alpha).backward()
+    weighted_loss(image, depth, alpha).backward()
+    for k in names:
+        assert_close(ins[k].grad, rins[k].grad, 2e-4, 2e-3, what=f"d/d{k}")
+    assert_close(bg_w.grad, bg_r.grad, 1e-5, what="d/dbackground")
+
+
+@pytest.mark.parametrize("device", DEVICES)
+def test_constant_per_pixel_background_equals_the_kernels_background(device):
+    """A [H, W, 3] background of one colour composited after the kernels (through the alpha output's
+    gradient) gives the image and Gaussian gradients of the kernels' own [3] background."""
+    scene = make_scene(n=12, seed=22)
+    colour = torch.tensor([0.2, 0.6, 0.9])
+    a, ia = run_warp(scene, device, grad=True, background=colour.to(device))
+    plane = colour.expand(scene["height"], scene["width"], 3).contiguous().to(device)
+    b, ib = run_warp(scene, device, grad=True, background=plane)
+    assert_close(a.image, b.image, 1e-6, what="image")
+    (a.image * 1.7).sum().backward()
+    (b.image * 1.7).sum().backward()
+    for k in ia:
+        assert_close(ia[k].grad, ib[k].grad, 1e-5, 1e-4, what=f"d/d{k}")
+
+
+def test_background_gradient_is_transmittance():
+    scene = make_scene(n=8, seed=23)
+    bg = backdrop(scene).float().requires_grad_(True)
+    out, _ = run_warp(scene, "cpu", background=bg)
+    out.image.sum().backward()
+    expected = (1 - out.alpha.detach())[..., None].expand_as(bg)
+    assert_close(bg.grad, expected, 1e-6, what="d image / d background")
+
+
+def test_per_pixel_background_of_the_wrong_size_is_named():
+    scene = make_scene(n=3, seed=24)
+    with pytest.raises(ValueError, match="background"):
+        run_warp(scene, "cpu", background=torch.zeros(scene["height"] + 1, scene["width"], 3))
+
+
+def test_ray_directions_are_the_analytic_pixel_rays():
+    V = look_at_viewmat((1.0, 0.5, -2.0), (0.0, 0.0, 0.0)).float()
+    K = torch.tensor([[30.0, 0, 16.0], [0, 32.0, 12.0], [0, 0, 1]])
+    d = ray_directions(V, K, 32, 24)
+    assert d.shape == (24, 32, 3)
+    assert_close(d.norm(dim=-1), torch.ones(24, 32), 1e-6, what="unit length")
+    R = V[:3, :3].double()
+    for (i, j) in [(0, 0), (11, 15), (23, 31), (5, 20)]:
+        cam = torch.tensor([(j + 0.5 - 16.0) / 30.0, (i + 0.5 - 12.0) / 32.0, 1.0], dtype=torch.float64)
+        world = R.T @ cam
+        assert_close(d[i, j], (world / world.norm()).float(), 1e-6, what=f"pixel {i},{j}")
+
+
+class _View:
+    def __init__(self, viewmat, K, width, height, image):
+        self.viewmat, self.K, self.width, self.height, self.image = viewmat, K, width, height, image
+
+
+def _banded_views(colour_of_band, bins, yaws, pitch_deg=0.0, size=(48, 40)):
+    """Cameras at the origin turned by ``yaws`` whose images are ``colour_of_band`` of each pixel's elevation
+    band (world up = +y: ``look_at_viewmat``'s cameras have their image y axis along world -y)."""
+    w, h = size
+    K = torch.tensor([[20.0, 0, w / 2], [0, 20.0, h / 2], [0, 0, 1]])
+    views = []
+    for yaw in yaws:
+        a, p = math.radians(yaw), math.radians(pitch_deg)
+        target = (math.sin(a) * math.cos(p), math.sin(p), math.cos(a) * math.cos(p))
+        V = look_at_viewmat((0.0, 0.0, 0.0), target).float()
+        e = ray_directions(V, K, w, h) @ torch.tensor([0.0, 1.0, 0.0])
+        band = ((e + 1) * 0.5 * bins).long().clamp(0, bins - 1)
+        views.append(_View(V, K, w, h, colour_of_band[band]))
+    return views
+
+
+def test_elevation_far_field_recovers_banded_colours_and_generalises_over_azimuth():
+    bins = 8
+    colours = torch.rand(bins, 3, generator=torch.Generator().manual_seed(3))
+    train = _banded_views(colours, bins, yaws=[0, 100, 230])
+    ff = ElevationFarField.fit(train, bins)
+    assert_close(ff.up, torch.tensor([0.0, 1.0, 0.0]), 1e-5, what="up")
+    # bands the views see (the vertical field of view is +-45 degrees: elevation sines within +-0.71)
+    seen = [b for b in range(bins) if abs((b + 0.5) / bins * 2 - 1) < 0.6]
+    assert len(seen) >= 4
+    assert_close(ff.colors[seen], colours[seen], 1e-5, what="band colours")
+    # an azimuth no input looked at: the same elevation profile, at the band centres
+    test = _banded_views(colours, bins, yaws=[160])[0]
+    img = ff.image(test.viewmat, test.K, test.width, test.height)
+    x = ff.elevation_coordinate(ray_directions(test.viewmat, test.K, test.width, test.height))
+    at_centre = (x - x.round()).abs() < 0.01  # within 1% of a band centre: at most 1% of a neighbour mixed in
+    centre_band = x.round().long().clamp(0, bins - 1)
+    inner = at_centre & torch.isin(centre_band, torch.tensor(seen))
+    assert int(inner.sum()) > 10
+    assert_close(img[inner], colours[centre_band[inner]], 0.0101, what="far field at band centres")
+
+
+def test_unseen_bands_take_the_nearest_seen_band_and_sky_drops_the_ground():
+    bins = 16
+    colours = torch.linspace(0, 1, bins)[:, None].repeat(1, 3)
+    train = _banded_views(colours, bins, yaws=[0, 90], pitch_deg=25.0, size=(40, 20))  # looking up
+    ff = ElevationFarField.fit(train, bins)
+    counts = np.zeros(bins)
+    for v in train:
+        e = (ray_directions(v.viewmat, v.K, v.width, v.height) @ ff.up).reshape(-1)
+        np.add.at(counts, ((e + 1) * 0.5 * bins).long().clamp(0, bins - 1).numpy(), 1)
+    seen = np.nonzero(counts)[0]
+    lowest = int(seen.min())
+    assert lowest > 0  # the views miss the lowest bands
+    assert_close(ff.colors[:lowest], ff.colors[lowest].expand(lowest, 3), 1e-6, what="unseen bands")
+    sky = make_far_field("sky", train, bins, background=torch.tensor([0.1, 0.2, 0.3]))
+    centres = (torch.arange(bins) + 0.5) / bins * 2 - 1
+    assert_close(sky.colors[centres < 0], torch.tensor([0.1, 0.2, 0.3]).expand(int((centres < 0).sum()), 3), 0,
+                 what="below the horizon")
+    assert_close(sky.colors[centres > 0], ff.colors[centres > 0], 0, what="above the horizon")
+    assert make_far_field("none", train, bins) is None
+    with pytest.raises(ValueError, match="far_field"):
+        make_far_field("cubemap", train, bins)
+
+
+def test_far_field_round_trips_through_its_json(tmp_path):
+    bins = 4
+    colours = torch.rand(bins, 3, generator=torch.Generator().manual_seed(5))
+    ff = ElevationFarField.fit(_banded_views(colours, bins, yaws=[0, 120]), bins)
+    back = ElevationFarField.from_dict(__import__("json").loads(ff.save(tmp_path / "ff.json").read_text()))
+    assert_close(back.colors, ff.colors, 1e-6, what="colours")
+    assert_close(back.up, ff.up, 1e-6, what="up")
+
+
+def test_trainer_fits_the_far_field_on_training_views_only_and_resumes_exactly(tmp_path):
+    import dataclasses
+
+    from tiny_scene import make_scene, param_copy, same_params, tiny_config
+    from warpgs.train import Trainer
+
+    scene = make_scene()
+    cfg = tiny_config(40, str(tmp_path / "none.pth"), far_field="elevation", far_field_bins=8)
+    straight = Trainer(cfg, scene)
+    assert straight.far_field is not None
+    cam = straight.test_cams[0]
+    bg = straight.background_for(cam)
+    assert bg.shape == (cam.height, cam.width, 3)
+    # the test views do not enter it
+    blanked = dataclasses.replace(scene, test=[dataclasses.replace(c, image=np.ones_like(c.image)) for c in scene.test])
+    assert torch.equal(Trainer(cfg, blanked).far_field.colors, straight.far_field.colors)
+    # every render of the trainer composites it
+    with torch.no_grad():
+        out = straight.render(cam)
+        raw = straight.model.render(cam.viewmat, cam.K, cam.width, cam.height)
+    assert_close(out.image, raw.image + (1 - raw.alpha)[..., None] * bg, 1e-6, what="render over the far field")
+    straight.train()
+    first = Trainer(cfg, scene, tmp_path)
+    first.train(20)
+    first.save_checkpoint()
+    second = Trainer(cfg, scene, tmp_path)
+    second.load_checkpoint()
+    second.train()
+    assert same_params(param_copy(straight), param_copy(second))
+    assert straight.losses == second.losses
