@@ -201,14 +201,21 @@ def read_yaml(path: str | Path, _seen=None) -> dict:
         raise ConfigError(f"{path}: 'base' chain loops")
     seen.add(path.resolve())
     try:
-        data = yaml.safe_load(path.read_text()) or {}
+        data = yaml.safe_load(path.read_text(encoding="utf-8")) or {}
     except yaml.YAMLError as e:
-        raise ConfigError(f"{path}: cannot parse YAML ({e})") from e
+        raise ConfigError(f"{path}: cannot parse YAML ({' '.join(str(e).split())})") from None
+    except UnicodeDecodeError as e:
+        raise ConfigError(f"{path}: not UTF-8 text at byte {e.start}") from None
     if not isinstance(data, dict):
         raise ConfigError(f"{path}: expected a mapping at the top level")
     base = data.pop("base", None)
     if base:
-        data = merge(read_yaml(path.parent / base, seen), data)
+        if not isinstance(base, str):
+            raise ConfigError(f"{path}: base = {base!r}: expected the name of another config file")
+        try:
+            data = merge(read_yaml(path.parent / base, seen), data)
+        except ConfigError as e:
+            raise ConfigError(f"{path}: base: {e}") from None
     return data
 
 
