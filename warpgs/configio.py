@@ -187,7 +187,7 @@ def apply_values(obj, values: dict, where: str, prefix: str = "") -> None:
             raise ConfigError(f"{prefix}{key} = {value!r} (from {where}): must be a finite number")
         why = limit_error(v, lim[key]) if key in lim else None
         if why:
-            raise ConfigError(f"{prefix}{key} = {value!r} (from {where}): {why}")
+            raise ConfigError(f"{prefix}{key} = {v!r} (from {where}): {why}")
         setattr(obj, key, v)
 
 

@@ -154,9 +154,11 @@ class RunFolder:
     def __init__(self, path: Path, token: str, notes: list[str]):
         self.path, self.token, self.notes = path, token, notes
         self.held = True
+        self.created = False  # made by this run: removed again if the run leaves it empty (it stopped early)
 
     def release(self) -> None:
-        """Removes the lock if it is still this run's (a lock taken over by someone else stays)."""
+        """Removes the lock if it is still this run's (a lock taken over by someone else stays), and the
+        folder if this run created it and wrote nothing into it."""
         if not self.held:
             return
         self.held = False
@@ -164,6 +166,8 @@ class RunFolder:
         if info and info.get("token") == self.token:
             try:
                 (self.path / LOCK).unlink()
+                if self.created and not any(self.path.iterdir()):
+                    self.path.rmdir()
             except OSError:
                 pass
 
@@ -255,8 +259,10 @@ def remove_outputs(folder: str | Path) -> list[Path]:
 
 def open_run_folder(folder: str | Path, *, resume: bool = False, overwrite: bool = False, log=None) -> RunFolder:
     """The checks and the lock of a run's output folder (module docstring), before any work starts."""
+    created = not Path(folder).exists()
     folder = check_writable(folder)
     held = take_lock(folder, log)
+    held.created = created
     try:
         before = earlier_run(folder)
         if before and not resume:

@@ -94,7 +94,7 @@ def read_checkpoint(path: str | Path) -> dict:
     try:
         ck = torch.load(path, map_location="cpu", weights_only=False)
     except Exception as e:  # zip reader, unpickler, EOF: a truncated or overwritten file
-        why = next((ln.strip() for ln in str(e).splitlines() if ln.strip()), type(e).__name__)
+        why = next((ln.strip() for ln in str(e).splitlines() if ln.strip()), type(e).__name__).split(". ")[0]
         raise CheckpointError(f"{path}: cannot be read, it is truncated or corrupt ({type(e).__name__}: "
                               f"{why[:120]})") from None
     missing = [k for k in ("config", "params") if not isinstance(ck, dict) or k not in ck]
@@ -822,7 +822,7 @@ class Trainer:
             path = Path(path)
             ck = read_checkpoint(path)
         else:
-            found = resumable_checkpoint(self.out, log=self.log) if self.out is not None else None
+            found = resumable_checkpoint(self.out) if self.out is not None else None  # its note: once per process
             if found is None:
                 raise CheckpointError(f"{self.out / CHECKPOINT if self.out else 'no output folder'}: "
                                       "no checkpoint to resume from")

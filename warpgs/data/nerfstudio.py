@@ -156,11 +156,12 @@ def _check_size(actual: tuple[int, int], w: float, h: float, downscale: int | No
     for d in dict.fromkeys([downscale or 1, 1, 2, 4, 8]):
         if abs(actual[0] - w / d) <= 1.0 and abs(actual[1] - h / d) <= 1.0:
             return
-    folder = _folder_factor(path)
-    where = f"in {path.parent.name}/" if folder == downscale else f"at downscale {downscale}"
+    folder = _folder_factor(path)  # a file in images_4/ is expected at a quarter, whatever its size suggests
+    d = folder or downscale
+    where = f"in {path.parent.name}/" if folder else f"at downscale {d}"
     raise SceneError(
         f"{path}: image is {actual[0]}x{actual[1]} but {source} gives {w:g}x{h:g}"
-        + (f" (expected {int(w // downscale)}x{int(h // downscale)} {where})" if downscale and downscale > 1 else "")
+        + (f" (expected {int(w // d)}x{int(h // d)} {where})" if d and d > 1 else "")
         + "; mixed image sizes or a wrong downscale folder"
     )
 
@@ -255,9 +256,8 @@ def load_nerfstudio(
             w, h = W_img * (downscale or 1), H_img * (downscale or 1)
         w, h = number(w, "w", src), number(h, "h", src)
         check_intrinsics(src, {"w": w, "h": h})
-        # the image's own scale relative to the intrinsics (nerfstudio floors w/d when downscaling): the
-        # folder's (images_4: 4) when the file lies in one, else what the sizes say
-        d = downscale if downscale is not None else (_folder_factor(img_path) or max(1, round(w / max(W_img, 1))))
+        # the image's own scale relative to the intrinsics (nerfstudio floors w/d when downscaling)
+        d = downscale if downscale is not None else max(1, round(w / max(W_img, 1)))
         _check_size((W_img, H_img), w, h, d, img_path, f"{tf.name} (w, h)")
         sizes.setdefault((W_img, H_img), str(img_path))
         if len(sizes) > 1 and "w" not in fr:  # frames sharing one set of intrinsics share one size

@@ -17,10 +17,14 @@ Examples:
     python -m warpgs.pipelines.sparse --method baseline --data blender --compact   # fewest Gaussians
 
 Config layers (later wins): configs/<method>.yaml, configs/<dataset>.yaml, --config files, --set
-key=value, explicit flags. With --resume the checkpoint's config replaces the first two.
+key=value, explicit flags. With --resume the checkpoint's config replaces the first two. Every layer is
+checked on its own (keys, types, ranges), so a bad value is named with the file, --set or flag it came from.
 
-The output folder gets config.yaml, checkpoint.pt (every train.checkpoint_every steps and on Ctrl-C),
-metrics.json, test/NNN_<view>.png (render | ground truth) and point_cloud.ply (3D-GS layout).
+The output folder gets config.yaml, checkpoint.pt (every train.checkpoint_every steps and on Ctrl-C; the
+one it replaced stays as checkpoint.prev.pt, which --resume falls back to when checkpoint.pt cannot be
+read), metrics.json, test/NNN_<view>.png (render | ground truth) and point_cloud.ply (3D-GS layout). A run
+locks its folder (.warpgs.lock; warpgs/runfolder.py): a second run into it stops, and a folder holding an
+earlier run needs --resume or --overwrite. Bad input of any kind ends in one line, ``error: ...``, exit 2.
 """
 
 from __future__ import annotations
