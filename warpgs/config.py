@@ -9,7 +9,11 @@ A run's config is built in layers, later ones winning:
 5. ``--set section.key=value`` overrides (values parsed as YAML: ``--set strategy.max_gaussians=20000``);
 6. explicit flags (``--iterations``, ``--views``, ``--device``, ...).
 
-Unknown keys are errors that list the valid ones. The config used is written to the output folder.
+Unknown keys are errors that list the valid ones, and so are values of the wrong type or outside a field's
+range: each option class lists its ranges in a ``LIMITS`` table next to its fields (learning rates > 0,
+iterations >= 1, weights >= 0, fractions in [0, 1], the words a field takes; ``warpgs.configio``). Every
+layer is checked on its own, so the error names the file, ``--set`` or flag a bad value came from, even
+where a later layer sets the key again. The config used is written to the output folder.
 """
 
 from __future__ import annotations

@@ -101,7 +101,7 @@ def one_line(message) -> str:
     do (the full message, with every place searched, stays in metrics.json)."""
     text = str(message)
     if text.startswith("LPIPS needs the AlexNet backbone weights"):
-        return f"no AlexNet weights: download {ALEXNET_FILE} and set {LPIPS_ENV} to it (README: What needs weights)"
+        return f"no AlexNet weights; download {ALEXNET_FILE} and set {LPIPS_ENV} to it (see README)"
     first = next((ln.strip() for ln in text.splitlines() if ln.strip()), "")
     return first if len(first) <= 160 else first[:157].rstrip() + "..."
 

@@ -105,9 +105,9 @@ def read_checkpoint(path: str | Path) -> dict:
 
 def resumable_checkpoint(folder: str | Path, log=None) -> tuple[Path, dict] | None:
     """The checkpoint to resume ``folder``'s run from, read: ``checkpoint.pt``, or when that cannot be read
-    (or is missing) the previous one, ``checkpoint.prev.pt``, with a one-line note through ``log``
-    (printed once per process). None when the folder holds neither; ``CheckpointError`` when no file there
-    can be read."""
+    (or is missing) the previous one, ``checkpoint.prev.pt``, with a one-line note through ``log`` (default
+    ``warn_once``: once per process). None when the folder holds neither; ``CheckpointError`` when no file
+    there can be read."""
     current = Path(folder) / CHECKPOINT
     prev = previous_checkpoint(current)
     if not current.is_file() and not prev.is_file():

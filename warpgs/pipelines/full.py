@@ -117,8 +117,8 @@ class FullMethod(Method):
                 self._lpips = losses.LPIPS(cfg.eval.lpips_weights).to(trainer.device)
             except Exception as e:  # LPIPSUnavailable or a broken install
                 self.lpips_missing = losses.one_line(e)
-                warn_once(f"warpgs: LPIPS unavailable ({self.lpips_missing}): pseudo views train with L1 (the paper's "
-                          "ablation) and LPIPS is not reported", key="lpips-missing")
+                warn_once(f"warpgs: pseudo views train with L1 (the paper's ablation), LPIPS is not reported: "
+                          f"{self.lpips_missing}", key="lpips-missing")
 
     @property
     def pseudo_loss_used(self) -> str:

@@ -262,8 +262,9 @@ def run_method(method: str, cfg, scene, out: Path, resume: bool, baseline_metric
         print("\n" + diverged_message(method, e, out), file=sys.stderr)
         trainer.stopped_early = {"reason": "diverged", "step": e.step, "cause": e.cause}
     except CheckpointError as e:
+        full = "space" in str(e).lower()  # ENOSPC, EDQUOT
         print(f"error: {e}" + ("" if "cannot write" not in str(e) else
-                               f"; free space, then continue with {resume_hint}"), file=sys.stderr)
+                               f"; {'free space, then ' if full else ''}continue with {resume_hint}"), file=sys.stderr)
         raise RunStopped(2) from e
     except OSError as e:
         print(f"error: {out}: cannot write {e.filename or 'the run folder'}: {e.strerror or e}", file=sys.stderr)
@@ -272,8 +273,8 @@ def run_method(method: str, cfg, scene, out: Path, resume: bool, baseline_metric
         metrics = trainer.finish(baseline_metrics)
     except (CheckpointError, OSError) as e:
         what = str(e) if isinstance(e, CheckpointError) else f"cannot write {e.filename or out}: {e.strerror or e}"
-        print(f"error: {what}; the outputs in {out} are incomplete (free space, then run again with {resume_hint})",
-              file=sys.stderr)
+        fix = "free space, then " if "space" in what.lower() else ""
+        print(f"error: {what}; the outputs in {out} are incomplete ({fix}run again with {resume_hint})", file=sys.stderr)
         raise RunStopped(2) from e
     print_metrics(metrics, out)
     return metrics
