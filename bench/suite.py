@@ -89,6 +89,7 @@ def eval_every(run: Run) -> int:
 def command(run: Run, device: str, work: Path, data_root: str | None) -> list[str]:
     cmd = [sys.executable, "-m", "warpgs.pipelines.sparse", "--method", run.method, "--data", run.data,
            "--iterations", str(run.iterations), "--device", device, "--out", str(work / run.name), "--no-progress",
+           "--overwrite",  # the suite decides what to reuse (execute): a run it starts replaces what its folder holds
            "--set", f"train.eval_every={eval_every(run)}"]
     if data_root and run.data != "synthetic":
         cmd += ["--data-root", data_root]

@@ -9,7 +9,7 @@ PKG = Path(__file__).resolve().parents[1] / "warpgs"
 
 # lower layers may not import higher ones; one layer may import within itself
 LAYERS = [
-    ["_warp", "kernels", "configio", "geometry", "guard", "losses", "ply", "viz"],
+    ["console", "runfolder", "_warp", "kernels", "configio", "geometry", "guard", "losses", "ply", "viz"],
     ["render", "metrics"],
     ["model", "data"],
     ["strategy"],

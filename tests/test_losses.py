@@ -170,5 +170,6 @@ def test_lpips_unavailable_message_fits_one_line(tmp_path):
     with pytest.raises(losses.LPIPSUnavailable) as e:
         losses.LPIPS(tmp_path / "none.pth")
     line = losses.one_line(e.value)
-    assert "\n" not in line and "alexnet-owt-7be5be79.pth" in line and "Download" in line
+    assert "\n" not in line and "alexnet-owt-7be5be79.pth" in line and "download" in line
+    assert "WARPGS_LPIPS_WEIGHTS" in line and len(line) < 120
     assert str(tmp_path) not in line and "looked at" not in line

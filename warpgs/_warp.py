@@ -12,14 +12,30 @@ try:  # the ctypes descriptor Warp passes to kernels; private, so fall back to t
 except ImportError:  # pragma: no cover - other Warp versions
     array_t = None
 
+from warpgs.console import filtered_stderr
+
 # Warp's start-up banner and per-module load lines are noise for users; keep warnings (errors only on
-# machines without CUDA, where Warp warns that no driver was found).
+# machines without CUDA).
 wp.config.log_level = wp.LOG_WARNING if torch.cuda.is_available() else wp.LOG_ERROR
+# printed by Warp's native start-up on every machine without an NVIDIA driver
+NO_DRIVER_WARNING = "could not find or load the nvidia cuda driver"
 
 
 @functools.cache
 def _init() -> None:
-    wp.init()
+    """``wp.init()``, once. Where torch sees no CUDA device, Warp's native line saying that it found no
+    CUDA driver is dropped: such a machine runs on the CPU anyway (a run that asks for cuda there stops
+    with its own error), so the warning does not apply. Everything else Warp prints stays."""
+    if torch.cuda.is_available():
+        wp.init()
+        return
+    with filtered_stderr([NO_DRIVER_WARNING]):
+        wp.init()
+
+
+def init() -> None:
+    """Initialises Warp (``_init``); every warpgs module calls this rather than ``wp.init``."""
+    _init()
 
 
 def device_of(t: torch.Tensor) -> str:
@@ -100,6 +116,7 @@ def struct_arg(struct, **fields):
 
 
 def launch(kernel, dim, inputs, device: str, stream=None) -> None:
+    _init()
     if (isinstance(dim, int) and dim == 0) or (not isinstance(dim, int) and 0 in dim):
         return
     wp.launch(kernel, dim=dim, inputs=inputs, device=device, stream=stream)

@@ -9,7 +9,11 @@ A run's config is built in layers, later ones winning:
 5. ``--set section.key=value`` overrides (values parsed as YAML: ``--set strategy.max_gaussians=20000``);
 6. explicit flags (``--iterations``, ``--views``, ``--device``, ...).
 
-Unknown keys are errors that list the valid ones. The config used is written to the output folder.
+Unknown keys are errors that list the valid ones, and so are values of the wrong type or outside a field's
+range: each option class lists its ranges in a ``LIMITS`` table next to its fields (learning rates > 0,
+iterations >= 1, weights >= 0, fractions in [0, 1], the words a field takes; ``warpgs.configio``). Every
+layer is checked on its own, so the error names the file, ``--set`` or flag a bad value came from, even
+where a later layer sets the key again. The config used is written to the output folder.
 """
 
 from __future__ import annotations
@@ -21,7 +25,7 @@ from pathlib import Path
 import yaml
 
 from warpgs.configio import (  # noqa: F401  (re-exported: the config API in one place)
-    CONFIG_DIR, REPO_ROOT, ConfigError, apply_values, merge, parse_override, read_yaml)
+    CONFIG_DIR, REPO_ROOT, ConfigError, apply_values, check_limits, merge, parse_override, read_yaml)
 from warpgs.densify import DensifyConfig
 from warpgs.points import GeometryConfig
 from warpgs.pseudo.views import PseudoConfig
@@ -37,6 +41,8 @@ class DataConfig:
     root: str | None = None  # dataset root (replaces the dataset config's roots)
     options: dict = field(default_factory=dict)  # loader keyword arguments
 
+    LIMITS = {"views": ">= 1 or {all}", "downscale": ">= 1"}
+
 
 @dataclass
 class ModelConfig:
@@ -50,6 +56,11 @@ class ModelConfig:
     init_ply: str | None = None  # point cloud (any vertex PLY) for init: ply
     init_opacity: float = 0.1
     init_scale: float = 1.0  # x the 3-nearest-neighbour distance
+    drop_invalid: bool = False  # init ply: drop points with non-finite values (one warning) instead of refusing the file
+
+    LIMITS = {"sh_degree": "[0, 3]", "init": "{sfm, stereo, sfm+stereo, box, hull, frustum, points, ply}",
+              "init_num": ">= 1", "init_random": ">= 0", "init_depth": "> 0", "init_opacity": "(0, 1)",
+              "init_scale": "> 0"}
 
 
 @dataclass
@@ -65,6 +76,10 @@ class OptimConfig:
     eps: float = 1e-15
     scene_scale: float | None = None  # None: 1.1 x the training cameras' largest distance from their centre
 
+    LIMITS = {"means_lr": "> 0", "means_lr_final": "> 0", "means_lr_decay_steps": ">= 1", "scales_lr": "> 0",
+              "quats_lr": "> 0", "opacities_lr": "> 0", "sh0_lr": "> 0", "shN_lr": "> 0", "eps": "> 0",
+              "scene_scale": "> 0"}
+
 
 @dataclass
 class LossConfig:
@@ -73,6 +88,9 @@ class LossConfig:
     depth_weight: float = 0.0  # Pearson depth term against the views' depth prior (0 = off)
     depth_prior: str = "scene"  # scene: Camera.depth from the loader
     alpha_weight: float = 0.0  # L1 between rendered and input alpha, for inputs with an alpha channel (0 = off)
+
+    LIMITS = {"l1_weight": ">= 0", "ssim_weight": ">= 0", "depth_weight": ">= 0", "depth_prior": "{scene}",
+              "alpha_weight": ">= 0"}
 
 
 @dataclass
@@ -107,12 +125,20 @@ class TrainConfig:
     cpu_threads: int = 1  # torch threads on the CPU (0: torch's default); Warp's CPU kernels use one anyway
     progress: bool = True
 
+    LIMITS = {"iterations": ">= 1", "seed": ">= 0", "sh_degree_interval": ">= 0", "checkpoint_every": ">= 0",
+              "eval_every": ">= 0", "background": "[0, 1]", "drop_rate": "[0, 1)", "max_nan_steps": ">= 1",
+              "explode_factor": ">= 0", "explode_window": ">= 1", "explode_patience": ">= 1", "snapshot_every": ">= 0",
+              "max_recoveries": ">= 0", "recovery_lr_factor": "(0, 1]", "cpu_threads": ">= 0",
+              "far_field": "{none, elevation, sky}", "far_field_bins": ">= 1"}
+
 
 @dataclass
 class EvalConfig:
     lpips_weights: str | None = None  # AlexNet weights; None: $WARPGS_LPIPS_WEIGHTS or the default location
     save_images: bool = True
     fps_repeats: int = 3
+
+    LIMITS = {"fps_repeats": ">= 1"}
 
 
 @dataclass
@@ -144,6 +170,12 @@ class FullConfig:
     far_field: str | None = None  # the far field for this method (train.far_field: none | elevation); None: train's
     flythrough_frames: int = 24  # frames per trajectory in flythrough.gif
 
+    LIMITS = {"cycles": ">= 0", "baseline_fraction": "[0, 1)", "pseudo_weight": ">= 0", "lpips_weight": ">= 0",
+              "ssim_weight": ">= 0", "depth_weight": ">= 0", "input_depth_weight": ">= 0",
+              "pseudo_loss": "{lpips, l1}", "guidance": "{warped, render}", "stereo_sources": "{inputs, all}",
+              "init_opacity": "(0, 1)", "max_new": ">= 0", "pseudo_mask": "{seen, reliable}", "growth_budget": ">= 0",
+              "drop_rate": "[0, 1)", "far_field": "{none, elevation, sky}", "flythrough_frames": ">= 0"}
+
 
 IMPORTANCE_VIEWS = ("train", "virtual", "pseudo")
 
@@ -169,23 +201,17 @@ class CompactConfig:
     report_test: bool = True  # record each point's test PSNR (reported only; never used to choose)
     seed: int = 0
 
+    LIMITS = {"importance": "{weight, weight_volume}", "volume_power": ">= 0",
+              "importance_views": "{" + ", ".join(IMPORTANCE_VIEWS) + "}", "virtual_frames": ">= 0",
+              "prune_at": "(0, 1)", "prune_ratio": "[0, 1)", "stop_densify_at": "(0, 1]", "tolerance_db": ">= 0",
+              "ratios": "(0, 1)", "finetune_steps": ">= 0", "seed": ">= 0"}
+
 
 def check_compact_config(c: CompactConfig) -> CompactConfig:
-    if c.importance not in ("weight", "weight_volume"):
-        raise ValueError(f"compact.importance={c.importance!r}: expected weight or weight_volume")
-    bad = [v for v in c.importance_views if v not in IMPORTANCE_VIEWS]
-    if bad or not c.importance_views:
-        raise ValueError(f"compact.importance_views={c.importance_views!r}: a non-empty list of {', '.join(IMPORTANCE_VIEWS)}")
-    for name in ("prune_at", "ratios"):
-        vals = getattr(c, name)
-        if any(not isinstance(v, (int, float)) or not 0 < float(v) < 1 for v in vals):
-            raise ValueError(f"compact.{name}={vals!r}: values must lie strictly between 0 and 1")
-    if not 0 <= c.prune_ratio < 1:
-        raise ValueError(f"compact.prune_ratio={c.prune_ratio}: expected 0 <= ratio < 1")
-    if c.tolerance_db < 0 or c.finetune_steps < 0:
-        raise ValueError("compact: tolerance_db and finetune_steps must be >= 0")
-    if c.stop_densify_at is not None and not 0 < c.stop_densify_at <= 1:
-        raise ValueError(f"compact.stop_densify_at={c.stop_densify_at}: expected a fraction in (0, 1] or null")
+    """The ranges of ``CompactConfig.LIMITS`` (for options built in code) and a non-empty list of views."""
+    check_limits(c, "compact mode's options", "compact.")
+    if not c.importance_views:
+        raise ConfigError("compact.importance_views is empty: a non-empty list of " + ", ".join(IMPORTANCE_VIEWS))
     return c
 
 
@@ -238,24 +264,30 @@ def upgrade(layer: dict) -> dict:
             layer = merge(layer, value)
     return layer
 
-def build_config(layers: list[dict]) -> Config:
-    """Defaults, then each layer in order (nested dicts, later ones winning); every key is checked."""
-    cfg = Config()
+
+def build_config(layers: list) -> Config:
+    """Defaults, then each layer in order (nested dicts, later ones winning). Every layer is checked on
+    its own (keys, types, ``LIMITS`` ranges), so a bad value is an error even where a later layer sets the
+    key again, and the error names the layer: each is a dict or a ``(where, dict)`` pair."""
     merged: dict = {}
-    for layer in layers:
-        merged = merge(merged, upgrade(layer))
-    apply_values(cfg, merged, "config")
+    for k, layer in enumerate(layers):
+        where, values = layer if isinstance(layer, tuple) else (f"config layer {k + 1}", layer)
+        values = upgrade(values)
+        apply_values(Config(), values, where)
+        merged = merge(merged, values)
+    cfg = Config()
+    apply_values(cfg, merged, "the merged config")
     return cfg
 
 
 def load_config(files: list[str | Path] = (), overrides: list[str] = ()) -> Config:
     """Defaults, then ``files`` in order, then ``key=value`` overrides."""
-    layers = [read_yaml(f) for f in files] + [parse_override(o) for o in overrides]
+    layers = [(str(f), read_yaml(f)) for f in files] + [(f"--set {o}", parse_override(o)) for o in overrides]
     return build_config(layers)
 
 
-def config_from_dict(d: dict) -> Config:
-    return build_config([d])
+def config_from_dict(d: dict, where: str = "a saved config") -> Config:
+    return build_config([(where, d)])
 
 
 def save_config(cfg: Config, path: str | Path) -> None:

@@ -6,6 +6,9 @@ the run's tree on top of it."""
 from __future__ import annotations
 
 import dataclasses
+import functools
+import math
+import re
 import types
 import typing
 from pathlib import Path
@@ -60,26 +63,131 @@ def _type_ok(value, tp) -> tuple[bool, Any]:
     return isinstance(value, base), value
 
 
-def apply_values(obj, values: dict, where: str) -> None:
+def type_name(tp) -> str:
+    """``int``, ``float | None``, ``int | str | None``: an annotation as a user reads it."""
+    if typing.get_origin(tp) in (typing.Union, types.UnionType):
+        return " | ".join(type_name(a) for a in typing.get_args(tp))
+    if tp is type(None):
+        return "None"
+    return getattr(typing.get_origin(tp) or tp, "__name__", str(tp))
+
+
+# ----------------------------------------------------------------------------------------------
+# ranges: each option class lists the ranges of its fields in a class attribute ``LIMITS`` (a dict of
+# field name -> rule, next to the fields), and ``apply_values`` checks every value it sets against it.
+# A rule is one or more alternatives joined by " or ": a bound ("> 0", ">= 1", "< 1", "<= 100"), an
+# interval ("[0, 1]", "[0, 1)", "(0, 1]", "(0, 1)") or a set of words ("{weight, weight_volume}").
+# None passes (where the type allows it) and so do booleans; numbers must be finite and keep one of the
+# rule's bounds, strings must be one of its words (a rule without words leaves strings to the type check);
+# a list's items are checked one by one.
+
+_BOUND = re.compile(r"^(>=|>|<=|<)\s*(\S+)$")
+_INTERVAL = re.compile(r"^([\[(])\s*([^,\s]+)\s*,\s*([^\])\s]+)\s*([\])])$")
+
+
+@functools.lru_cache(maxsize=None)
+def _rule(rule: str) -> tuple[list, frozenset | None]:
+    """A rule's numeric tests (value -> bool) and its words (None: it has none)."""
+    tests, words = [], None
+    for alt in (a.strip() for a in rule.split(" or ")):
+        m, n = _BOUND.match(alt), _INTERVAL.match(alt)
+        if alt.startswith("{") and alt.endswith("}"):
+            words = (words or frozenset()) | frozenset(w.strip() for w in alt[1:-1].split(",") if w.strip())
+        elif m:
+            op, b = m.group(1), float(m.group(2))
+            tests.append({">": lambda v, b=b: v > b, ">=": lambda v, b=b: v >= b,
+                          "<": lambda v, b=b: v < b, "<=": lambda v, b=b: v <= b}[op])
+        elif n:
+            lo, hi, closed_lo, closed_hi = float(n.group(2)), float(n.group(3)), n.group(1) == "[", n.group(4) == "]"
+            tests.append(lambda v, lo=lo, hi=hi, cl=closed_lo, ch=closed_hi:
+                         (v >= lo if cl else v > lo) and (v <= hi if ch else v < hi))
+        else:
+            raise ValueError(f"range rule {rule!r}: {alt!r} is not '> x', '>= x', '< x', '<= x', an interval like "
+                             "'[0, 1)' or a set of words like '{a, b}'")
+    return tests, words
+
+
+def _describe(rule: str) -> str:
+    parts = []
+    for alt in (a.strip() for a in rule.split(" or ")):
+        if alt.startswith("{"):
+            parts.append("one of " + ", ".join(w.strip() for w in alt[1:-1].split(",")))
+        else:
+            parts.append(alt if alt[0] in "<>" else f"in {alt}")
+    return "must be " + " or ".join(parts)
+
+
+def limit_error(value, rule: str) -> str | None:
+    """Why ``value`` breaks ``rule`` (a ``LIMITS`` rule), or None when it keeps it."""
+    tests, words = _rule(rule)
+    for v in value if isinstance(value, (list, tuple)) else [value]:
+        if v is None or isinstance(v, bool):
+            continue
+        if isinstance(v, str):
+            if words is not None and v not in words:
+                return _describe(rule)
+        elif isinstance(v, (int, float)):
+            if not math.isfinite(v):
+                return "must be a finite number"
+            if not any(t(v) for t in tests):
+                return _describe(rule)
+    return None
+
+
+def limits_of(cls) -> dict:
+    """The ``LIMITS`` of an option class (its own; those of a base class underneath)."""
+    out: dict = {}
+    for klass in reversed(cls.__mro__):
+        out.update(klass.__dict__.get("LIMITS", {}))
+    return out
+
+
+def check_limits(obj, where: str = "config", prefix: str = "") -> None:
+    """Checks every field of the dataclass ``obj`` (recursing into nested ones) against its class's
+    ``LIMITS``; ``ConfigError`` names the first key out of range. For options built in code, which
+    ``apply_values`` never saw."""
+    lim = limits_of(type(obj))
+    for f in dataclasses.fields(obj):
+        value = getattr(obj, f.name)
+        if dataclasses.is_dataclass(value):
+            check_limits(value, where, f"{prefix}{f.name}.")
+        elif f.name in lim:
+            why = limit_error(value, lim[f.name])
+            if why:
+                raise ConfigError(f"{prefix}{f.name} = {value!r} (from {where}): {why}")
+
+
+def apply_values(obj, values: dict, where: str, prefix: str = "") -> None:
     """Sets the fields of the dataclass ``obj`` (recursing into nested dataclasses) from ``values``,
-    coerced to their annotated types; unknown keys and wrong types raise ``ConfigError`` naming
-    ``where``. The one reader of every config section (training, pseudo views, densification)."""
+    coerced to their annotated types and checked against the class's ``LIMITS``; unknown keys, wrong
+    types and values out of range raise ``ConfigError`` naming the key and ``where`` the values came from
+    (a file, ``--set key=value``, a flag). The one reader of every config section (training, pseudo
+    views, densification). ``prefix``: the dotted path of ``obj`` in the whole config."""
     if not isinstance(values, dict):
-        raise ConfigError(f"{where}: expected a mapping, got {type(values).__name__}")
+        raise ConfigError(f"{prefix.rstrip('.') or 'config'} (from {where}): expected a mapping, got "
+                          f"{type(values).__name__}")
     hints = typing.get_type_hints(type(obj))
     names = [f.name for f in dataclasses.fields(obj)]
+    lim = limits_of(type(obj))
     for key, value in values.items():
         if key not in names:
-            raise ConfigError(f"{where}: unknown key {key!r}; valid keys: {', '.join(names)}")
+            raise ConfigError(f"{prefix.rstrip('.') or 'config'} (from {where}): unknown key {key!r}; "
+                              f"valid keys: {', '.join(names)}")
         cur = getattr(obj, key)
         if dataclasses.is_dataclass(cur):
             if not isinstance(value, dict):
-                raise ConfigError(f"{where}.{key}: expected a mapping of {type(cur).__name__} fields, got {value!r}")
-            apply_values(cur, value, f"{where}.{key}")
+                raise ConfigError(f"{prefix}{key} (from {where}): expected a mapping of {type(cur).__name__} "
+                                  f"fields, got {value!r}")
+            apply_values(cur, value, where, f"{prefix}{key}.")
             continue
         ok, v = _type_ok(value, hints[key])
         if not ok:
-            raise ConfigError(f"{where}.{key}: {value!r} is not a valid {hints[key]}")
+            raise ConfigError(f"{prefix}{key} = {value!r} (from {where}): not a valid {type_name(hints[key])}")
+        if any(isinstance(x, float) and not math.isfinite(x) for x in (v if isinstance(v, list) else [v])):
+            raise ConfigError(f"{prefix}{key} = {value!r} (from {where}): must be a finite number")
+        why = limit_error(v, lim[key]) if key in lim else None
+        if why:
+            raise ConfigError(f"{prefix}{key} = {v!r} (from {where}): {why}")
         setattr(obj, key, v)
 
 
@@ -93,14 +201,21 @@ def read_yaml(path: str | Path, _seen=None) -> dict:
         raise ConfigError(f"{path}: 'base' chain loops")
     seen.add(path.resolve())
     try:
-        data = yaml.safe_load(path.read_text()) or {}
+        data = yaml.safe_load(path.read_text(encoding="utf-8")) or {}
     except yaml.YAMLError as e:
-        raise ConfigError(f"{path}: cannot parse YAML ({e})") from e
+        raise ConfigError(f"{path}: cannot parse YAML ({' '.join(str(e).split())})") from None
+    except UnicodeDecodeError as e:
+        raise ConfigError(f"{path}: not UTF-8 text at byte {e.start}") from None
     if not isinstance(data, dict):
         raise ConfigError(f"{path}: expected a mapping at the top level")
     base = data.pop("base", None)
     if base:
-        data = merge(read_yaml(path.parent / base, seen), data)
+        if not isinstance(base, str):
+            raise ConfigError(f"{path}: base = {base!r}: expected the name of another config file")
+        try:
+            data = merge(read_yaml(path.parent / base, seen), data)
+        except ConfigError as e:
+            raise ConfigError(f"{path}: base: {e}") from None
     return data
 
 
@@ -128,4 +243,5 @@ def parse_override(text: str) -> dict:
     return out
 
 
-__all__ = ["CONFIG_DIR", "REPO_ROOT", "ConfigError", "apply_values", "merge", "parse_override", "read_yaml"]
+__all__ = ["CONFIG_DIR", "REPO_ROOT", "ConfigError", "apply_values", "check_limits", "limit_error", "limits_of", "merge",
+           "parse_override", "read_yaml", "type_name"]

@@ -96,14 +96,14 @@ def _missing_weights_message(looked: list[Path]) -> str:
             f"(or anywhere, and set {LPIPS_ENV}=/path/to/{ALEXNET_FILE}).")
 
 
-def one_line(message: str) -> str:
-    """An LPIPSUnavailable message on one line for summaries: what is missing and what to do (without
-    the list of places searched)."""
-    lines = [ln.strip() for ln in str(message).splitlines() if ln.strip()]
-    if not lines:
-        return ""
-    head = lines[0].removesuffix("warpgs looked at:").strip()
-    return head if len(lines) == 1 else f"{head} {lines[-1]}"
+def one_line(message) -> str:
+    """An LPIPSUnavailable message as one short line for summaries: what is missing and the one thing to
+    do (the full message, with every place searched, stays in metrics.json)."""
+    text = str(message)
+    if text.startswith("LPIPS needs the AlexNet backbone weights"):
+        return f"no AlexNet weights; download {ALEXNET_FILE} and set {LPIPS_ENV} to it (see README)"
+    first = next((ln.strip() for ln in text.splitlines() if ln.strip()), "")
+    return first if len(first) <= 160 else first[:157].rstrip() + "..."
 
 
 def _alexnet_features() -> nn.Sequential:

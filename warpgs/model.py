@@ -195,8 +195,10 @@ class GaussianModel(nn.Module):
         return cls.from_points(pts, rgb, **kw)
 
     @classmethod
-    def load_ply(cls, path: str | Path, device=None) -> "GaussianModel":
-        """Reads a 3D-GS PLY (the layout ``save_ply`` writes, and what 3D-GS / gsplat export)."""
+    def load_ply(cls, path: str | Path, device=None, drop_invalid: bool = False) -> "GaussianModel":
+        """Reads a 3D-GS PLY (the layout ``save_ply`` writes, and what 3D-GS / gsplat export). Gaussians with
+        non-finite values make it a ``ValueError`` with their count, or with ``drop_invalid`` are dropped
+        with one warning line."""
         v = ply.read_vertices(path)
         need = [k for k in ply.gaussian_fields(0) if k not in ("nx", "ny", "nz")]  # normals are not read
         missing = [k for k in need if k not in v]
@@ -210,6 +212,7 @@ class GaussianModel(nn.Module):
         degree = int(round(math.sqrt(per_channel + 1))) - 1
         if num_sh_coeffs(degree) - 1 != per_channel or degree > 3:
             raise ValueError(f"{path}: {per_channel} f_rest coefficients per channel match no SH degree 0..3")
+        v = ply.keep_finite(v, need + [f"f_rest_{i}" for i in range(n_rest)], path, drop_invalid)
 
         def col(*names):
             return torch.from_numpy(np.stack([np.asarray(v[k], np.float32) for k in names], axis=1))
@@ -290,12 +293,16 @@ class GaussianModel(nn.Module):
         return ply.write_vertices(path, data.view(ply.float_fields(ply.gaussian_fields(rest.shape[1]))).reshape(n))
 
 
-def read_point_cloud(path: str | Path) -> tuple[np.ndarray, np.ndarray | None]:
+def read_point_cloud(path: str | Path, drop_invalid: bool = False) -> tuple[np.ndarray, np.ndarray | None]:
     """Points (N, 3) float32 and colours (N, 3) in [0, 1] (or None) from any vertex PLY: plain
-    ``red/green/blue`` (8-bit or float) or a 3D-GS file's DC colour."""
+    ``red/green/blue`` (8-bit or float) or a 3D-GS file's DC colour. Points with non-finite coordinates or
+    colours are refused with their count, or dropped with one warning line (``drop_invalid``)."""
     v = ply.read_vertices(path)
     if not all(k in v for k in ("x", "y", "z")):
         raise ValueError(f"{path}: PLY vertices have no x, y, z")
+    colour_fields = ["red", "green", "blue", "r", "g", "b", "diffuse_red", "diffuse_green", "diffuse_blue",
+                     "f_dc_0", "f_dc_1", "f_dc_2"]
+    v = ply.keep_finite(v, ["x", "y", "z"] + colour_fields, path, drop_invalid, what="points")
     xyz = np.stack([v["x"], v["y"], v["z"]], 1).astype(np.float32)
     rgb = None
     for names in (("red", "green", "blue"), ("r", "g", "b"), ("diffuse_red", "diffuse_green", "diffuse_blue")):

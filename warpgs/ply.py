@@ -122,4 +122,29 @@ def read_vertices(path: str | Path) -> dict[str, np.ndarray]:
     raise ValueError(f"{path}: PLY file has no vertex element")
 
 
-__all__ = ["float_fields", "gaussian_fields", "header", "read_vertices", "write_vertices"]
+def keep_finite(v: dict[str, np.ndarray], names: list[str], path, drop: bool = False,
+                what: str = "Gaussians") -> dict[str, np.ndarray]:
+    """The rows of the vertex columns ``v`` whose ``names`` columns are all finite. Rows that are not make
+    a ``ValueError`` naming the file, their count and the columns, unless ``drop``: then they are dropped
+    with one warning line (``--drop-invalid``). A file with no finite row at all is an error either way."""
+    names = [k for k in names if k in v and np.asarray(v[k]).dtype.kind == "f"]
+    if not names:
+        return v
+    bad = ~np.all(np.stack([np.isfinite(v[k]) for k in names]), axis=0)
+    n_bad, n = int(bad.sum()), len(bad)
+    if not n_bad:
+        return v
+    cols = [k for k in names if not np.all(np.isfinite(v[k]))]
+    shown = ", ".join(cols[:6]) + (f" and {len(cols) - 6} more" if len(cols) > 6 else "")
+    if n_bad == n:
+        raise ValueError(f"{path}: all {n} {what} have non-finite values (NaN or inf) in {shown}; nothing usable")
+    if not drop:
+        raise ValueError(f"{path}: {n_bad} of {n} {what} have non-finite values (NaN or inf) in {shown}; "
+                         "--drop-invalid drops them")
+    from warpgs.console import warn_once
+
+    warn_once(f"warpgs: {path}: dropped {n_bad} of {n} {what} with non-finite values in {shown} (--drop-invalid)")
+    return {k: np.asarray(a)[~bad] for k, a in v.items()}
+
+
+__all__ = ["float_fields", "gaussian_fields", "header", "keep_finite", "read_vertices", "write_vertices"]

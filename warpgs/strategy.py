@@ -53,6 +53,11 @@ class DefaultStrategy:
     unseen_min_weight: float = 0.05  # prune_unseen keeps Gaussians with at least this total weight (pixels)
     verbose: bool = False
 
+    LIMITS = {"prune_opa": "[0, 1]", "grow_grad2d": ">= 0", "grow_scale3d": ">= 0", "grow_scale2d": ">= 0",
+              "prune_scale3d": ">= 0", "prune_scale2d": ">= 0", "refine_scale2d_stop_iter": ">= 0",
+              "refine_start_iter": ">= 0", "refine_stop_iter": ">= 0", "reset_every": ">= 1", "refine_every": ">= 1",
+              "pause_refine_after_reset": ">= 0", "max_gaussians": ">= 0", "unseen_min_weight": ">= 0"}
+
     # ------------------------------------------------------------------------------------------
 
     def initialize_state(self, n: int, device) -> dict[str, torch.Tensor]:

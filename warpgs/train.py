@@ -24,9 +24,12 @@ one). On the CPU, Warp's kernels run on one thread, so two runs with one seed gi
 on CUDA the rasterizer sums gradients in fixed point and cuDNN is set deterministic, for the same reason.
 
 Checkpoints (``checkpoint.pt`` in the output folder) are written every ``train.checkpoint_every``
-steps through a temporary file and a rename, so an interruption never leaves a broken one. Ctrl-C
-finishes the current step, writes a checkpoint and stops (``TrainingInterrupted``); a second Ctrl-C
-stops at once, keeping the last checkpoint.
+steps through a temporary file (flushed to disk) and a rename, so an interruption never leaves a broken
+one, and the one they replace is kept beside them as ``checkpoint.prev.pt``. A checkpoint that cannot be
+read is a ``CheckpointError`` in one line; resuming (``load_checkpoint()`` without a path) then falls back
+to the previous one with a note. A write that fails (a full disk) leaves both files as they were and
+raises ``CheckpointError`` naming the last good one. Ctrl-C finishes the current step, writes a
+checkpoint and stops (``TrainingInterrupted``); a second Ctrl-C stops at once, keeping the last checkpoint.
 
 Divergence (judged by ``warpgs.guard.DivergenceGuard``, acted on here): a step is skipped (no update)
 when its loss or gradients are not finite, or when its loss on the input views (``parts["inputs"]`` of
@@ -62,6 +65,7 @@ import torch
 
 from warpgs import losses
 from warpgs.config import Config, config_from_dict, to_dict
+from warpgs.console import warn_once
 from warpgs.evaluation import evaluate_views, run_metrics, write_run_outputs
 from warpgs.farfield import make_far_field
 from warpgs.guard import DivergenceGuard
@@ -69,6 +73,58 @@ from warpgs.metrics import render_fps
 from warpgs.model import PARAM_NAMES, GaussianModel, read_point_cloud
 
 CHECKPOINT = "checkpoint.pt"
+PREVIOUS_CHECKPOINT = "checkpoint.prev.pt"  # the one checkpoint.pt replaced, kept until the next write
+
+
+class CheckpointError(RuntimeError):
+    """A checkpoint cannot be read or written; the message is one line naming the file."""
+
+
+def previous_checkpoint(path: str | Path) -> Path:
+    """Where the checkpoint ``path`` replaced is kept (``checkpoint.pt`` -> ``checkpoint.prev.pt``)."""
+    path = Path(path)
+    return path.with_name(f"{path.stem}.prev{path.suffix}")
+
+
+def read_checkpoint(path: str | Path) -> dict:
+    """A checkpoint's content; ``CheckpointError`` in one line when it is missing, truncated, corrupt or not
+    a warpgs checkpoint."""
+    path = Path(path)
+    if not path.is_file():
+        raise CheckpointError(f"{path}: no such checkpoint")
+    try:
+        ck = torch.load(path, map_location="cpu", weights_only=False)
+    except Exception as e:  # zip reader, unpickler, EOF: a truncated or overwritten file
+        why = next((ln.strip() for ln in str(e).splitlines() if ln.strip()), type(e).__name__).split(". ")[0]
+        raise CheckpointError(f"{path}: cannot be read, it is truncated or corrupt ({type(e).__name__}: "
+                              f"{why[:120]})") from None
+    missing = [k for k in ("config", "params") if not isinstance(ck, dict) or k not in ck]
+    if missing:
+        raise CheckpointError(f"{path}: not a warpgs checkpoint (no {', '.join(missing)})")
+    return ck
+
+
+def resumable_checkpoint(folder: str | Path, log=None) -> tuple[Path, dict] | None:
+    """The checkpoint to resume ``folder``'s run from, read: ``checkpoint.pt``, or when that cannot be read
+    (or is missing) the previous one, ``checkpoint.prev.pt``, with a one-line note through ``log`` (default
+    ``warn_once``: once per process). None when the folder holds neither; ``CheckpointError`` when no file
+    there can be read."""
+    current = Path(folder) / CHECKPOINT
+    prev = previous_checkpoint(current)
+    if not current.is_file() and not prev.is_file():
+        return None
+    try:
+        return current, read_checkpoint(current)
+    except CheckpointError as e:
+        if not prev.is_file():
+            raise
+        try:
+            ck = read_checkpoint(prev)
+        except CheckpointError as e2:
+            raise CheckpointError(f"{e}; the previous one cannot be read either ({e2})") from None
+        msg = f"warpgs: {e}; resuming from the previous checkpoint {prev.name} (step {ck.get('step')})"
+        (log or warn_once)(msg)
+        return prev, ck
 
 
 class TrainingInterrupted(Exception):
@@ -159,7 +215,7 @@ def init_model(cfg: Config, scene, generator: torch.Generator) -> GaussianModel:
     if m.init == "ply":
         if not m.init_ply:
             raise ValueError("model.init=ply needs model.init_ply=/path/to/points.ply")
-        xyz, rgb = read_point_cloud(m.init_ply)
+        xyz, rgb = read_point_cloud(m.init_ply, drop_invalid=m.drop_invalid)
         return GaussianModel.from_points(xyz, rgb, **kw)
     if m.init == "frustum":
         cams = scene.train
@@ -226,9 +282,28 @@ def _all_finite(tensors) -> bool:
     return bool(torch.stack([c.to(dev) for c in checks]).all())
 
 
-def _atomic_torch_save(obj, path: Path) -> None:
+def _atomic_torch_save(obj, path: Path, keep_previous: bool = True) -> None:
+    """Writes ``obj`` to a temporary file beside ``path``, flushes it to disk and renames it into place;
+    with ``keep_previous`` the file it replaces becomes ``previous_checkpoint(path)``. When writing fails
+    (``OSError``, e.g. a full disk) the temporary file goes and ``path`` and its previous one stay as they were."""
     tmp = path.with_name(path.name + f".tmp{os.getpid()}")
-    torch.save(obj, tmp)
+    try:
+        with open(tmp, "wb") as f:
+            torch.save(obj, f)
+            f.flush()
+            os.fsync(f.fileno())
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+    if keep_previous and path.is_file():
+        prev = previous_checkpoint(path)
+        try:  # a second name for the current file, then renamed over the previous one: path exists throughout
+            link = prev.with_name(prev.name + f".tmp{os.getpid()}")
+            link.unlink(missing_ok=True)
+            os.link(path, link)
+            os.replace(link, prev)
+        except OSError:  # no hard links here: the current one moves
+            os.replace(path, prev)
     os.replace(tmp, path)
 
 
@@ -340,6 +415,7 @@ class Trainer:
         self.n_before_compaction: int | None = None
         self._stop = False
         self._ema = {}
+        self.saved_step: int | None = None  # the step of the checkpoint last written or read (messages)
         self.compact_report: dict | None = None
         self.stopped_early: dict | None = None  # set by the caller when training stopped before the end
         self.reserved_steps = 0  # compact mode: the last steps, taken by the search's fine-tunes (warpgs/compact.py)
@@ -614,7 +690,12 @@ class Trainer:
                 tried = (f"{len(self.recoveries)} recoveries (each a rollback to the last good state with the learning "
                          f"rates x{tc.recovery_lr_factor:g}, now x{self.lr_scale:g}) did not help")
             if ck is not None:
-                saved = torch.load(ck, map_location="cpu", weights_only=False).get("step")
+                saved = self.saved_step
+                if saved is None:  # a file this trainer neither wrote nor read
+                    try:
+                        saved = read_checkpoint(ck).get("step")
+                    except CheckpointError:
+                        saved = "unreadable"
                 where = f"The last good checkpoint is {ck} (step {saved}); it was not overwritten."
             else:
                 where = ("No checkpoint was written before it "
@@ -730,23 +811,45 @@ class Trainer:
             self.log(f"warpgs: step {self.step}: the model or optimiser state is not finite; {path} is not written "
                      "(the checkpoint there, if any, is the last good one)")
             return None
-        path.parent.mkdir(parents=True, exist_ok=True)
-        _atomic_torch_save({"format": 2, "config": to_dict(self.cfg), "scene": self.scene.name,
-                            "method_name": self.method.name, **self.state_dict()}, path)
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            _atomic_torch_save({"format": 2, "config": to_dict(self.cfg), "scene": self.scene.name,
+                                "method_name": self.method.name, **self.state_dict()}, path)
+        except OSError as e:
+            kept = (f"the last good checkpoint {path} (step {self.saved_step}) is intact" if path.is_file()
+                    and self.saved_step is not None else f"{path} as it was is left untouched" if path.is_file()
+                    else "no checkpoint was written before it")
+            raise CheckpointError(f"{path}: cannot write the checkpoint of step {self.step} "
+                                  f"({e.strerror or e}); {kept}") from None
+        self.saved_step = self.step
         return path
 
-    def load_checkpoint(self, path: str | Path | None = None) -> None:
-        path = Path(path) if path is not None else self.out / CHECKPOINT
-        if not path.is_file():
-            raise FileNotFoundError(f"{path}: no checkpoint to resume from")
-        ck = torch.load(path, map_location="cpu", weights_only=False)
-        saved = config_from_dict(ck["config"])
+    def load_checkpoint(self, path: str | Path | None = None) -> Path:
+        """Restores the training state from ``path``, or (None) from the output folder's checkpoint, falling
+        back to the previous one when it cannot be read (``resumable_checkpoint``); returns the file used.
+        ``CheckpointError`` (one line) when there is none or none can be read."""
+        if path is not None:
+            path = Path(path)
+            ck = read_checkpoint(path)
+        else:
+            found = resumable_checkpoint(self.out) if self.out is not None else None  # its note: once per process
+            if found is None:
+                raise CheckpointError(f"{self.out / CHECKPOINT if self.out else 'no output folder'}: "
+                                      "no checkpoint to resume from")
+            path, ck = found
+        saved = config_from_dict(ck["config"], str(path))
         for section in ("model", "optim", "loss", "strategy"):
             if to_dict(getattr(saved, section)) != to_dict(getattr(self.cfg, section)):
                 self.log(f"warpgs: note: the checkpoint's {section} config differs from this run's; using this run's")
         if ck.get("format", 1) == 1:
             ck = _upgrade_format_1(ck, self.cfg.train.sh_degree_interval)
-        self.load_state_dict(ck)
+        try:
+            self.load_state_dict(ck)
+        except (KeyError, TypeError, ValueError, RuntimeError) as e:  # a file of another model or version
+            raise CheckpointError(f"{path}: does not fit this run ({type(e).__name__}: "
+                                  f"{str(e).splitlines()[0][:120] if str(e) else ''})") from None
+        self.saved_step = self.step
+        return path
 
     # ------------------------------------------------------------------------------------------
     # evaluation and outputs
@@ -791,12 +894,12 @@ class Trainer:
         return self.method.finish(metrics, baseline)
 
 
-def load_trained(path: str | Path, device="cpu") -> GaussianModel:
-    """A model from a checkpoint (``checkpoint.pt``) or a 3D-GS PLY."""
+def load_trained(path: str | Path, device="cpu", drop_invalid: bool = False) -> GaussianModel:
+    """A model from a checkpoint (``checkpoint.pt``) or a 3D-GS PLY (``drop_invalid``: ``load_ply``'s)."""
     path = Path(path)
     if path.suffix == ".ply":
-        return GaussianModel.load_ply(path, device=device)
-    ck = torch.load(path, map_location="cpu", weights_only=False)
+        return GaussianModel.load_ply(path, device=device, drop_invalid=drop_invalid)
+    ck = read_checkpoint(path)
     p = ck["params"]
     m = GaussianModel(p["means"], p["quats"], p["scales"], p["opacities"], p["sh0"], p["shN"],
                       max_sh_degree=ck["max_sh_degree"])

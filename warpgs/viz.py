@@ -31,7 +31,8 @@ from pathlib import Path
 
 import numpy as np
 
-from warpgs.ply import write_vertices
+from warpgs.console import filtered_stderr
+from warpgs.ply import keep_finite, write_vertices
 
 def save_image(path: str | Path, image) -> Path:
     """Saves [H, W, 3] or [H, W] values in [0, 1] (numpy or torch) as an 8-bit PNG; NaN is written as 0."""
@@ -56,9 +57,11 @@ SH_C0 = 0.28209479177387814
 # PLY
 
 
-def read_cloud(path: str | Path) -> dict:
+def read_cloud(path: str | Path, drop_invalid: bool = False) -> dict:
     """{'points' [N, 3] float32, 'colors' [N, 3] in [0, 1] or None, 'origin' [N] uint8 or None,
-    'kind': 'points' | 'gaussians' | 'mesh'} from any PLY with vertices."""
+    'kind': 'points' | 'gaussians' | 'mesh'} from any PLY with vertices. Points (for a Gaussian file: Gaussians,
+    every field) with non-finite values are refused with their count (``ValueError``), or with
+    ``drop_invalid`` dropped with one warning line."""
     import trimesh
 
     path = Path(path)
@@ -93,7 +96,15 @@ def read_cloud(path: str | Path) -> dict:
             if len(vc) == len(points):
                 colors = vc[:, :3].astype(np.float32) / 255.0
     origin = np.asarray(raw["origin"], np.uint8) if "origin" in names else None
-    return {"points": points, "colors": colors, "origin": origin, "kind": kind}
+    cols = {"x": points[:, 0], "y": points[:, 1], "z": points[:, 2]}
+    if kind == "gaussians":  # a Gaussian is invalid when any of its values is (opacity, scales, rotation too)
+        cols.update({k: np.asarray(raw[k]) for k in names if k not in cols})
+    elif colors is not None and colors.dtype.kind == "f":
+        cols.update({f"colour_{i}": colors[:, i] for i in range(colors.shape[1])})
+    rows = {"points": points, "colors": colors, "origin": origin}
+    kept = keep_finite({**cols, **{f"_{k}": a for k, a in rows.items() if a is not None}}, list(cols), path,
+                       drop_invalid, what="Gaussians" if kind == "gaussians" else "points")
+    return {**{k: kept.get(f"_{k}") for k in rows}, "kind": kind}
 
 
 def save_origin_ply(path: str | Path, points, colors=None, origin=None) -> Path:
@@ -202,16 +213,19 @@ def open3d_render(points, colors, K, viewmat, width: int, height: int, point_siz
     import open3d as o3d
 
     o3d.utility.set_verbosity_level(o3d.utility.VerbosityLevel.Error)  # no "falling back to EGL" notes
-    vis = o3d.visualization.Visualizer()
-    if not vis.create_window(window_name="warpgs", width=width, height=height, visible=False):
-        raise RuntimeError("open3d could not create an offscreen window (no display and no EGL)")
-    try:
-        _setup_open3d(vis, points, colors, K, viewmat, width, height, point_size, background)
-        vis.poll_events()
-        vis.update_renderer()
-        img = np.asarray(vis.capture_screen_float_buffer(do_render=True), np.float32)
-    finally:
-        vis.destroy_window()
+    # Mesa's EGL says "XDG_RUNTIME_DIR is invalid or not set" on machines without a desktop session; it
+    # needs no runtime folder for an offscreen frame, so that line does not apply (anything else it says stays)
+    with filtered_stderr(["XDG_RUNTIME_DIR"]):
+        vis = o3d.visualization.Visualizer()
+        if not vis.create_window(window_name="warpgs", width=width, height=height, visible=False):
+            raise RuntimeError("open3d could not create an offscreen window (no display and no EGL)")
+        try:
+            _setup_open3d(vis, points, colors, K, viewmat, width, height, point_size, background)
+            vis.poll_events()
+            vis.update_renderer()
+            img = np.asarray(vis.capture_screen_float_buffer(do_render=True), np.float32)
+        finally:
+            vis.destroy_window()
     if img.shape[:2] != (height, width):
         raise RuntimeError(f"open3d returned a {img.shape[1]}x{img.shape[0]} frame, {width}x{height} was asked for")
     return img
@@ -323,6 +337,8 @@ def main(argv=None) -> int:
     ap.add_argument("--point-size", type=float, default=2.0)
     ap.add_argument("--renderer", default="auto", choices=["auto", "open3d", "numpy"], help="for --png")
     ap.add_argument("--background", default="1,1,1", help="r,g,b in [0, 1]")
+    ap.add_argument("--drop-invalid", action="store_true",
+                    help="drop points / Gaussians with non-finite values (one warning) instead of refusing the file")
     a = ap.parse_args(argv)
     try:
         width, height = (int(v) for v in a.size.lower().split("x"))
@@ -332,7 +348,7 @@ def main(argv=None) -> int:
     except ValueError:
         ap.error("--size is WIDTHxHEIGHT and --background is r,g,b")
     try:
-        cloud = read_cloud(a.ply)
+        cloud = read_cloud(a.ply, drop_invalid=a.drop_invalid)
         counts = ""
         if cloud["origin"] is not None:
             counts = " (" + ", ".join(f"{n} {int((cloud['origin'] == k).sum())}" for k, n in enumerate(ORIGIN_NAMES)) + ")"

@@ -18,7 +18,8 @@ import math
 import re
 from pathlib import Path
 
-from .scene import Scene, SceneError, check_pose, downsample, intrinsics, make_camera, opengl_to_opencv_c2w, read_image
+from .scene import (ImageChannels, Scene, SceneError, check_pose, downsample, intrinsics, make_camera, number,
+                    opengl_to_opencv_c2w, read_image)
 from .splits import blender_train_ids
 
 
@@ -34,13 +35,23 @@ def _read(path: Path) -> dict:
         meta = json.loads(path.read_text())
     except Exception as e:
         raise SceneError(f"{path}: cannot parse JSON ({e})") from e
+    if not isinstance(meta, dict):
+        raise SceneError(f"{path}: expected a JSON object at the top level, got {type(meta).__name__}")
     if "camera_angle_x" not in meta:
         raise SceneError(f"{path}: no 'camera_angle_x'")
+    angle = number(meta["camera_angle_x"], "camera_angle_x", str(path))
+    if not (math.isfinite(angle) and 0 < angle < math.pi):
+        raise SceneError(f"{path}: invalid intrinsics: camera_angle_x = {angle!r} (a field of view in radians, "
+                         "between 0 and pi)")
     if not isinstance(meta.get("frames"), list):
         raise SceneError(f"{path}: no 'frames' list")
     for k, fr in enumerate(meta["frames"]):
+        if not isinstance(fr, dict):
+            raise SceneError(f"{path}: frame {k} is {type(fr).__name__}, not an object")
         if "file_path" not in fr:
             raise SceneError(f"{path}: frame {k} has no 'file_path'")
+        if not isinstance(fr["file_path"], str) or not fr["file_path"].strip():
+            raise SceneError(f"{path}: frame {k}: file_path = {fr['file_path']!r} is not a file name")
         if "transform_matrix" not in fr:
             raise SceneError(f"{path}: frame {k} ({fr['file_path']}) has no pose ('transform_matrix')")
     return meta
@@ -65,11 +76,12 @@ def load_blender(
     train_meta = _read(root / "transforms_train.json")
     test_meta = _read(root / "transforms_test.json")
     bg = (1.0, 1.0, 1.0) if white_background else (0.0, 0.0, 0.0)
+    channels = ImageChannels()
 
     def load(meta: dict, fr: dict, src: Path, factor: int):
         c2w = opengl_to_opencv_c2w(check_pose(fr["transform_matrix"], f"{src} frame {fr['file_path']!r}", "transform_matrix"))
         p = _image_path(root, fr["file_path"])
-        rgb, alpha = read_image(p, bg)
+        rgb, alpha = read_image(p, bg, channels)
         h, w = rgb.shape[:2]
         f = 0.5 * w / math.tan(0.5 * float(meta["camera_angle_x"]))
         rgb = downsample(rgb, factor)
@@ -91,6 +103,7 @@ def load_blender(
         if (num if num is not None else k) % 8 == 0:
             test_frames.append(fr)
     test = [load(test_meta, fr, root / "transforms_test.json", test_downscale or 1) for fr in test_frames]
+    channels.warn(root)
     sizes = {(c.width, c.height) for c in train}
     if len(sizes) > 1:
         raise SceneError(f"{root}: mixed image sizes among training views {sorted(sizes)}")

@@ -45,6 +45,8 @@ CAMERA_MODELS = {
     11: ("RAD_TAN_THIN_PRISM_FISHEYE", 16),
 }
 MODEL_IDS = {name: (mid, n) for mid, (name, n) in CAMERA_MODELS.items()}
+# models with one focal length f (params f, cx, cy, ...); the others have fx, fy, cx, cy, ...
+SINGLE_FOCAL_MODELS = ("SIMPLE_PINHOLE", "SIMPLE_RADIAL", "RADIAL", "SIMPLE_RADIAL_FISHEYE", "RADIAL_FISHEYE")
 
 
 @dataclass
@@ -58,7 +60,7 @@ class ColmapCamera:
     def pinhole(self) -> tuple[float, float, float, float]:
         """(fx, fy, cx, cy) of the model."""
         p = self.params
-        if self.model in ("SIMPLE_PINHOLE", "SIMPLE_RADIAL", "RADIAL", "SIMPLE_RADIAL_FISHEYE", "RADIAL_FISHEYE"):
+        if self.model in SINGLE_FOCAL_MODELS:
             return float(p[0]), float(p[0]), float(p[1]), float(p[2])
         return float(p[0]), float(p[1]), float(p[2]), float(p[3])
 
@@ -79,7 +81,7 @@ class ColmapCamera:
             "THIN_PRISM_FISHEYE": ["k1", "k2", "p1", "p2", "k3", "k4", "sx1", "sy1"],
             "RAD_TAN_THIN_PRISM_FISHEYE": ["k0", "k1", "k2", "k3", "k4", "k5", "p0", "p1", "s0", "s1", "s2", "s3"],
         }[self.model]
-        first = 3 if self.model in ("SIMPLE_PINHOLE", "SIMPLE_RADIAL", "RADIAL", "SIMPLE_RADIAL_FISHEYE", "RADIAL_FISHEYE") else 4
+        first = 3 if self.model in SINGLE_FOCAL_MODELS else 4
         return {n: float(v) for n, v in zip(names, p[first:])}
 
 
@@ -141,14 +143,26 @@ class _Reader:
         end = self.buf.find(b"\x00", self.pos)
         if end < 0:
             raise SceneError(f"{self.path}: file ends early inside an image name (truncated)")
-        s = self.buf[self.pos : end].decode("utf-8")
+        try:
+            s = self.buf[self.pos : end].decode("utf-8")
+        except UnicodeDecodeError:
+            raise SceneError(f"{self.path}: an image name at byte {self.pos} is not UTF-8 text (corrupt file)") from None
         self.pos = end + 1
         return s
+
+    def count(self, record_size: int) -> int:
+        """A uint64 count of records of at least ``record_size`` bytes each, checked against the bytes left
+        (a corrupt count would otherwise ask for petabytes)."""
+        (n,) = self.read("<Q")
+        if n * record_size > len(self.buf) - self.pos:
+            raise SceneError(f"{self.path}: says it holds {n} records, more than its {len(self.buf)} bytes can "
+                             "(truncated or corrupt)")
+        return n
 
 
 def read_cameras_binary(path: str | Path) -> dict[int, ColmapCamera]:
     r = _Reader(Path(path))
-    (n,) = r.read("<Q")
+    n = r.count(24)
     cams = {}
     for _ in range(n):
         cid, mid, w, h = r.read("<iiQQ")
@@ -161,7 +175,7 @@ def read_cameras_binary(path: str | Path) -> dict[int, ColmapCamera]:
 
 def read_images_binary(path: str | Path, with_points2d: bool = False) -> dict[int, ColmapImage]:
     r = _Reader(Path(path))
-    (n,) = r.read("<Q")
+    n = r.count(73)
     images = {}
     for _ in range(n):
         vals = r.read("<i7di")
@@ -179,7 +193,7 @@ def read_images_binary(path: str | Path, with_points2d: bool = False) -> dict[in
 
 def read_points3d_binary(path: str | Path) -> ColmapPoints:
     r = _Reader(Path(path))
-    (n,) = r.read("<Q")
+    n = r.count(43)
     ids = np.empty(n, np.int64)
     xyz = np.empty((n, 3), np.float64)
     rgb = np.empty((n, 3), np.uint8)
@@ -192,6 +206,9 @@ def read_points3d_binary(path: str | Path) -> ColmapPoints:
             raise SceneError(f"{path}: file ends early (truncated or not a COLMAP binary file)")
         v = rec.unpack_from(buf, pos)
         pos += rec.size
+        if v[0] > np.iinfo(np.int64).max or 8 * v[8] > len(buf) - pos:
+            raise SceneError(f"{path}: point {k} has id {v[0]} and a track of {v[8]} elements, which the file "
+                             "cannot hold (truncated or corrupt)")
         ids[k], xyz[k], rgb[k], err[k], tl[k] = v[0], v[1:4], v[4:7], v[7], v[8]
         pos += 8 * v[8]  # track: (int32 image id, int32 point2D index) per element
     if pos > len(buf):
@@ -203,10 +220,17 @@ def read_points3d_binary(path: str | Path) -> ColmapPoints:
 # text
 
 
-def _data_lines(path: Path):
+def _read_text(path: Path) -> str:
     if not path.is_file():
         raise SceneError(f"{path}: file is missing")
-    for line in path.read_text().splitlines():
+    try:
+        return path.read_text(encoding="utf-8")
+    except UnicodeDecodeError as e:
+        raise SceneError(f"{path}: not UTF-8 text at byte {e.start} (corrupt, or a binary file named .txt)") from None
+
+
+def _data_lines(path: Path):
+    for line in _read_text(path).splitlines():
         s = line.strip()
         if s and not s.startswith("#"):
             yield s
@@ -232,9 +256,7 @@ def read_cameras_text(path: str | Path) -> dict[int, ColmapCamera]:
 
 def read_images_text(path: str | Path, with_points2d: bool = False) -> dict[int, ColmapImage]:
     path = Path(path)
-    if not path.is_file():
-        raise SceneError(f"{path}: file is missing")
-    lines = [s for s in path.read_text().splitlines() if not s.lstrip().startswith("#")]
+    lines = [s for s in _read_text(path).splitlines() if not s.lstrip().startswith("#")]
     # drop leading blank lines only; a blank line after an image line is its (empty) 2D point list
     images = {}
     i = 0
@@ -276,6 +298,8 @@ def read_points3d_text(path: str | Path) -> ColmapPoints:
             tl.append((len(el) - 8) // 2)
         except (ValueError, IndexError) as e:
             raise SceneError(f"{path}: cannot parse point line {line[:80]!r}") from e
+    if any(not 0 <= c <= 255 for c in (v for row in rgb for v in row)) or any(abs(i) >= 2**63 for i in ids):
+        raise SceneError(f"{path}: a point has a colour outside 0..255 or an id outside 64 bits")
     return ColmapPoints(
         np.array(ids, np.int64),
         np.array(xyz, np.float64).reshape(-1, 3),

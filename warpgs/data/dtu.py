@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .scene import Scene, SceneError, downsample, list_images, make_camera, read_image, read_mask
+from .scene import ImageChannels, Scene, SceneError, downsample, list_images, make_camera, read_image, read_mask
 from .splits import dtu_split
 
 
@@ -85,6 +85,7 @@ def load_dtu(
     train_ids, test_ids = dtu_split(n, views)
     mask_dir = root / "mask"
     d = downscale or 1
+    channels = ImageChannels()
 
     def load(i: int):
         wm = cams[f"world_mat_{i}"].astype(np.float64)
@@ -94,7 +95,7 @@ def load_dtu(
         K, R, t = decompose_projection(wm @ scale_mat)
         if abs(np.linalg.det(K)) < 1e-9:
             raise SceneError(f"{src}: degenerate projection matrix")
-        rgb, _ = read_image(files[i])
+        rgb, _ = read_image(files[i], channels=channels)
         h_img, w_img = rgb.shape[:2]
         s = w_img / full_width
         if abs(h_img - round(full_width * 0.75 * s)) > 1:
@@ -120,6 +121,7 @@ def load_dtu(
 
     train = [load(i) for i in train_ids]
     test = [load(i) for i in test_ids]
+    channels.warn(img_dir)
     sizes = {(c.width, c.height) for c in train + test}
     if len(sizes) > 1:
         raise SceneError(f"{img_dir}: mixed image sizes {sorted(sizes)}")

@@ -22,8 +22,10 @@ import numpy as np
 
 from . import colmap as colmap_io
 from .scene import (
+    ImageChannels,
     Scene,
     SceneError,
+    check_intrinsics,
     check_pose,
     downsample,
     image_size,
@@ -81,6 +83,8 @@ def load_llff(
         raise SceneError(f"{pb}: cannot read ({e})") from e
     if arr.ndim != 2 or arr.shape[1] != 17:
         raise SceneError(f"{pb}: array has shape {arr.shape}, expected (N, 17)")
+    if arr.dtype.kind not in "fiu":
+        raise SceneError(f"{pb}: array holds {arr.dtype} values, expected real numbers")
     if not np.all(np.isfinite(arr)):
         bad = sorted(set(np.nonzero(~np.isfinite(arr))[0].tolist()))
         raise SceneError(f"{pb}: rows {bad} contain non-finite values")
@@ -113,22 +117,26 @@ def load_llff(
     W = llff_world_transform(c2w_cv, float(bds.min()), bd_factor, recenter)
     scale = float(np.cbrt(np.linalg.det(W[:3, :3])))
 
-    train_idx, test_idx = every_nth_split(len(files), views, test_every)
+    train_idx, test_idx = every_nth_split(len(files), views, test_every, source=str(pb))
+
+    channels = ImageChannels()
 
     def load(k: int):
         H, Wd, f = poses[k, :, 4]
+        check_intrinsics(f"{pb} row {k} ({files[k].name})", {"H": H, "W": Wd, "f": f})
         w_img, h_img = image_size(files[k])
         w_img, h_img = w_img // extra, h_img // extra
         sx, sy = w_img / Wd, h_img / H
         if abs(sx - sy) * max(Wd, H) > 1.5:
             raise SceneError(f"{files[k]}: image is {w_img}x{h_img}, not a scaled copy of the {Wd:g}x{H:g} in {pb.name}")
         K = intrinsics(f * sx, f * sy, w_img / 2.0, h_img / 2.0)
-        rgb, _ = read_image(files[k])
+        rgb, _ = read_image(files[k], channels=channels)
         rgb = downsample(rgb, extra)
         return make_camera(files[k].stem, similarity_apply_c2w(W, c2w_cv[k]), K, rgb, image_path=files[k])
 
     train = [load(k) for k in train_idx]
     test = [load(k) for k in test_idx]
+    channels.warn(folder)
     sizes = {(c.width, c.height) for c in train + test}
     if len(sizes) > 1:
         raise SceneError(f"{folder}: mixed image sizes {sorted(sizes)}")

@@ -25,16 +25,19 @@ import numpy as np
 from . import colmap as colmap_io
 from .scene import (
     Camera,
+    ImageChannels,
     Scene,
     SceneError,
     bounds_from_cameras,
     bounds_from_points,
+    check_intrinsics,
     check_pose,
     downsample,
     downsample_depth,
     image_size,
     intrinsics,
     make_camera,
+    number,
     opengl_to_opencv_c2w,
     read_depth,
     read_image,
@@ -141,15 +144,24 @@ def _resolve_image(root: Path, rel: str, downscale: int | None, source: str) -> 
     raise SceneError(f"{source}: file {rel!r} is missing (looked for " + ", ".join(str(t) for t in tried) + ")")
 
 
+def _folder_factor(path: Path) -> int | None:
+    """The downscale factor its folder's name gives an image (``images_4/x.jpg``: 4), or None."""
+    head, _, tail = path.parent.name.rpartition("_")
+    return int(tail) if head and tail.isdigit() and int(tail) > 0 else None
+
+
 def _check_size(actual: tuple[int, int], w: float, h: float, downscale: int | None, path: Path, source: str) -> None:
     """The image must be the intrinsics' w x h reduced by one factor (the requested one, or 1, 2, 4, 8
     for folders whose intrinsics were already rescaled), within a pixel of rounding."""
     for d in dict.fromkeys([downscale or 1, 1, 2, 4, 8]):
         if abs(actual[0] - w / d) <= 1.0 and abs(actual[1] - h / d) <= 1.0:
             return
+    folder = _folder_factor(path)  # a file in images_4/ is expected at a quarter, whatever its size suggests
+    d = folder or downscale
+    where = f"in {path.parent.name}/" if folder else f"at downscale {d}"
     raise SceneError(
         f"{path}: image is {actual[0]}x{actual[1]} but {source} gives {w:g}x{h:g}"
-        + (f" (expected {w / downscale:g}x{h / downscale:g} at downscale {downscale})" if downscale and downscale > 1 else "")
+        + (f" (expected {int(w // d)}x{int(h // d)} {where})" if d and d > 1 else "")
         + "; mixed image sizes or a wrong downscale folder"
     )
 
@@ -195,12 +207,18 @@ def load_nerfstudio(
         meta = json.loads(tf.read_text())
     except Exception as e:
         raise SceneError(f"{tf}: cannot parse JSON ({e})") from e
+    if not isinstance(meta, dict):
+        raise SceneError(f"{tf}: expected a JSON object at the top level, got {type(meta).__name__}")
     frames = meta.get("frames")
     if not isinstance(frames, list) or not frames:
         raise SceneError(f"{tf}: no 'frames' list")
     for k, fr in enumerate(frames):
+        if not isinstance(fr, dict):
+            raise SceneError(f"{tf}: frame {k} is {type(fr).__name__}, not an object")
         if "file_path" not in fr:
             raise SceneError(f"{tf}: frame {k} has no 'file_path'")
+        if not isinstance(fr["file_path"], str) or not fr["file_path"].strip():
+            raise SceneError(f"{tf}: frame {k}: file_path = {fr['file_path']!r} is not a file name")
         if "transform_matrix" not in fr:
             raise SceneError(f"{tf}: frame {k} ({fr['file_path']}) has no pose ('transform_matrix')")
     frames = sorted(frames, key=lambda f: str(f["file_path"]))
@@ -209,7 +227,7 @@ def load_nerfstudio(
         dup = sorted({n for n in names if names.count(n) > 1})
         raise SceneError(f"{tf}: frames listed more than once: {dup[:5]}")
 
-    train_idx, test_idx = every_nth_split(len(frames), views, test_every, test_rest)
+    train_idx, test_idx = every_nth_split(len(frames), views, test_every, test_rest, str(tf))
 
     A = np.eye(4)
     if "applied_transform" in meta:
@@ -220,8 +238,9 @@ def load_nerfstudio(
         return fr.get(key, meta.get(key, default))
 
     bg = (1.0, 1.0, 1.0) if white_background else (0.0, 0.0, 0.0)
-    png_depth_scale = float(meta.get("depth_unit_scale_factor", 1e-3))
+    png_depth_scale = number(meta.get("depth_unit_scale_factor", 1e-3), "depth_unit_scale_factor", str(tf))
     sizes: dict[tuple[int, int], str] = {}
+    channels = ImageChannels()
 
     def load_frame(k: int) -> Camera:
         fr = frames[k]
@@ -235,9 +254,10 @@ def load_nerfstudio(
         w, h = get(fr, "w"), get(fr, "h")
         if w is None or h is None:
             w, h = W_img * (downscale or 1), H_img * (downscale or 1)
-        w, h = float(w), float(h)
+        w, h = number(w, "w", src), number(h, "h", src)
+        check_intrinsics(src, {"w": w, "h": h})
         # the image's own scale relative to the intrinsics (nerfstudio floors w/d when downscaling)
-        d = downscale if downscale is not None else max(1, round(w / W_img))
+        d = downscale if downscale is not None else max(1, round(w / max(W_img, 1)))
         _check_size((W_img, H_img), w, h, d, img_path, f"{tf.name} (w, h)")
         sizes.setdefault((W_img, H_img), str(img_path))
         if len(sizes) > 1 and "w" not in fr:  # frames sharing one set of intrinsics share one size
@@ -245,19 +265,24 @@ def load_nerfstudio(
             raise SceneError(f"{img_path}: image is {W_img}x{H_img} but {first_path} is {first_size[0]}x{first_size[1]}; mixed image sizes")
         sx, sy = W_img / w, H_img / h
         if "fl_x" in fr or "fl_x" in meta:
-            fx = float(get(fr, "fl_x"))
-            fy = float(get(fr, "fl_y", fx))
+            fx = number(get(fr, "fl_x"), "fl_x", src)
+            fy = number(get(fr, "fl_y", fx), "fl_y", src)
+            check_intrinsics(src, {"fl_x": fx, "fl_y": fy})
         elif "camera_angle_x" in meta or "camera_angle_x" in fr:
-            fx = 0.5 * w / math.tan(0.5 * float(get(fr, "camera_angle_x")))
-            fy = 0.5 * h / math.tan(0.5 * float(get(fr, "camera_angle_y"))) if get(fr, "camera_angle_y") is not None else fx
+            angles = {k: number(get(fr, k), k, src) for k in ("camera_angle_x", "camera_angle_y") if get(fr, k) is not None}
+            for k, a in angles.items():
+                if not (np.isfinite(a) and 0 < a < math.pi):
+                    raise SceneError(f"{src}: invalid intrinsics: {k} = {a!r} (a field of view in radians, "
+                                     "between 0 and pi)")
+            fx = 0.5 * w / math.tan(0.5 * angles["camera_angle_x"])
+            fy = 0.5 * h / math.tan(0.5 * angles["camera_angle_y"]) if "camera_angle_y" in angles else fx
         else:
             raise SceneError(f"{tf}: no focal length (fl_x or camera_angle_x) for frame {fr['file_path']!r}")
-        cx, cy = float(get(fr, "cx", w / 2)), float(get(fr, "cy", h / 2))
+        cx, cy = number(get(fr, "cx", w / 2), "cx", src), number(get(fr, "cy", h / 2), "cy", src)
+        check_intrinsics(src, {}, {"cx": cx, "cy": cy})
         K = intrinsics(fx * sx, fy * sy, cx * sx, cy * sy)
-        if not np.all(np.isfinite(K)) or K[0, 0] <= 0 or K[1, 1] <= 0:
-            raise SceneError(f"{src}: invalid intrinsics {K.tolist()}")
 
-        rgb, _ = read_image(img_path, bg)
+        rgb, _ = read_image(img_path, bg, channels)
         rgb = downsample(rgb, extra)
         mask = depth = None
         if fr.get("mask_path"):
@@ -269,7 +294,9 @@ def load_nerfstudio(
         if load_depth and dpath:
             depth = _load_depth(root, str(dpath), rgb.shape[:2], png_depth_scale, src)
 
-        dist = {key: float(get(fr, key, 0.0)) for key in DISTORTION_KEYS}
+        dist = {key: number(get(fr, key, 0.0), key, src) for key in DISTORTION_KEYS}
+        if not all(np.isfinite(v) for v in dist.values()):
+            raise SceneError(f"{src}: distortion {({k: v for k, v in dist.items() if not np.isfinite(v)})} is not finite")
         if _has_distortion(dist):
             if not undistort:
                 raise SceneError(
@@ -286,6 +313,7 @@ def load_nerfstudio(
 
     train = [load_frame(k) for k in train_idx]
     test = [load_frame(k) for k in test_idx]
+    channels.warn(tf)
 
     points = rgbs = None
     sparse = _find_colmap_near(root)
@@ -440,8 +468,9 @@ def load_colmap(
         raise SceneError(f"{model}: the model has no registered images")
     img_dir, extra = (Path(images_dir), 1) if images_dir is not None else _find_images_dir(root, model, downscale)
     order = sorted(imgs.values(), key=lambda im: im.name)
-    train_idx, test_idx = every_nth_split(len(order), views, test_every)
+    train_idx, test_idx = every_nth_split(len(order), views, test_every, source=str(model))
     bg = (1.0, 1.0, 1.0) if white_background else (0.0, 0.0, 0.0)
+    channels = ImageChannels()
 
     def load_frame(k: int) -> Camera:
         im = order[k]
@@ -453,16 +482,22 @@ def load_colmap(
         if not (np.all(np.isfinite(im.qvec)) and np.all(np.isfinite(im.tvec))) or np.linalg.norm(im.qvec) < 1e-8:
             raise SceneError(f"{src}: pose contains non-finite values or a zero quaternion")
         c2w = np.linalg.inv(check_pose(im.viewmat(), src, "pose"))
+        fx, fy, cx, cy = cam.pinhole()
+        focal = {"f": fx} if cam.model in colmap_io.SINGLE_FOCAL_MODELS else {"fx": fx, "fy": fy}
+        check_intrinsics(f"{model}/cameras.* camera {cam.id} ({cam.model})",
+                         {"width": cam.width, "height": cam.height, **focal}, {"cx": cx, "cy": cy})
+        dist = cam.distortion()
+        bad = {k: v for k, v in dist.items() if not np.isfinite(v)}
+        if bad:
+            raise SceneError(f"{model}/cameras.* camera {cam.id} ({cam.model}): distortion {bad} is not finite")
         p = img_dir / im.name
         W_img, H_img = image_size(p)
         W_img, H_img = W_img // extra, H_img // extra
         _check_size((W_img, H_img), cam.width, cam.height, downscale, p, f"{model.name}/cameras.* (camera {cam.id})")
         sx, sy = W_img / cam.width, H_img / cam.height
-        fx, fy, cx, cy = cam.pinhole()
         K = intrinsics(fx * sx, fy * sy, cx * sx, cy * sy)
-        rgb, _ = read_image(p, bg)
+        rgb, _ = read_image(p, bg, channels)
         rgb = downsample(rgb, extra)
-        dist = cam.distortion()
         if _has_distortion(dist):
             if not undistort:
                 raise SceneError(f"{src}: camera {cam.id} ({cam.model}) has lens distortion {dist}; "
@@ -473,6 +508,7 @@ def load_colmap(
 
     train = [load_frame(k) for k in train_idx]
     test = [load_frame(k) for k in test_idx]
+    channels.warn(model)
     pts_xyz = pts.xyz if pts is not None and len(pts.ids) else None
     return Scene(
         name=name or (root.name if root.name not in ("0", "sparse") else root.parent.name),

@@ -146,9 +146,34 @@ def intrinsics(fx: float, fy: float, cx: float, cy: float) -> np.ndarray:
     return np.array([[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]], np.float64)
 
 
+def number(value, field: str, source: str) -> float:
+    """``value`` (a scene file's ``field``) as a float; ``SceneError`` naming the field when it is not a number."""
+    if isinstance(value, bool) or not isinstance(value, (int, float, str, np.number)):
+        raise SceneError(f"{source}: {field} = {value!r} is not a number")
+    try:
+        return float(value)
+    except (TypeError, ValueError):
+        raise SceneError(f"{source}: {field} = {value!r} is not a number") from None
+
+
+def check_intrinsics(source: str, positive: dict[str, float], finite: dict[str, float] | None = None) -> None:
+    """Each of ``positive`` (focal lengths, image sizes: by the name the file gives them) must be a finite
+    number above 0 and each of ``finite`` (principal point) a finite number; ``SceneError`` names the
+    first field that is not."""
+    for name, v in positive.items():
+        if not (np.isfinite(float(v)) and v > 0):
+            raise SceneError(f"{source}: invalid intrinsics: {name} = {v!r} (must be a finite number > 0)")
+    for name, v in (finite or {}).items():
+        if not np.isfinite(float(v)):
+            raise SceneError(f"{source}: invalid intrinsics: {name} = {v!r} (must be a finite number)")
+
+
 def check_pose(m: np.ndarray, source: str, what: str = "pose", atol: float = 1e-3) -> np.ndarray:
     """Checks that ``m`` (3x4 or 4x4) is a finite rigid transform; returns it as 4x4 float64."""
-    m = np.asarray(m, np.float64)
+    try:
+        m = np.asarray(m, np.float64)
+    except (TypeError, ValueError):
+        raise SceneError(f"{source}: {what} is not a matrix of numbers ({str(m)[:60]})") from None
     if m.shape not in ((3, 4), (4, 4)):
         raise SceneError(f"{source}: {what} has shape {m.shape}, expected 3x4 or 4x4")
     if not np.all(np.isfinite(m)):
@@ -158,10 +183,12 @@ def check_pose(m: np.ndarray, source: str, what: str = "pose", atol: float = 1e-
     if m.shape == (4, 4) and not np.allclose(m[3], [0, 0, 0, 1], atol=1e-6):
         raise SceneError(f"{source}: {what} has last row {m[3].tolist()}, expected [0, 0, 0, 1]")
     R = out[:3, :3]
-    err = np.abs(R.T @ R - np.eye(3)).max()
-    if err > atol or np.linalg.det(R) < 0:
+    with np.errstate(over="ignore", invalid="ignore"):  # huge entries: err is inf, refused below
+        err = np.abs(R.T @ R - np.eye(3)).max()
+        det = np.linalg.det(R)
+    if not err <= atol or det < 0:
         raise SceneError(
-            f"{source}: {what} is not rigid (rotation part has |R^T R - I| = {err:.3g}, det = {np.linalg.det(R):.4g}); "
+            f"{source}: {what} is not rigid (rotation part has |R^T R - I| = {err:.3g}, det = {det:.4g}); "
             "warpgs needs camera poses that are a rotation and a translation"
         )
     # remove the small non-orthogonality that text formats leave (a few 1e-7)
@@ -196,12 +223,18 @@ def make_camera(
 ) -> Camera:
     """Builds a ``Camera`` from an OpenCV camera-to-world pose (float64 in, float32 stored)."""
     h, w = image.shape[:2]
-    viewmat = np.linalg.inv(c2w)
-    viewmat[3] = [0, 0, 0, 1]
+    with np.errstate(all="ignore"):  # values out of float32's range become inf: refused below
+        viewmat = np.linalg.inv(c2w)
+        viewmat[3] = [0, 0, 0, 1]
+        viewmat32, K32 = viewmat.astype(np.float32), np.asarray(K, np.float32)
+    for what, a in (("intrinsics", K32), ("pose", viewmat32)):
+        if not np.all(np.isfinite(a)):
+            raise SceneError(f"{image_path or name}: its camera's {what} are out of range (not finite as float32: "
+                             f"{np.asarray(K if what == 'intrinsics' else c2w).ravel()[:4].tolist()}...)")
     return Camera(
         name=name,
-        viewmat=viewmat.astype(np.float32),
-        K=np.asarray(K, np.float32),
+        viewmat=viewmat32,
+        K=K32,
         width=int(w),
         height=int(h),
         image=image,
@@ -247,11 +280,58 @@ def bounds_from_cameras(cams_c2w: list[np.ndarray]) -> tuple[float, float]:
 IMAGE_EXTS = (".png", ".jpg", ".jpeg", ".JPG", ".JPEG", ".PNG", ".bmp", ".tif", ".tiff", ".exr")
 
 
-def read_image(path: str | Path, background: tuple[float, float, float] | None = None) -> tuple[np.ndarray, np.ndarray | None]:
+def channels_of(mode: str, info: dict | None = None) -> str:
+    """What a PIL image mode holds, in words: RGB, RGBA, grayscale, grayscale with alpha, palette, ..."""
+    if mode in ("1", "L", "I", "F") or mode.startswith("I;"):
+        return "grayscale"
+    if mode in ("LA", "La"):
+        return "grayscale with alpha"
+    if mode in ("P", "PA"):
+        return "palette with alpha" if mode == "PA" or "transparency" in (info or {}) else "palette"
+    if mode in ("RGBA", "RGBa"):
+        return "RGBA"
+    return mode
+
+
+class ImageChannels:
+    """The channels of every image a loader reads (``read_image(..., channels=this)``). A capture whose
+    images differ (a grayscale or RGBA frame among RGB ones) is converted image by image to RGB, and
+    ``note()`` says so in one line, naming the odd images; None when they all agree."""
+
+    def __init__(self):
+        self.kinds: dict[str, str] = {}
+
+    def add(self, path, kind: str) -> None:
+        self.kinds[str(path)] = kind
+
+    def note(self, source) -> str | None:
+        from collections import Counter
+
+        counts = Counter(self.kinds.values())
+        if len(counts) <= 1:
+            return None
+        main = max(counts, key=lambda k: (counts[k], k in ("RGB", "RGBA")))  # a tie: the colour images are the rule
+        odd = [(p, k) for p, k in self.kinds.items() if k != main]
+        shown = ", ".join(f"{Path(p).name} ({k})" for p, k in odd[:3]) + (f" and {len(odd) - 3} more" if len(odd) > 3 else "")
+        alpha = any("alpha" in k or k == "RGBA" for _, k in odd)
+        return (f"warpgs: note: {source}: {len(odd)} of {len(self.kinds)} images are not {main} like the rest and were "
+                f"converted to RGB{' (alpha composited over the background)' if alpha else ''}: {shown}")
+
+    def warn(self, source) -> None:
+        """Prints ``note(source)`` (once), if there is one."""
+        msg = self.note(source)
+        if msg:
+            from warpgs.console import warn_once
+
+            warn_once(msg)
+
+
+def read_image(path: str | Path, background: tuple[float, float, float] | None = None,
+               channels: ImageChannels | None = None) -> tuple[np.ndarray, np.ndarray | None]:
     """Reads an image as float32 (H, W, 3) in [0, 1] and its alpha (H, W) float32 or None.
 
     With ``background`` given and an alpha channel present, RGB is composited over it
-    (straight alpha: rgb * a + background * (1 - a)).
+    (straight alpha: rgb * a + background * (1 - a)). ``channels`` records what the file held.
     """
     from PIL import Image
 
@@ -262,6 +342,8 @@ def read_image(path: str | Path, background: tuple[float, float, float] | None =
         with Image.open(path) as im:
             im.load()
             mode = im.mode
+            if channels is not None:
+                channels.add(path, channels_of(mode, im.info))
             if mode in ("I;16", "I;16B", "I;16L", "I"):
                 a = np.asarray(im, np.float32)
                 a = a / (65535.0 if a.max() > 255 else 255.0)

@@ -21,13 +21,21 @@ BLENDER_TRAIN_IDS = (26, 86, 2, 55, 75, 93, 16, 73)
 
 
 def every_nth_split(num: int, n_train: int | None, test_every: int = 8,
-                    test_rest: bool = False) -> tuple[list[int], list[int]]:
+                    test_rest: bool = False, source: str | None = None) -> tuple[list[int], list[int]]:
     """LLFF/DL3DV rule over ``num`` frames already sorted by name -> (train, test) indices.
 
     ``n_train=None`` takes every non-test frame; ``test_every=0`` makes no test views. ``test_rest``:
     the training views are chosen by the same rule, but every frame not trained on is a test view (a
-    denser test set where ground truth is free, as for the synthetic scene).
+    denser test set where ground truth is free, as for the synthetic scene). ``source``: the file the
+    frames come from, named in the errors.
     """
+    try:
+        return _every_nth_split(num, n_train, test_every, test_rest)
+    except SceneError as e:
+        raise SceneError(f"{source}: {e}" if source else str(e)) from None
+
+
+def _every_nth_split(num: int, n_train: int | None, test_every: int, test_rest: bool) -> tuple[list[int], list[int]]:
     if num <= 0:
         raise SceneError("the scene has no frames")
     idx = np.arange(num)
@@ -38,8 +46,13 @@ def every_nth_split(num: int, n_train: int | None, test_every: int = 8,
         test, rest = [], [int(i) for i in idx]
     if n_train is None:
         return rest, test
-    if n_train < 1 or n_train > len(rest):
-        raise SceneError(f"asked for {n_train} training views but only {len(rest)} frames are not test frames")
+    if isinstance(n_train, bool) or not isinstance(n_train, (int, np.integer)):
+        raise SceneError(f"views={n_train!r}: expected a number of training views or 'all'")
+    if n_train < 1:
+        raise SceneError(f"views={n_train}: at least 1 training view is needed")
+    if n_train > len(rest):
+        raise SceneError(f"views={n_train}: asked for {n_train} training views but only {len(rest)} of the "
+                         f"{num} frames are not test frames")
     pick = np.round(np.linspace(0, len(rest) - 1, n_train)).astype(int)
     train = [rest[i] for i in pick]
     if test_rest:

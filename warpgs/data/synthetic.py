@@ -328,9 +328,10 @@ def render_views(
     """Ray-traces N views -> (rgb (N, H, W, 3) float32 in [0, 1], z-depth (N, H, W) float32, 0 = miss)."""
     import warp as wp
 
+    from .._warp import init
     from ..kernels import raytrace
 
-    wp.init()
+    init()  # wp.init without the no-driver line on a machine without CUDA
     dev = wp.get_device(device) if device is not None else wp.get_preferred_device()
     viewmats = np.asarray(viewmats, np.float64).reshape(-1, 4, 4)
     n = len(viewmats)

@@ -28,6 +28,8 @@ class FilterConfig:
     std_ratio: float = 2.0  # outlier: score > mean + std_ratio * std
     voxel: float | None = None  # voxel size for downsampling first; None or 0: off
 
+    LIMITS = {"nb_neighbors": ">= 1", "std_ratio": "> 0", "voxel": ">= 0"}
+
 
 class FilterResult(NamedTuple):
     points: Any  # [M, 3]

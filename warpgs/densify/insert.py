@@ -39,6 +39,8 @@ class InsertConfig:
     scale_factor: float = 1.0  # x the local spacing
     seed: int = 0  # thinning order
 
+    LIMITS = {"radius": "> 0", "k": ">= 1", "spacing_radius": "> 0", "scale_factor": "> 0", "seed": ">= 0"}
+
 
 class Insertion(NamedTuple):
     means: torch.Tensor  # [N, 3] centres of the new Gaussians

@@ -31,6 +31,7 @@ import numpy as np
 import torch
 from warpgs import losses
 from warpgs.config import FullConfig
+from warpgs.console import warn_once
 from warpgs.farfield import FAR_FIELDS, make_far_field
 from warpgs.model import rgb_to_sh
 from warpgs.train import STATE_PARTS, Method, Trainer
@@ -122,8 +123,8 @@ class FullMethod(Method):
                 self._lpips = losses.LPIPS(cfg.eval.lpips_weights).to(trainer.device)
             except Exception as e:  # LPIPSUnavailable or a broken install
                 self.lpips_missing = losses.one_line(e)
-                trainer.log("warpgs: LPIPS weights are not available, so pseudo views are trained with L1 in place of "
-                            f"LPIPS (the paper's 'L1 instead of LPIPS' ablation). Reason: {self.lpips_missing}")
+                warn_once(f"warpgs: pseudo views train with L1 (the paper's ablation), LPIPS is not reported: "
+                          f"{self.lpips_missing}", key="lpips-missing")
 
     @property
     def pseudo_loss_used(self) -> str:

@@ -17,10 +17,14 @@ Examples:
     python -m warpgs.pipelines.sparse --method baseline --data blender --compact   # fewest Gaussians
 
 Config layers (later wins): configs/<method>.yaml, configs/<dataset>.yaml, --config files, --set
-key=value, explicit flags. With --resume the checkpoint's config replaces the first two.
+key=value, explicit flags. With --resume the checkpoint's config replaces the first two. Every layer is
+checked on its own (keys, types, ranges), so a bad value is named with the file, --set or flag it came from.
 
-The output folder gets config.yaml, checkpoint.pt (every train.checkpoint_every steps and on Ctrl-C),
-metrics.json, test/NNN_<view>.png (render | ground truth) and point_cloud.ply (3D-GS layout).
+The output folder gets config.yaml, checkpoint.pt (every train.checkpoint_every steps and on Ctrl-C; the
+one it replaced stays as checkpoint.prev.pt, which --resume falls back to when checkpoint.pt cannot be
+read), metrics.json, test/NNN_<view>.png (render | ground truth) and point_cloud.ply (3D-GS layout). A run
+locks its folder (.warpgs.lock; warpgs/runfolder.py): a second run into it stops, and a folder holding an
+earlier run needs --resume or --overwrite. Bad input of any kind ends in one line, ``error: ...``, exit 2.
 """
 
 from __future__ import annotations
@@ -31,10 +35,9 @@ import json
 import sys
 from pathlib import Path
 
-import torch
-
 from warpgs import losses
-from warpgs.config import CONFIG_DIR, ConfigError, build_config, merge, parse_override, read_yaml, save_config
+from warpgs.config import CONFIG_DIR, ConfigError, build_config, parse_override, read_yaml, save_config
+from warpgs.console import warn_once
 from warpgs.pipelines.full import ABLATIONS
 
 METHODS = ("baseline", "full", "compare")
@@ -63,7 +66,13 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--seed", type=int, default=None)
     g.add_argument("--out", default=None, help="output folder (default: outputs/<method>/<scene>_<views>v)")
     g.add_argument("--resume", nargs="?", const="", default=None, metavar="DIR",
-                   help="continue from DIR/checkpoint.pt (DIR defaults to --out)")
+                   help="continue from DIR/checkpoint.pt (DIR defaults to --out; an unreadable checkpoint falls "
+                        "back to DIR/checkpoint.prev.pt)")
+    g.add_argument("--overwrite", action="store_true",
+                   help="--out holds an earlier run: delete its outputs and start over (without it, such a folder "
+                        "needs --resume)")
+    g.add_argument("--drop-invalid", action="store_true",
+                   help="model.init=ply: drop points with non-finite values (one warning) instead of refusing the file")
     g.add_argument("--no-progress", action="store_true", help="no progress bar")
     g.add_argument("--jobs", type=int, default=None, metavar="N",
                    help="compare: 2 trains baseline and full method at once (default on a multi-core CPU), 1 in turn")
@@ -84,59 +93,72 @@ def dataset_overlay(data: str) -> Path | None:
     return p if p.is_file() and name not in METHODS else None
 
 
-def flag_layer(args) -> dict:
-    layer: dict = {}
-    data = {k: v for k, v in (("name", args.data), ("scene", args.scene), ("views", args.views),
-                              ("downscale", args.downscale), ("root", args.data_root)) if v is not None}
-    if "views" in data and data["views"] != "all":
-        try:
-            data["views"] = int(data["views"])
-        except ValueError:
-            raise ConfigError(f"--views {data['views']!r}: expected a number or 'all'") from None
-    if data:
-        layer["data"] = data
-    train = {k: v for k, v in (("iterations", args.iterations), ("device", args.device), ("seed", args.seed))
-             if v is not None}
+def flag_layers(args) -> list[tuple[str, dict]]:
+    """The explicit flags as config layers, each named after its flag (a value out of range is reported
+    as coming from that flag)."""
+    layers: list[tuple[str, dict]] = []
+    for flag, section, key, value in (("--data", "data", "name", args.data), ("--scene", "data", "scene", args.scene),
+                                      ("--views", "data", "views", args.views),
+                                      ("--downscale", "data", "downscale", args.downscale),
+                                      ("--data-root", "data", "root", args.data_root),
+                                      ("--iterations", "train", "iterations", args.iterations),
+                                      ("--device", "train", "device", args.device), ("--seed", "train", "seed", args.seed),
+                                      ("--cycles", "full", "cycles", args.cycles)):
+        if value is None:
+            continue
+        if key == "views" and value != "all":
+            try:
+                value = int(value)
+            except ValueError:
+                raise ConfigError(f"--views {value!r}: expected a number or 'all'") from None
+        layers.append((f"{flag} {value}", {section: {key: value}}))
     if args.no_progress:
-        train["progress"] = False
-    if train:
-        layer["train"] = train
-    if args.cycles is not None:
-        layer["full"] = {"cycles": args.cycles}
+        layers.append(("--no-progress", {"train": {"progress": False}}))
+    if getattr(args, "drop_invalid", False):
+        layers.append(("--drop-invalid", {"model": {"drop_invalid": True}}))
     for name in args.ablation:
         if name not in ABLATIONS:
             raise ConfigError(f"--ablation {name!r}: available ablations are {', '.join(ABLATIONS)}")
-        layer = merge(layer, ABLATIONS[name])
+        layers.append((f"--ablation {name}", ABLATIONS[name]))
     if args.out is not None:
-        layer["out"] = args.out
-    return layer
+        layers.append(("--out", {"out": args.out}))
+    return layers
 
 
 def make_config(args):
-    """-> (config, resume folder or None)."""
+    """-> (config, resume folder or None). Every layer is checked on its own (``build_config``): a value out
+    of range is an error naming the file, ``--set`` or flag it came from, even where a later layer sets the
+    key again."""
+    from warpgs.train import resumable_checkpoint
+
     resume_dir = None
     if args.resume is not None:
+        if getattr(args, "overwrite", False):
+            raise ConfigError("--resume continues the run in a folder and --overwrite replaces it: give one of them")
         resume_dir = Path(args.resume or args.out or "")
         if not str(resume_dir) or str(resume_dir) == ".":
             raise ConfigError("--resume needs a folder: --resume DIR (or --out DIR)")
-        ck = resume_dir / "checkpoint.pt"
-        if ck.is_file():
-            base = [torch.load(ck, map_location="cpu", weights_only=False)["config"], {"out": str(resume_dir)}]
+        found = resumable_checkpoint(resume_dir)  # checkpoint.pt, else checkpoint.prev.pt (with a note)
+        if found is not None:
+            base = [(str(found[0]), found[1]["config"]), ("--resume", {"out": str(resume_dir)})]
         elif (resume_dir / "config.yaml").is_file():  # a compare run: each method has its own checkpoint
-            base = [read_yaml(resume_dir / "config.yaml"), {"out": str(resume_dir)}]
+            base = [(str(resume_dir / "config.yaml"), read_yaml(resume_dir / "config.yaml")),
+                    ("--resume", {"out": str(resume_dir)})]
         else:
-            raise ConfigError(f"--resume: {ck} does not exist; nothing to resume")
+            raise ConfigError(f"--resume: {resume_dir / 'checkpoint.pt'} does not exist; nothing to resume")
     else:
         method = args.method or "compare"
         if method not in METHODS:
             raise ConfigError(f"--method {method!r}: available methods are {', '.join(METHODS)}")
-        base = [read_yaml(CONFIG_DIR / "baseline.yaml"), read_yaml(CONFIG_DIR / "full.yaml"), {"method": method}]
+        base = [(str(CONFIG_DIR / f"{m}.yaml"), read_yaml(CONFIG_DIR / f"{m}.yaml")) for m in ("baseline", "full")]
+        base.append((f"--method {method}", {"method": method}))
         overlay = dataset_overlay(args.data or "synthetic")
         if overlay is not None:
-            base.append(read_yaml(overlay))
+            base.append((str(overlay), read_yaml(overlay)))
     if getattr(args, "compact", False):
-        base.append(read_yaml(CONFIG_DIR / "compact.yaml"))
-    layers = base + [read_yaml(f) for f in args.config] + [parse_override(s) for s in args.set] + [flag_layer(args)]
+        base.append(("--compact", read_yaml(CONFIG_DIR / "compact.yaml")))
+    layers = (base + [(str(f), read_yaml(f)) for f in args.config] + [(f"--set {s}", parse_override(s)) for s in args.set]
+              + flag_layers(args))
     return build_config(layers), resume_dir
 
 
@@ -158,8 +180,8 @@ def print_metrics(m: dict, out: Path) -> None:
           f"{m['resolution'][0]}x{m['resolution'][1]}, {m['iterations']} iterations on {m['device']}")
     print(f"  test{masked}: PSNR {f(m['psnr'], '.2f')}  SSIM {f(m['ssim'], '.3f')}  LPIPS {f(m['lpips'], '.3f')}"
           f"   (initial PSNR {f(m['initial_psnr'], '.2f')}, train PSNR {f(m['train_psnr'], '.2f')})")
-    if m.get("lpips_missing"):
-        print("  LPIPS not computed: " + losses.one_line(m["lpips_missing"]))
+    if m.get("lpips_missing"):  # one line, once per process (a compare run has two runs, the full method said it)
+        warn_once(f"warpgs: LPIPS not computed: {losses.one_line(m['lpips_missing'])}", key="lpips-missing")
     mem = m.get("peak_cuda_allocated_mb", m.get("peak_rss_mb"))
     print(f"  {m['num_gaussians']} Gaussians, training {m['train_time_s']:.1f} s, {m['render_fps']:.1f} FPS, "
           f"peak memory {mem:.0f} MB")
@@ -206,26 +228,27 @@ class RunStopped(Exception):
 def run_method(method: str, cfg, scene, out: Path, resume: bool, baseline_metrics: dict | None = None,
                resume_hint: str | None = None) -> dict:
     """Trains one method into ``out``; returns its metrics (``stopped_early`` set when it diverged and the
-    last good state's were written). Raises ``RunStopped`` when it ends without them."""
-    from warpgs.train import TrainingDiverged, TrainingInterrupted
+    last good state's were written). Raises ``RunStopped`` when it ends without them: bad settings, Ctrl-C,
+    a checkpoint that cannot be read or written, outputs that cannot be written (each said in one line)."""
+    from warpgs.train import CHECKPOINT, PREVIOUS_CHECKPOINT, CheckpointError, TrainingDiverged, TrainingInterrupted
 
     cfg = copy.deepcopy(cfg)
     cfg.method = method
+    resume_hint = resume_hint or f"--resume {out}"
     try:
         trainer = make_trainer(cfg, scene, out)
     except (RuntimeError, ValueError) as e:
         print(f"error: {e}", file=sys.stderr)
         raise RunStopped(2) from e
-    if resume and (out / "checkpoint.pt").is_file():
-        trainer.load_checkpoint()
-        print(f"warpgs: resumed {out / 'checkpoint.pt'} at step {trainer.step} of {cfg.train.iterations}",
-              file=sys.stderr)
-    elif (out / "checkpoint.pt").exists():
-        print(f"warpgs: {out} holds an earlier run; starting over (use --resume to continue it)", file=sys.stderr)
-    out.mkdir(parents=True, exist_ok=True)
-    save_config(cfg, out / "config.yaml")
-    resume_hint = resume_hint or f"--resume {out}"
+    has_checkpoint = (out / CHECKPOINT).is_file() or (out / PREVIOUS_CHECKPOINT).is_file()
     try:
+        if resume and has_checkpoint:
+            used = trainer.load_checkpoint()  # checkpoint.pt, or the previous one when it cannot be read
+            print(f"warpgs: resumed {used} at step {trainer.step} of {cfg.train.iterations}", file=sys.stderr)
+        elif has_checkpoint:
+            print(f"warpgs: {out} holds an earlier run; starting over (use --resume to continue it)", file=sys.stderr)
+        out.mkdir(parents=True, exist_ok=True)
+        save_config(cfg, out / "config.yaml")
         trainer.run()
     except TrainingInterrupted as e:
         print(f"\nwarpgs: stopped at step {e.step}; checkpoint {e.checkpoint}. Continue with:\n"
@@ -238,7 +261,21 @@ def run_method(method: str, cfg, scene, out: Path, resume: bool, baseline_metric
         # the model is at its last good state: its metrics, renders and PLY are written all the same
         print("\n" + diverged_message(method, e, out), file=sys.stderr)
         trainer.stopped_early = {"reason": "diverged", "step": e.step, "cause": e.cause}
-    metrics = trainer.finish(baseline_metrics)
+    except CheckpointError as e:
+        full = "space" in str(e).lower()  # ENOSPC, EDQUOT
+        print(f"error: {e}" + ("" if "cannot write" not in str(e) else
+                               f"; {'free space, then ' if full else ''}continue with {resume_hint}"), file=sys.stderr)
+        raise RunStopped(2) from e
+    except OSError as e:
+        print(f"error: {out}: cannot write {e.filename or 'the run folder'}: {e.strerror or e}", file=sys.stderr)
+        raise RunStopped(2) from e
+    try:
+        metrics = trainer.finish(baseline_metrics)
+    except (CheckpointError, OSError) as e:
+        what = str(e) if isinstance(e, CheckpointError) else f"cannot write {e.filename or out}: {e.strerror or e}"
+        fix = "free space, then " if "space" in what.lower() else ""
+        print(f"error: {what}; the outputs in {out} are incomplete ({fix}run again with {resume_hint})", file=sys.stderr)
+        raise RunStopped(2) from e
     print_metrics(metrics, out)
     return metrics
 
@@ -274,28 +311,35 @@ def print_side_by_side(base: dict, full: dict, out: Path) -> None:
     print(f"  wrote {out / 'comparison.json'}, {out / 'full' / 'report.md'}")
 
 
+DEFAULT_OUT = "outputs/sparse"  # Config.out: replaced by outputs/<method>/<scene>_<views>v
+
+
 def main(argv=None) -> int:
+    """The command line. Bad input of any kind (config, scene, output folder, checkpoint) ends with one line,
+    ``error: ...``, and exit code 2, before any training; Ctrl-C with 130."""
     from warpgs.data.scene import SceneError
-    from warpgs.train import prepare_geometry
+    from warpgs.runfolder import RunFolderError, open_run_folder
+    from warpgs.train import CheckpointError, prepare_geometry
 
     args = build_parser().parse_args(argv)
+    folder = None
     try:
-        cfg, resume_dir = make_config(args)
-        scene = load_scene_for(cfg)
-    except (ConfigError, SceneError, ValueError) as e:
-        print(f"error: {e}", file=sys.stderr)
-        return 2
-    if args.out is None and resume_dir is None and cfg.out == "outputs/sparse":
-        cfg.out = f"outputs/{cfg.method}{'-compact' if cfg.compact.enabled else ''}/{scene.name}_{len(scene.train)}v"
-    out = Path(cfg.out)
-    resume = resume_dir is not None
-    print(f"warpgs: {scene.summary()}", file=sys.stderr)
-    try:
-        prepare_geometry(cfg, scene)  # once for both methods of a compare run
-    except (SceneError, ValueError) as e:
-        print(f"error: {e}", file=sys.stderr)
-        return 2
-    try:
+        try:
+            cfg, resume_dir = make_config(args)
+            resume = resume_dir is not None
+            chosen = args.out is not None or resume or cfg.out != DEFAULT_OUT
+            if chosen:  # the folder is checked and locked before the scene loads
+                folder = open_run_folder(cfg.out, resume=resume, overwrite=args.overwrite)
+            scene = load_scene_for(cfg)
+            if not chosen:
+                cfg.out = f"outputs/{cfg.method}{'-compact' if cfg.compact.enabled else ''}/{scene.name}_{len(scene.train)}v"
+                folder = open_run_folder(cfg.out, resume=resume, overwrite=args.overwrite)
+            out = Path(cfg.out)
+            print(f"warpgs: {scene.summary()}", file=sys.stderr)
+            prepare_geometry(cfg, scene)  # once for both methods of a compare run
+        except (ConfigError, SceneError, RunFolderError, CheckpointError, ValueError) as e:
+            print(f"error: {e}", file=sys.stderr)
+            return 2
         if cfg.method != "compare":
             return 1 if run_method(cfg.method, cfg, scene, out, resume).get("stopped_early") else 0
         out.mkdir(parents=True, exist_ok=True)
@@ -306,10 +350,13 @@ def main(argv=None) -> int:
         else:
             base = run_method("baseline", cfg, scene, out / "baseline", resume, resume_hint=hint)
             full = run_method("full", cfg, scene, out / "full", resume, baseline_metrics=base, resume_hint=hint)
+        print_side_by_side(base, full, out)
+        return 1 if base.get("stopped_early") or full.get("stopped_early") else 0
     except RunStopped as e:
         return e.code
-    print_side_by_side(base, full, out)
-    return 1 if base.get("stopped_early") or full.get("stopped_early") else 0
+    finally:
+        if folder is not None:
+            folder.release()
 
 
 def compare_in_parallel(args, cfg) -> bool:

@@ -45,6 +45,9 @@ class GeometryConfig:
     sfm: SfmOptions = field(default_factory=SfmOptions)
     stereo: StereoInitOptions = field(default_factory=StereoInitOptions)
 
+    LIMITS = {"min_points": ">= 0", "max_points": ">= 1", "near_percentile": "[0, 100]", "far_percentile": "[0, 100]",
+              "bounds_margin": "[0, 1)", "seed": ">= 0"}
+
 
 @dataclass
 class Geometry:

@@ -48,6 +48,8 @@ class UncertaintyConfig:
     photometric: bool = True  # keep the |I_gs(p) - I_inp(q)|^2 / s2 term
     min_depth: float = 1e-6  # depths at or below this count as "no surface"
 
+    LIMITS = {"s1": "> 0", "reference_width": "> 0", "s2": "> 0", "min_depth": ">= 0"}
+
 
 def effective_s1(cfg: UncertaintyConfig, width: int) -> float:
     """s1 in this image's pixels^2: the paper measures the reprojection error on SVD's 1024-wide frames,

@@ -49,6 +49,8 @@ class SamplerConfig:
     noise_scale: float | None = None  # x the initial noise; None: the backend's default
     seed: int = 0
 
+    LIMITS = {"steps": ">= 1", "delta": ">= 0", "eps": "> 0", "noise_scale": ">= 0", "seed": ">= 0"}
+
 
 class VideoBackend(Protocol):
     """What the sampler needs from a video model. Frames are [N, H, W, 3] in [0, 1]; latents [N, C, h, w]."""

@@ -36,6 +36,9 @@ class TrajectoryConfig:
     # paper does for DL3DV); nearest: a nearest-neighbour path through the camera centres (any capture)
     order: str = "nearest"
 
+    LIMITS = {"n_frames": ">= 2", "perturb_candidates": ">= 0", "perturb_translation": ">= 0",
+              "perturb_rotation_deg": ">= 0", "guidance_source": "{nearest, halves, best}", "order": "{capture, nearest}"}
+
 
 @dataclass
 class Trajectory:
