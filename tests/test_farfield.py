@@ -53,19 +53,21 @@ def test_constant_per_pixel_background_equals_the_kernels_background(device):
         assert_close(ia[k].grad, ib[k].grad, 1e-5, 1e-4, what=f"d/d{k}")
 
 
-def test_background_gradient_is_transmittance():
+@pytest.mark.parametrize("device", DEVICES)
+def test_background_gradient_is_transmittance(device):
     scene = make_scene(n=8, seed=23)
-    bg = backdrop(scene).float().requires_grad_(True)
-    out, _ = run_warp(scene, "cpu", background=bg)
+    bg = backdrop(scene).float().to(device).requires_grad_(True)
+    out, _ = run_warp(scene, device, background=bg)
     out.image.sum().backward()
     expected = (1 - out.alpha.detach())[..., None].expand_as(bg)
     assert_close(bg.grad, expected, 1e-6, what="d image / d background")
 
 
-def test_per_pixel_background_of_the_wrong_size_is_named():
+@pytest.mark.parametrize("device", DEVICES)
+def test_per_pixel_background_of_the_wrong_size_is_named(device):
     scene = make_scene(n=3, seed=24)
     with pytest.raises(ValueError, match="background"):
-        run_warp(scene, "cpu", background=torch.zeros(scene["height"] + 1, scene["width"], 3))
+        run_warp(scene, device, background=torch.zeros(scene["height"] + 1, scene["width"], 3, device=device))
 
 
 def test_ray_directions_are_the_analytic_pixel_rays():
@@ -155,6 +157,7 @@ def test_far_field_round_trips_through_its_json(tmp_path):
     assert_close(back.up, ff.up, 1e-6, what="up")
 
 
+@pytest.mark.skipif("cpu" not in DEVICES, reason="trains on the CPU (the GPU machine's packed Warp has no CPU compiler)")
 def test_trainer_fits_the_far_field_on_training_views_only_and_resumes_exactly(tmp_path):
     import dataclasses
 
