@@ -10,7 +10,7 @@ PKG = Path(__file__).resolve().parents[1] / "warpgs"
 # lower layers may not import higher ones; one layer may import within itself
 LAYERS = [
     ["console", "runfolder", "_warp", "kernels", "configio", "geometry", "guard", "losses", "ply", "viz"],
-    ["render", "metrics"],
+    ["render", "metrics", "farfield"],
     ["model", "data"],
     ["strategy"],
     ["pseudo", "densify"],
