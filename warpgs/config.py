@@ -27,9 +27,13 @@ import yaml
 from warpgs.configio import (  # noqa: F401  (re-exported: the config API in one place)
     CONFIG_DIR, REPO_ROOT, ConfigError, apply_values, check_limits, merge, parse_override, read_yaml)
 from warpgs.densify import DensifyConfig
+from warpgs.farfield import FAR_FIELDS
 from warpgs.points import GeometryConfig
 from warpgs.pseudo.views import PseudoConfig
 from warpgs.strategy import DefaultStrategy
+
+
+FAR_FIELD_RULE = "{" + ", ".join(FAR_FIELDS) + "}"  # train.far_field, full.far_field
 
 
 @dataclass
@@ -129,7 +133,7 @@ class TrainConfig:
               "eval_every": ">= 0", "background": "[0, 1]", "drop_rate": "[0, 1)", "max_nan_steps": ">= 1",
               "explode_factor": ">= 0", "explode_window": ">= 1", "explode_patience": ">= 1", "snapshot_every": ">= 0",
               "max_recoveries": ">= 0", "recovery_lr_factor": "(0, 1]", "cpu_threads": ">= 0",
-              "far_field": "{none, elevation, sky}", "far_field_bins": ">= 1"}
+              "far_field": FAR_FIELD_RULE, "far_field_bins": ">= 1"}
 
 
 @dataclass
@@ -174,7 +178,7 @@ class FullConfig:
               "ssim_weight": ">= 0", "depth_weight": ">= 0", "input_depth_weight": ">= 0",
               "pseudo_loss": "{lpips, l1}", "guidance": "{warped, render}", "stereo_sources": "{inputs, all}",
               "init_opacity": "(0, 1)", "max_new": ">= 0", "pseudo_mask": "{seen, reliable}", "growth_budget": ">= 0",
-              "drop_rate": "[0, 1)", "far_field": "{none, elevation, sky}", "flythrough_frames": ">= 0"}
+              "drop_rate": "[0, 1)", "far_field": FAR_FIELD_RULE, "flythrough_frames": ">= 0"}
 
 
 IMPORTANCE_VIEWS = ("train", "virtual", "pseudo")

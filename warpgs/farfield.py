@@ -67,14 +67,12 @@ class ElevationFarField:
         up = up / up.norm()
         sums = torch.zeros(bins, 3, dtype=torch.float64, device=dev)
         counts = torch.zeros(bins, dtype=torch.float64, device=dev)
-        total = torch.zeros(3, dtype=torch.float64, device=dev)
         for c, m in zip(cameras, mats):
             img = torch.as_tensor(c.image, dtype=torch.float32, device=dev).reshape(-1, 3).double()
             e = ray_directions(m, torch.as_tensor(c.K, device=dev), c.width, c.height) @ up
             b = ((e.reshape(-1) + 1) * 0.5 * bins).long().clamp(0, bins - 1)
             sums.index_add_(0, b, img)
             counts.index_add_(0, b, torch.ones_like(b, dtype=torch.float64))
-            total += img.sum(0)
         seen = torch.nonzero(counts > 0).flatten()
         colors = sums / counts.clamp(min=1)[:, None]
         if len(seen) < bins:  # unseen bands: the nearest seen band's colour

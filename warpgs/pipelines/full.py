@@ -30,9 +30,9 @@ from pathlib import Path
 import numpy as np
 import torch
 from warpgs import losses
-from warpgs.config import FullConfig
+from warpgs.config import FullConfig, check_limits
 from warpgs.console import warn_once
-from warpgs.farfield import FAR_FIELDS, make_far_field
+from warpgs.farfield import make_far_field
 from warpgs.model import rgb_to_sh
 from warpgs.train import STATE_PARTS, Method, Trainer
 
@@ -48,22 +48,8 @@ ABLATIONS = {
 
 
 def check_settings(s: FullConfig) -> FullConfig:
-    if s.pseudo_loss not in ("lpips", "l1"):
-        raise ValueError(f"full.pseudo_loss must be lpips or l1, got {s.pseudo_loss!r}")
-    if s.stereo_sources not in ("inputs", "all"):
-        raise ValueError(f"full.stereo_sources must be inputs or all, got {s.stereo_sources!r}")
-    if s.guidance not in ("warped", "render"):
-        raise ValueError(f"full.guidance must be warped or render, got {s.guidance!r}")
-    if s.pseudo_mask not in ("seen", "reliable"):
-        raise ValueError(f"full.pseudo_mask must be seen or reliable, got {s.pseudo_mask!r}")
-    if s.far_field is not None and s.far_field not in FAR_FIELDS:
-        raise ValueError(f"full.far_field must be null or one of {', '.join(FAR_FIELDS)}, got {s.far_field!r}")
-    if s.drop_rate is not None and not 0.0 <= s.drop_rate < 1.0:
-        raise ValueError(f"full.drop_rate must be in [0, 1), got {s.drop_rate}")
-    if s.growth_budget < 0:
-        raise ValueError(f"full.growth_budget must be >= 0, got {s.growth_budget}")
-    if s.cycles < 0 or not 0.0 <= s.baseline_fraction < 1.0:
-        raise ValueError("full.cycles must be >= 0 and full.baseline_fraction in [0, 1)")
+    """The ranges of ``FullConfig.LIMITS``, for settings built in code (a config file's are checked as read)."""
+    check_limits(s, "the full method's options", "full.")
     return s
 
 
