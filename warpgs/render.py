@@ -29,8 +29,6 @@ from warpgs.kernels import projection as kp
 from warpgs.kernels import rasterize as kr
 from warpgs.kernels import sh as ksh
 
-TILE_SIZE = kr.TILE_SIZE
-
 
 class RenderOutput(NamedTuple):
     image: torch.Tensor
@@ -63,8 +61,9 @@ class _Project(torch.autograd.Function):
         dev = device_of(means)
         stream = stream_of(dev)
         n = means.shape[0]
-        tiles_x = (width + TILE_SIZE - 1) // TILE_SIZE
-        tiles_y = (height + TILE_SIZE - 1) // TILE_SIZE
+        ts = kr.tile_size_for(dev)
+        tiles_x = (width + ts - 1) // ts
+        tiles_y = (height + ts - 1) // ts
         f = dict(device=means.device, dtype=torch.float32)
         means2d = torch.empty(n, 2, **f)
         conics = torch.empty(n, 3, **f)
@@ -75,7 +74,7 @@ class _Project(torch.autograd.Function):
         launch(
             kp.project_gaussians_fwd, n,
             [_gaussians(means, quats, scales, opacities), _camera(viewmat, K, width, height, eps2d, antialiased),
-             near, far, TILE_SIZE, tiles_x, tiles_y,
+             near, far, ts, tiles_x, tiles_y,
              arg(means2d, wp.vec2), arg(conics, wp.vec3), arg(depths), arg(radii, wp.vec2i),
              arg(opac_eff), arg(tiles_touched)],
             dev, stream,
@@ -157,7 +156,7 @@ def _bin_gaussians(means2d, radii, depths, tiles_touched, tiles_x, tiles_y):
     launch(
         kb.emit_intersections, n,
         [arg(means2d, wp.vec2), arg(radii, wp.vec2i), arg(depths.view(torch.int32)), arg(offsets),
-         TILE_SIZE, tiles_x, tiles_y, arg(keys), arg(values)],
+         kr.tile_size_for(dev), tiles_x, tiles_y, arg(keys), arg(values)],
         dev, stream,
     )
     tile_bits = int(math.floor(math.log2(n_tiles))) + 1
@@ -181,8 +180,9 @@ class _Composite(torch.autograd.Function):
                 width, height, alpha_max, deterministic):
         dev = device_of(means2d)
         stream = stream_of(dev)
-        tiles_x = (width + TILE_SIZE - 1) // TILE_SIZE
-        n_threads = ranges.shape[0] * kr.BLOCK
+        ts = kr.tile_size_for(dev)
+        tiles_x = (width + ts - 1) // ts
+        n_threads = ranges.shape[0] * ts * ts
         f = dict(device=means2d.device, dtype=torch.float32)
         splats = torch.empty(means2d.shape[0], 10, **f)
         launch(kr.pack_splats, means2d.shape[0],
@@ -208,7 +208,8 @@ class _Composite(torch.autograd.Function):
         splats, background, ranges, gauss_ids, depth, alpha, last = ctx.saved_tensors
         width, height, alpha_max, deterministic = ctx.cfg
         dev = device_of(splats)
-        tiles_x = (width + TILE_SIZE - 1) // TILE_SIZE
+        ts = kr.tile_size_for(dev)
+        tiles_x = (width + ts - 1) // ts
         n = splats.shape[0]
         # the CPU backend runs one thread, so its float sums are deterministic already
         fixed = bool(deterministic) and (dev != "cpu" or deterministic == "fixed")
@@ -218,7 +219,7 @@ class _Composite(torch.autograd.Function):
         v_opac, v_depths = make(n, **z), make(n, **z)
         v_fixed = torch.zeros(n if fixed else 0, 10, device=splats.device, dtype=torch.int64)
         launch(
-            kr.rasterize_bwd if dev == "cpu" else kr.rasterize_bwd_cuda, ranges.shape[0] * kr.BLOCK,
+            kr.rasterize_bwd if dev == "cpu" else kr.rasterize_bwd_cuda, ranges.shape[0] * ts * ts,
             [arg(ranges), arg(gauss_ids), arg(splats, kr.splat), arg(background.reshape(1, 3), wp.vec3),
              width, height, tiles_x, alpha_max, arg(depth.view(-1)), arg(alpha.view(-1)), arg(last.view(-1)),
              arg(_zeros_like_or(v_color, alpha.new_empty(height, width, 3)).view(-1, 3), wp.vec3),
@@ -345,8 +346,9 @@ def rasterize(
         if n and bool((quats.detach().norm(dim=-1) == 0).any()):
             _fail("quats", "contains a zero quaternion, which has no rotation")
 
-    tiles_x = (width + TILE_SIZE - 1) // TILE_SIZE
-    tiles_y = (height + TILE_SIZE - 1) // TILE_SIZE
+    ts = kr.tile_size_for(device_of(means))
+    tiles_x = (width + ts - 1) // ts
+    tiles_y = (height + ts - 1) // ts
     means2d, conics, depths, opac_eff, radii, tiles_touched = _Project.apply(
         means, quats, scales, opacities, viewmat, K, width, height, eps2d, near_plane, far_plane, antialiased
     )
