@@ -182,7 +182,7 @@ class _Composite(torch.autograd.Function):
         stream = stream_of(dev)
         ts = kr.tile_size_for(dev)
         tiles_x = (width + ts - 1) // ts
-        n_threads = ranges.shape[0] * ts * ts
+        n_threads = kr.compositing_threads(dev, ranges.shape[0])
         f = dict(device=means2d.device, dtype=torch.float32)
         splats = torch.empty(means2d.shape[0], 10, **f)
         launch(kr.pack_splats, means2d.shape[0],
@@ -193,7 +193,7 @@ class _Composite(torch.autograd.Function):
         alpha = torch.empty(height, width, **f)
         last = torch.empty(height, width, device=means2d.device, dtype=torch.int32)
         launch(
-            kr.rasterize_fwd if dev == "cpu" else kr.rasterize_fwd_cuda, n_threads,
+            kr.rasterize_fwd_cpu if dev == "cpu" else kr.rasterize_fwd_cuda, n_threads,
             [arg(ranges), arg(gauss_ids), arg(splats, kr.splat), arg(background.reshape(1, 3), wp.vec3),
              width, height, tiles_x, alpha_max,
              arg(color.view(-1, 3), wp.vec3), arg(depth.view(-1)), arg(alpha.view(-1)), arg(last.view(-1))],
@@ -219,7 +219,8 @@ class _Composite(torch.autograd.Function):
         v_opac, v_depths = make(n, **z), make(n, **z)
         v_fixed = torch.zeros(n if fixed else 0, 10, device=splats.device, dtype=torch.int64)
         launch(
-            kr.rasterize_bwd if dev == "cpu" else kr.rasterize_bwd_cuda, ranges.shape[0] * ts * ts,
+            kr.rasterize_bwd_cpu if dev == "cpu" else kr.rasterize_bwd_cuda,
+            kr.compositing_threads(dev, ranges.shape[0]),
             [arg(ranges), arg(gauss_ids), arg(splats, kr.splat), arg(background.reshape(1, 3), wp.vec3),
              width, height, tiles_x, alpha_max, arg(depth.view(-1)), arg(alpha.view(-1)), arg(last.view(-1)),
              arg(_zeros_like_or(v_color, alpha.new_empty(height, width, 3)).view(-1, 3), wp.vec3),
