@@ -46,6 +46,16 @@ listed in metrics.json). After ``train.max_recoveries`` recoveries the next dive
 ``TrainingDiverged``, naming the step, the cause and the last good checkpoint on disk; the model is left
 at the last good state. A checkpoint is never written from a state that is not finite, so the one on disk
 stays the last good one.
+
+Host reads (``train.sync_every``; 10 on CUDA, every step on the CPU): reading a loss or a flag on the host
+waits for the device, so on CUDA the verdicts are read every ``sync_every`` steps (and before every
+snapshot, checkpoint, evaluation, the end of a phase and a stop). In between, a step is judged on the
+device (finite loss and gradients; the exploding-loss median over ``warpgs.guard.LossWindow``, the same
+statistic in the same arithmetic) and a bad step's update is skipped there (``masked_step``: fused Adam's
+``found_inf``), so a non-finite gradient never reaches the parameters. The read replays the verdicts
+through the guard in order; a divergence is acted on then, up to ``sync_every`` steps late, and rolls back
+as above (the steps after it are undone with it). Only the reads move: a run gives the same numbers for
+every ``sync_every``. The progress bar's loss and PSNR are those of the reading steps.
 """
 
 from __future__ import annotations
