@@ -18,7 +18,9 @@ trainer's), SH degree schedule and loss (``loss.l1_weight`` L1 + ``loss.ssim_wei
   trainer makes it and ``warpgs.strategy.DefaultStrategy``: what the trainer's machinery costs over it;
 - ``plain_gsplat`` (CUDA, gsplat importable): ``gsplat.rasterization`` (packed=False, classic, as gsplat's
   examples/simple_trainer.py), gsplat's ``DefaultStrategy`` and one Adam per parameter (gsplat's
-  convention; fused where the trainer's is, so the optimiser is no difference between the loops).
+  convention; fused where the trainer's is, so the optimiser is no difference between the loops);
+- ``warpgs_trainer_sync1`` (only when asked for): the trainer reading its verdicts every step
+  (``train.sync_every=1``): what the host reads cost; it must end with the same model as ``warpgs_trainer``.
 
 Each loop runs ``--warmup`` steps first (kernel loading, cuDNN, allocator), then ``--iterations`` steps timed
 with ``time.perf_counter`` between two ``torch.cuda.synchronize()``; with ``--repeats`` the loops take turns
@@ -50,7 +52,8 @@ sys.path.insert(0, str(ROOT))
 from warpgs import losses  # noqa: E402
 from warpgs.model import PARAM_NAMES, GaussianModel  # noqa: E402
 
-LOOPS = ("warpgs_trainer", "plain_warpgs", "plain_gsplat")
+LOOPS = ("warpgs_trainer", "plain_warpgs", "plain_gsplat", "warpgs_trainer_sync1")
+DEFAULT_LOOPS = LOOPS[:3]
 
 
 def gsplat_available() -> bool:
@@ -172,11 +175,13 @@ class Setup:
         return {k: v.to(self.device, copy=True) for k, v in self.init_state["params"].items()}
 
 
-def run_warpgs_trainer(setup: Setup, iterations: int):
+def run_warpgs_trainer(setup: Setup, iterations: int, sync_every: int | None = None):
     from warpgs.pipelines.sparse import make_trainer
 
     cfg = copy.deepcopy(setup.cfg)
     cfg.train.iterations = iterations
+    if sync_every is not None:
+        cfg.train.sync_every = sync_every
     tr = make_trainer(cfg, setup.train_scene)
     tr.load_state_dict(setup.init_state)  # the same initial Gaussians (and a fresh optimiser)
     tr.log = lambda msg: print(msg, file=sys.stderr)
@@ -269,7 +274,8 @@ def run_plain_gsplat(setup: Setup, iterations: int):
     return go, finish, splats
 
 
-RUNNERS = {"warpgs_trainer": run_warpgs_trainer, "plain_warpgs": run_plain_warpgs, "plain_gsplat": run_plain_gsplat}
+RUNNERS = {"warpgs_trainer": run_warpgs_trainer, "plain_warpgs": run_plain_warpgs, "plain_gsplat": run_plain_gsplat,
+           "warpgs_trainer_sync1": lambda setup, iterations: run_warpgs_trainer(setup, iterations, sync_every=1)}
 
 
 def measure(name: str, setup: Setup, iterations: int, warmup: int) -> dict:
@@ -304,7 +310,8 @@ def main(argv=None) -> dict:
     ap.add_argument("--iterations", type=int, default=3000)
     ap.add_argument("--device", choices=["cuda", "cpu"], default="cuda" if torch.cuda.is_available() else "cpu")
     ap.add_argument("--loops", default=None,
-                    help=f"comma-separated, of {', '.join(LOOPS)} (default: all where gsplat runs, else the warpgs ones)")
+                    help=f"comma-separated, of {', '.join(LOOPS)} (default: the first three where gsplat runs, "
+                         "else the warpgs ones)")
     ap.add_argument("--shrink", type=int, default=1, help="train and test at 1/N of the loaded size (box filter)")
     ap.add_argument("--warmup", type=int, default=None, help="untimed steps before each loop (default 20 CUDA, 2 CPU)")
     ap.add_argument("--repeats", type=int, default=1, help="runs of each loop (interleaved); the median is reported")
@@ -313,7 +320,7 @@ def main(argv=None) -> dict:
     args = ap.parse_args(argv)
     device = args.device
     has_gsplat = device == "cuda" and gsplat_available()
-    loops = args.loops.split(",") if args.loops else [n for n in LOOPS if n != "plain_gsplat" or has_gsplat]
+    loops = args.loops.split(",") if args.loops else [n for n in DEFAULT_LOOPS if n != "plain_gsplat" or has_gsplat]
     for n in loops:
         if n not in LOOPS:
             ap.error(f"--loops: unknown loop {n!r}; the loops are {', '.join(LOOPS)}")
@@ -351,10 +358,14 @@ def main(argv=None) -> dict:
         result["loops"][name] = row
     secs = {k: v["seconds"] for k, v in result["loops"].items()}
     ratios = {}
-    for other in ("plain_gsplat", "plain_warpgs"):
+    for other in ("plain_gsplat", "plain_warpgs", "warpgs_trainer_sync1"):
         if "warpgs_trainer" in secs and other in secs:
             ratios[f"warpgs_trainer/{other}"] = round(secs["warpgs_trainer"] / secs[other], 3)
     result["ratios"] = ratios
+    if {"warpgs_trainer", "warpgs_trainer_sync1"} <= set(result["loops"]):
+        a, b = result["loops"]["warpgs_trainer"], result["loops"]["warpgs_trainer_sync1"]
+        result["same_model_every_sync"] = all(a[k] == b[k] for k in ("gaussians", "train_psnr", "test_psnr"))
+        print(f"  the same model whatever train.sync_every: {result['same_model_every_sync']}")
     for k, v in ratios.items():
         print(f"  time ratio {k}: {v:.3f}")
     out_path.parent.mkdir(parents=True, exist_ok=True)

@@ -19,7 +19,7 @@ import torch
 from tiny_scene import make_scene, param_copy, same_params, tiny_config
 from warpgs.config import ConfigError, load_config
 from warpgs.guard import DivergenceGuard, LossWindow
-from warpgs.train import CHECKPOINT, Trainer, masked_step, with_adam_options
+from warpgs.train import CHECKPOINT, Trainer, finite_flags, masked_step, with_adam_options
 
 
 @pytest.fixture(scope="module")
@@ -275,3 +275,10 @@ def test_masked_step_changes_nothing_when_told_so():
         plain.load_state_dict(with_adam_options(fused.state_dict(), plain))
         assert not plain.param_groups[0].get("fused")
         plain.step()
+
+
+def test_finite_flags_find_nan_and_inf_and_take_empty_tensors():
+    nan, inf = float("nan"), float("inf")
+    ts = [torch.tensor(1.0), torch.tensor([1.0, nan]), torch.tensor([[-inf, 0.0]]), torch.tensor([2.0, -3.0])]
+    assert finite_flags(ts).tolist() == [True, False, False, True]
+    assert finite_flags(ts + [torch.zeros(0, 3)]).tolist() == [True, False, False, True, True]

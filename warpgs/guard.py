@@ -11,7 +11,7 @@ state with lower learning rates; ``warpgs.train``).
     window = LossWindow(cfg.train.explode_window, device)   # the same statistic on the device (no host read)
     window.rebuild(losses, guard.stat_start, step)           # from the losses the host holds
     flag = guard.exploding_on_device(value, window)          # a bool tensor: ``exploding``'s verdict
-    window.push(step, value_or_nan)                          # the step's entry (NaN: skipped)
+    window.push(step, value)                                 # the step's entry (not finite: skipped)
 
 A step is skipped when its loss or gradients are not finite, or when its loss explodes: above
 ``explode_factor`` x the median of the last ``explode_window`` finite losses of the phase. A divergence is
@@ -74,8 +74,8 @@ class DivergenceGuard:
         tc = self.cfg
         if tc.explode_factor <= 0 or tc.explode_window <= 0:
             return torch.zeros((), dtype=torch.bool, device=value.device)
-        median, count = window.median()
-        return (count > 0) & (median > 0) & (value.double() / median > tc.explode_factor)
+        median = window.median()  # inf when the window is empty: never exploding, as the host has it
+        return (median > 0) & (value.double() / median > tc.explode_factor)
 
     def skipped(self) -> bool:
         """One more skipped step; True when that makes ``max_nan_steps`` in a row."""
@@ -93,39 +93,39 @@ class DivergenceGuard:
 
 class LossWindow:
     """The guard's statistic kept on the device: the losses of the last ``size`` steps in a ring (slot
-    ``step % size``), NaN for skipped steps and for steps before the phase's ``stat_start``, in float64 (the
-    host's ``np.median`` works on Python floats). Filled from the host list (``rebuild``) after a host read,
-    then one entry per step (``push``) without one."""
+    ``step % size``), +inf for skipped steps and for steps before the phase's ``stat_start`` (any value that
+    is not finite is left out), in float64 (the host's ``np.median`` works on Python floats). Filled from
+    the host list (``rebuild``) after a host read, then one entry per step (``push``) without one."""
 
     def __init__(self, size: int, device):
         self.size = max(int(size), 1)
-        self.values = torch.full((self.size,), float("nan"), dtype=torch.float64, device=device)
+        self.values = torch.full((self.size,), float("inf"), dtype=torch.float64, device=device)
+        self._pair = torch.tensor([0, 1], device=device)  # the two middle ranks: (count - 1 + [0, 1]) // 2
 
     def rebuild(self, losses: list[float], stat_start: int, step: int) -> None:
         """The window before ``step``: ``losses[max(stat_start, step - size):step]`` (the host's statistic);
         an empty window (a new phase) needs no copy from the host."""
-        self.values.fill_(float("nan"))
+        self.values.fill_(float("inf"))
         lo = max(stat_start, step - self.size, 0)
         if lo < step:
             if len(losses) < step:
                 raise ValueError(f"LossWindow.rebuild: {len(losses)} losses on the host, the window needs {step}")
             idx = torch.tensor([j % self.size for j in range(lo, step)], device=self.values.device)
-            self.values[idx] = torch.tensor(losses[lo:step], dtype=torch.float64).to(self.values.device)
+            kept = [x if math.isfinite(x) else math.inf for x in losses[lo:step]]
+            self.values[idx] = torch.tensor(kept, dtype=torch.float64).to(self.values.device)
 
     def push(self, step: int, value) -> None:
-        """Step ``step``'s entry: a float (a step the host judged) or a 0-dim tensor (NaN: a skipped step)."""
+        """Step ``step``'s entry: a float (a step the host judged) or a 0-dim tensor (not finite: a skipped
+        step)."""
         slot = self.values[step % self.size]
-        if isinstance(value, torch.Tensor):
+        if isinstance(value, torch.Tensor):  # the trainer's: finite, or +inf for a skipped step
             slot.copy_(value.reshape(()))
         else:
-            slot.fill_(value)
+            slot.fill_(value if math.isfinite(value) else math.inf)
 
-    def median(self) -> tuple[torch.Tensor, torch.Tensor]:
-        """(median, count) of the finite entries as 0-dim tensors; the median as ``np.median`` has it (the
-        mean of the two middle values for an even count; undefined for none)."""
-        finite = torch.isfinite(self.values)
-        count = finite.sum()
-        ordered = torch.sort(torch.where(finite, self.values, torch.full_like(self.values, float("inf")))).values
-        lo = ((count - 1).clamp(min=0) // 2).reshape(1)
-        hi = (count // 2).clamp(max=self.size - 1).reshape(1)
-        return ((ordered.index_select(0, lo) + ordered.index_select(0, hi)) / 2).reshape(()), count
+    def median(self) -> torch.Tensor:
+        """The median of the finite entries (a 0-dim tensor) as ``np.median`` has it: the mean of the two
+        middle values for an even count (their sum halved: the same rounding); +inf when there are none."""
+        count = torch.isfinite(self.values).sum()  # what is not finite is +inf here: sorted last
+        ranks = ((count - 1 + self._pair) // 2).clamp(0, self.size - 1)
+        return torch.sort(self.values).values.index_select(0, ranks).mean()

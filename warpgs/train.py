@@ -295,6 +295,15 @@ def with_adam_options(saved: dict, optimizer: torch.optim.Optimizer) -> dict:
     return saved
 
 
+def finite_flags(tensors: list[torch.Tensor]) -> torch.Tensor:
+    """Whether each tensor is all finite, as a bool tensor on the device (no host read): their largest
+    absolute values in one fused reduction, which keeps NaN and inf (``torch._foreach_norm``'s infinity
+    norm, as ``clip_grad_norm_`` relies on), or one check each where a tensor is empty."""
+    if all(t.numel() for t in tensors):
+        return torch.isfinite(torch.stack(torch._foreach_norm(tensors, float("inf"))))
+    return torch.stack([torch.isfinite(t).all() for t in tensors])
+
+
 def masked_step(optimizer: torch.optim.Optimizer, apply: torch.Tensor) -> None:
     """``optimizer.step()`` where the 0-dim bool tensor ``apply`` is true, and no change at all (parameters,
     moments, step counts) where it is false, without reading ``apply`` on the host. Fused Adam skips on the
@@ -680,11 +689,12 @@ class Trainer:
         """A step's record, float64 on the device: [the input views' loss, whether the loss and each
         parameter's gradient are finite (1 / 0), exploding (a deferred verdict's), the render's MSE (where
         read)]."""
-        true = torch.ones((), dtype=torch.bool, device=loss.device)
-        flags = [torch.isfinite(loss).all()] + [true if p.grad is None else torch.isfinite(p.grad).all()
-                                                for p in self.model.params.values()]
-        return torch.cat([inputs.reshape(1).double(), torch.stack(flags).double(),
-                          torch.zeros(2, dtype=torch.float64, device=loss.device)])
+        zero = loss.new_zeros(())
+        flags = finite_flags([loss] + [zero if p.grad is None else p.grad for p in self.model.params.values()])
+        record = torch.zeros(len(flags) + 3, dtype=torch.float64, device=loss.device)
+        record[_VALUE] = inputs
+        record[_LOSS_FINITE:_EXPLODING] = flags
+        return record
 
     def _nonfinite_cause(self, row: list[float]) -> str:
         if not row[_LOSS_FINITE]:
@@ -704,7 +714,7 @@ class Trainer:
         record[_EXPLODING] = exploding
         masked_step(self.optimizer, apply)
         self.optimizer.zero_grad(set_to_none=True)
-        self._window.push(step, torch.where(apply, value, torch.full_like(value, float("nan"))))
+        self._window.push(step, torch.where(apply, value, float("inf")))
         self._pending.append((step, self.guard.stat_start, record))
         # a step without its update is one in which no Gaussian was seen, for the densification statistics
         return self._after_update(step, out._replace(radii=out.radii * apply), cam)
@@ -800,10 +810,11 @@ class Trainer:
         """Per parameter (in ``model.params``' order), on the device: whether it is finite, as stored and as
         rendered."""
         p = self.model.params
-        checks = {n: torch.isfinite(t).all() for n, t in p.items()}
-        if "scales" in checks:
-            checks["scales"] = checks["scales"] & torch.isfinite(torch.exp(p["scales"].detach())).all()
-        return torch.stack(list(checks.values()))
+        flags = finite_flags([t.detach() for t in p.values()])
+        if "scales" in p:
+            i = list(p).index("scales")
+            flags[i] = flags[i] & torch.isfinite(torch.exp(p["scales"].detach())).all()
+        return flags
 
     def state_is_finite(self) -> bool:
         """Whether the parameters (as rendered), the optimiser's moments and the densification statistics
