@@ -127,12 +127,16 @@ class TrainConfig:
     max_recoveries: int = 3  # rollbacks before the run stops; 0 = stop at the first divergence
     recovery_lr_factor: float = 0.5  # learning-rate scale applied at each rollback (recorded in metrics.json)
     cpu_threads: int = 1  # torch threads on the CPU (0: torch's default); Warp's CPU kernels use one anyway
+    sync_every: int | None = None  # steps between host reads of the losses and the guard's verdicts (a read
+    #   waits for the device); in between, a step with a non-finite or exploding loss skips its update on the
+    #   device and a divergence is acted on at the next read, up to this many steps late. The progress bar's
+    #   loss and PSNR are read at the same steps. None: 10 on CUDA, 1 (every step) on the CPU
     progress: bool = True
 
     LIMITS = {"iterations": ">= 1", "seed": ">= 0", "sh_degree_interval": ">= 0", "checkpoint_every": ">= 0",
               "eval_every": ">= 0", "background": "[0, 1]", "drop_rate": "[0, 1)", "max_nan_steps": ">= 1",
               "explode_factor": ">= 0", "explode_window": ">= 1", "explode_patience": ">= 1", "snapshot_every": ">= 0",
-              "max_recoveries": ">= 0", "recovery_lr_factor": "(0, 1]", "cpu_threads": ">= 0",
+              "max_recoveries": ">= 0", "recovery_lr_factor": "(0, 1]", "cpu_threads": ">= 0", "sync_every": ">= 1",
               "far_field": FAR_FIELD_RULE, "far_field_bins": ">= 1"}
 
 

@@ -8,10 +8,21 @@ state with lower learning rates; ``warpgs.train``).
     guard.skipped() / guard.exploded()        # True when that many in a row make a divergence
     guard.healthy()                           # a good step: the counts in a row start again
 
+    window = LossWindow(cfg.train.explode_window, device)   # the same statistic on the device (no host read)
+    window.rebuild(losses, guard.stat_start, step)           # from the losses the host holds
+    flag = guard.exploding_on_device(value, window)          # a bool tensor: ``exploding``'s verdict
+    window.push(step, value)                                 # the step's entry (not finite: skipped)
+
 A step is skipped when its loss or gradients are not finite, or when its loss explodes: above
 ``explode_factor`` x the median of the last ``explode_window`` finite losses of the phase. A divergence is
 ``max_nan_steps`` skipped steps in a row, or ``explode_patience`` exploding ones in a row (one high loss
 alone costs one step, never the run).
+
+On CUDA the trainer reads the verdicts only every ``train.sync_every`` steps (a host read waits for the
+device): between reads a step's verdict is computed on the device from ``LossWindow``, the last
+``explode_window`` losses of the phase kept there, and the update is skipped there; at the read the
+host replays the verdicts through the counts above. ``exploding_on_device`` computes the same median, in
+the same float64 arithmetic, as ``exploding``, so both give the same verdict.
 """
 
 from __future__ import annotations
@@ -19,6 +30,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import torch
 
 
 class DivergenceGuard:
@@ -55,6 +67,16 @@ class DivergenceGuard:
                     f"(train.explode_factor={tc.explode_factor:g})")
         return None
 
+    def exploding_on_device(self, value: torch.Tensor, window: "LossWindow") -> torch.Tensor:
+        """``exploding``'s verdict for a finite ``value`` (a 0-dim tensor) against ``window`` (the losses
+        ``exploding`` would take from ``losses``) as a 0-dim bool tensor on the device, without a host read.
+        ``max_loss_ratio`` is not updated here: the host does that when it replays the verdict."""
+        tc = self.cfg
+        if tc.explode_factor <= 0 or tc.explode_window <= 0:
+            return torch.zeros((), dtype=torch.bool, device=value.device)
+        median = window.median()  # inf when the window is empty: never exploding, as the host has it
+        return (median > 0) & (value.double() / median > tc.explode_factor)
+
     def skipped(self) -> bool:
         """One more skipped step; True when that makes ``max_nan_steps`` in a row."""
         self.nan_steps += 1
@@ -67,3 +89,43 @@ class DivergenceGuard:
 
     def healthy(self) -> None:
         self.nan_steps = self.explode_steps = 0
+
+
+class LossWindow:
+    """The guard's statistic kept on the device: the losses of the last ``size`` steps in a ring (slot
+    ``step % size``), +inf for skipped steps and for steps before the phase's ``stat_start`` (any value that
+    is not finite is left out), in float64 (the host's ``np.median`` works on Python floats). Filled from
+    the host list (``rebuild``) after a host read, then one entry per step (``push``) without one."""
+
+    def __init__(self, size: int, device):
+        self.size = max(int(size), 1)
+        self.values = torch.full((self.size,), float("inf"), dtype=torch.float64, device=device)
+        self._pair = torch.tensor([0, 1], device=device)  # the two middle ranks: (count - 1 + [0, 1]) // 2
+
+    def rebuild(self, losses: list[float], stat_start: int, step: int) -> None:
+        """The window before ``step``: ``losses[max(stat_start, step - size):step]`` (the host's statistic);
+        an empty window (a new phase) needs no copy from the host."""
+        self.values.fill_(float("inf"))
+        lo = max(stat_start, step - self.size, 0)
+        if lo < step:
+            if len(losses) < step:
+                raise ValueError(f"LossWindow.rebuild: {len(losses)} losses on the host, the window needs {step}")
+            idx = torch.tensor([j % self.size for j in range(lo, step)], device=self.values.device)
+            kept = [x if math.isfinite(x) else math.inf for x in losses[lo:step]]
+            self.values[idx] = torch.tensor(kept, dtype=torch.float64).to(self.values.device)
+
+    def push(self, step: int, value) -> None:
+        """Step ``step``'s entry: a float (a step the host judged) or a 0-dim tensor (not finite: a skipped
+        step)."""
+        slot = self.values[step % self.size]
+        if isinstance(value, torch.Tensor):  # the trainer's: finite, or +inf for a skipped step
+            slot.copy_(value.reshape(()))
+        else:
+            slot.fill_(value if math.isfinite(value) else math.inf)
+
+    def median(self) -> torch.Tensor:
+        """The median of the finite entries (a 0-dim tensor) as ``np.median`` has it: the mean of the two
+        middle values for an even count (their sum halved: the same rounding); +inf when there are none."""
+        count = torch.isfinite(self.values).sum()  # what is not finite is +inf here: sorted last
+        ranks = ((count - 1 + self._pair) // 2).clamp(0, self.size - 1)
+        return torch.sort(self.values).values.index_select(0, ranks).mean()

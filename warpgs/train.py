@@ -46,6 +46,16 @@ listed in metrics.json). After ``train.max_recoveries`` recoveries the next dive
 ``TrainingDiverged``, naming the step, the cause and the last good checkpoint on disk; the model is left
 at the last good state. A checkpoint is never written from a state that is not finite, so the one on disk
 stays the last good one.
+
+Host reads (``train.sync_every``; 10 on CUDA, every step on the CPU): reading a loss or a flag on the host
+waits for the device, so on CUDA the verdicts are read every ``sync_every`` steps (and before every
+snapshot, checkpoint, evaluation, the end of a phase and a stop). In between, a step is judged on the
+device (finite loss and gradients; the exploding-loss median over ``warpgs.guard.LossWindow``, the same
+statistic in the same arithmetic) and a bad step's update is skipped there (``masked_step``: fused Adam's
+``found_inf``), so a non-finite gradient never reaches the parameters. The read replays the verdicts
+through the guard in order; a divergence is acted on then, up to ``sync_every`` steps late, and rolls back
+as above (the steps after it are undone with it). Only the reads move: a run gives the same numbers for
+every ``sync_every``. The progress bar's loss and PSNR are those of the reading steps.
 """
 
 from __future__ import annotations
@@ -68,11 +78,14 @@ from warpgs.config import Config, config_from_dict, to_dict
 from warpgs.console import warn_once
 from warpgs.evaluation import evaluate_views, run_metrics, write_run_outputs
 from warpgs.farfield import make_far_field
-from warpgs.guard import DivergenceGuard
+from warpgs.guard import DivergenceGuard, LossWindow
 from warpgs.metrics import render_fps
 from warpgs.model import PARAM_NAMES, GaussianModel, read_point_cloud
 
 CHECKPOINT = "checkpoint.pt"
+SYNC_EVERY_CUDA = 10  # train.sync_every's default on CUDA: host reads of the verdicts every this many steps
+# a step's record (Trainer._step_record): [loss, loss finite, each gradient finite ..., exploding, MSE]
+_VALUE, _LOSS_FINITE, _EXPLODING, _MSE = 0, 1, -2, -1
 PREVIOUS_CHECKPOINT = "checkpoint.prev.pt"  # the one checkpoint.pt replaced, kept until the next write
 
 
@@ -256,10 +269,69 @@ def base_learning_rates(cfg: Config, scene_scale: float) -> dict[str, float]:
 
 
 def make_optimizer(model: GaussianModel, cfg: Config, scene_scale: float) -> torch.optim.Adam:
+    """Adam, one group per parameter, with ``adam_options`` for the model's device."""
     o = cfg.optim
     lrs = base_learning_rates(cfg, scene_scale)
     groups = [{"params": [model.params[k]], "lr": lrs[k], "name": k} for k in model.params.keys()]
-    return torch.optim.Adam(groups, eps=o.eps)
+    return torch.optim.Adam(groups, eps=o.eps, **adam_options(model.device))
+
+
+def adam_options(device) -> dict:
+    """Adam's implementation on ``device``: fused on CUDA (one kernel per group instead of a dozen, and a
+    step skipped on the device when ``found_inf`` is set: ``masked_step``). The CPU keeps torch's default:
+    its fused kernel is faster (2.5x on the update of 50k Gaussians) but not bit-identical to it, and the
+    CPU runs are the ones whose numbers must stay the same across refactors (bench/fingerprint.py)."""
+    return {"fused": True} if torch.device(device).type == "cuda" else {}
+
+
+def with_adam_options(saved: dict, optimizer: torch.optim.Optimizer) -> dict:
+    """An optimiser state dict (``saved``, changed in place) with ``optimizer``'s implementation options, so
+    that a checkpoint of a CUDA run (fused Adam) resumes on the CPU and the other way round (torch's
+    ``load_state_dict`` would take the saved ones)."""
+    for g_saved, g in zip(saved["param_groups"], optimizer.param_groups):
+        for k in ("fused", "foreach", "capturable"):
+            if k in g:
+                g_saved[k] = g[k]
+    return saved
+
+
+def finite_flags(tensors: list[torch.Tensor]) -> torch.Tensor:
+    """Whether each tensor is all finite, as a bool tensor on the device (no host read): their largest
+    absolute values in one fused reduction, which keeps NaN and inf (``torch._foreach_norm``'s infinity
+    norm, as ``clip_grad_norm_`` relies on), or one check each where a tensor is empty."""
+    if all(t.numel() for t in tensors):
+        return torch.isfinite(torch.stack(torch._foreach_norm(tensors, float("inf"))))
+    return torch.stack([torch.isfinite(t).all() for t in tensors])
+
+
+def masked_step(optimizer: torch.optim.Optimizer, apply: torch.Tensor) -> None:
+    """``optimizer.step()`` where the 0-dim bool tensor ``apply`` is true, and no change at all (parameters,
+    moments, step counts) where it is false, without reading ``apply`` on the host. Fused Adam skips on the
+    device (its ``found_inf``, as torch's GradScaler sets it); other optimisers step and put back what the
+    step changed (their step counts must then be on ``apply``'s device; where they are not, ``apply`` is
+    read)."""
+    groups = optimizer.param_groups
+    if all(g.get("fused") for g in groups):
+        optimizer.grad_scale, optimizer.found_inf = None, (~apply).to(torch.float32)
+        try:
+            optimizer.step()
+        finally:
+            del optimizer.grad_scale, optimizer.found_inf
+        return
+    if apply.device.type != "cpu" and not all(g.get("capturable") for g in groups):  # step counts on the CPU
+        if bool(apply):
+            optimizer.step()
+        return
+    params = [p for g in groups for p in g["params"] if p.grad is not None]
+    before = [(p.detach().clone(), {k: v.clone() for k, v in optimizer.state.get(p, {}).items()
+                                    if isinstance(v, torch.Tensor)}) for p in params]
+    optimizer.step()
+    with torch.no_grad():
+        for p, (old, old_state) in zip(params, before):
+            p.copy_(torch.where(apply, p, old))
+            for k, v in optimizer.state[p].items():
+                if isinstance(v, torch.Tensor):  # a state the step created: as it starts (zeros, step 0)
+                    v.copy_(torch.where(apply, v, old_state.get(k, torch.zeros_like(v))))
 
 
 def _cpu_copy(obj):
@@ -415,6 +487,11 @@ class Trainer:
         self.n_before_compaction: int | None = None
         self._stop = False
         self._ema = {}
+        # host reads every train.sync_every steps (train_step): the deferred steps' records, the end of the
+        # running phase (None: outside train(), every step reads), the guard's statistic on the device
+        self._pending: list[tuple[int, int, torch.Tensor]] = []
+        self._phase_end: int | None = None
+        self._window: LossWindow | None = None
         self.saved_step: int | None = None  # the step of the checkpoint last written or read (messages)
         self.compact_report: dict | None = None
         self.stopped_early: dict | None = None  # set by the caller when training stopped before the end
@@ -490,7 +567,13 @@ class Trainer:
 
     def train_step(self) -> dict:
         """One iteration at ``self.step`` (does not advance it). On a divergence that a recovery handles it
-        rolls back (``self.step`` becomes the snapshot's) and returns ``{"rolled_back": 1, ...}``."""
+        rolls back (``self.step`` becomes the snapshot's) and returns ``{"rolled_back": 1, ...}``.
+
+        A step that reads its verdict on the host (``_sync_due``: every ``train.sync_every`` steps, and
+        before snapshots, checkpoints, evaluations and the end of a phase) first replays the verdicts of the
+        steps deferred before it, then judges itself as the guard says. A deferred step judges itself on
+        the device and makes or skips its update there (``_deferred_step``). Either way a non-finite or
+        exploding step's gradient never reaches the parameters."""
         step = self.step
         self.model.active_sh_degree = min(step // max(self.cfg.train.sh_degree_interval, 1), self.model.max_sh_degree)
         for g in self.optimizer.param_groups:
@@ -498,18 +581,25 @@ class Trainer:
                 g["lr"] = self.means_lr(step) * self.lr_scale
         cam = self.train_cams[self.next_view()]
         cam, bg = self.with_training_background(cam, self.split_gen)
+        # no input checks in the rasterizer (each is a host read): the guard checks the loss, the gradients and
+        # the parameters, and a step with non-finite ones makes no update
         out = self.model.render(cam.viewmat, cam.K, cam.width, cam.height, background=bg,
-                                opacity_scale=self.dropout_scale(step))
+                                opacity_scale=self.dropout_scale(step), check_finite=False)
         loss, parts = self.compute_loss(out, cam)
         loss.backward()
-        # one device sync for the whole guard: the loss and every gradient must be finite
-        if not _all_finite([loss.detach()] + [p.grad for p in self.model.params.values()]):
-            bad = [n for n, p in self.model.params.items() if p.grad is not None and not bool(torch.isfinite(p.grad).all())]
-            return self._skip(step, "the loss is not finite" if not bool(torch.isfinite(loss))
-                              else f"the gradient of {', '.join(bad)} is not finite")
         # the guard judges the input views' loss: extra views (the full method's pseudo views) change what is
         # optimised and can be far off at first without anything diverging
-        value = float(parts.get("inputs", loss).detach())
+        record = self._step_record(loss.detach(), parts.get("inputs", loss).detach())
+        if not self._sync_due(step):
+            return self._deferred_step(step, record, out, cam)
+        with torch.no_grad():
+            record[_MSE] = ((out.image.detach().clamp(0, 1) - cam.image) ** 2).mean()
+        rolled_back, row = self._resolve(record)  # the one host read of the step, with the deferred steps'
+        if rolled_back is not None:
+            return rolled_back
+        value = row[_VALUE]
+        if not all(row[_LOSS_FINITE:_EXPLODING]):
+            return self._skip(step, self._nonfinite_cause(row))
         exploding = self.guard.exploding(value, self.losses)
         if exploding:
             if self.guard.exploded():
@@ -519,6 +609,21 @@ class Trainer:
         self.optimizer.step()
         self.optimizer.zero_grad(set_to_none=True)
         self.guard.healthy()
+        info = self._after_update(step, out, cam)
+        bad = self.nonfinite_parameters()
+        if bad:
+            return self._diverge(step, f"the parameters {', '.join(bad)} are not finite after the optimiser step")
+        self.losses.append(value)
+        if self._window is not None:
+            self._window.push(step, value)
+        every = self.cfg.train.snapshot_every
+        if every and (step + 1) % every == 0:
+            self.take_snapshot(step + 1)
+        return {"loss": value, "psnr": -10 * math.log10(max(row[_MSE], 1e-10)), **info}
+
+    def _after_update(self, step: int, out, cam) -> dict:
+        """What follows a step's update: densification (the strategy), pruning the unseen when it finds the
+        budget spent, and a new statistic after an opacity reset (whose jump in the loss is expected)."""
         info = self.strategy.step_post_backward(self.model, self.optimizer, self.state, step, out,
                                                 cam.width, cam.height, self.scene_scale, generator=self.split_gen)
         s = self.strategy
@@ -526,18 +631,9 @@ class Trainer:
                 and len(self.model) >= s.max_gaussians):
             # the budget is spent: free what the training views do not use, so growth can go on where it helps
             info["pruned_unseen"] = s.prune_unseen(self.model, self.optimizer, self.state, self.train_cams, self.background)
-        bad = self.nonfinite_parameters()
-        if bad:
-            return self._diverge(step, f"the parameters {', '.join(bad)} are not finite after the optimiser step")
-        if info.get("reset"):  # the opacity reset's jump in the loss is expected: restart the statistic
-            self.guard.restart(step + 1)
-        self.losses.append(value)
-        every = self.cfg.train.snapshot_every
-        if every and (step + 1) % every == 0:
-            self.take_snapshot(step + 1)
-        with torch.no_grad():
-            mse = float(((out.image.detach().clamp(0, 1) - cam.image) ** 2).mean())
-        return {"loss": value, "psnr": -10 * math.log10(max(mse, 1e-10)), **info}
+        if info.get("reset"):
+            self._restart_statistic(step + 1)
+        return info
 
     def dropout_scale(self, step: int) -> torch.Tensor | None:
         """DropGaussian's factors for one training render at ``step``: 0 for a Gaussian dropped at the rate
@@ -549,7 +645,16 @@ class Trainer:
         return keep.float() / (1.0 - rate)
 
     def _skip(self, step: int, why: str) -> dict:
+        """A step judged on the host that makes no update."""
         self.optimizer.zero_grad(set_to_none=True)
+        result = self._skipped(step, why)
+        if self._window is not None and not result.get("rolled_back"):
+            self._window.push(step, float("nan"))
+        return result
+
+    def _skipped(self, step: int, why: str) -> dict:
+        """Counts a step that made no update: the log line, the guard's count (a divergence when it is the
+        ``train.max_nan_steps``-th in a row), a NaN loss."""
         self.log(f"warpgs: step {step} skipped: {why}")
         if self.guard.skipped():
             return self._diverge(step, f"{self.guard.nan_steps} consecutive steps without a usable loss and gradient "
@@ -558,17 +663,158 @@ class Trainer:
         return {"loss": float("nan"), "psnr": float("nan"), "skipped": 1}
 
     # ------------------------------------------------------------------------------------------
+    # host reads (train.sync_every): deferred verdicts
+
+    @property
+    def sync_every(self) -> int:
+        """Steps between host reads of the verdicts (``train.sync_every``; None: ``SYNC_EVERY_CUDA`` on CUDA,
+        every step on the CPU, where a read costs nothing)."""
+        n = self.cfg.train.sync_every
+        if n is None:
+            n = SYNC_EVERY_CUDA if self.device.type == "cuda" else 1
+        return max(int(n), 1)
+
+    def _sync_due(self, step: int) -> bool:
+        """Whether step ``step`` reads the verdicts on the host: every ``sync_every`` steps, and where what comes
+        after the step needs them all (a snapshot, a checkpoint, an evaluation, the end of the phase, a stop).
+        Outside ``train()`` every step does."""
+        every, end = self.sync_every, self._phase_end
+        if every <= 1 or end is None:
+            return True
+        n, tc = step + 1, self.cfg.train
+        return (n % every == 0 or n >= end or self._stop
+                or any(k and n % k == 0 for k in (tc.snapshot_every, tc.checkpoint_every, tc.eval_every)))
+
+    def _step_record(self, loss: torch.Tensor, inputs: torch.Tensor) -> torch.Tensor:
+        """A step's record, float64 on the device: [the input views' loss, whether the loss and each
+        parameter's gradient are finite (1 / 0), exploding (a deferred verdict's), the render's MSE (where
+        read)]."""
+        zero = loss.new_zeros(())
+        flags = finite_flags([loss] + [zero if p.grad is None else p.grad for p in self.model.params.values()])
+        record = torch.zeros(len(flags) + 3, dtype=torch.float64, device=loss.device)
+        record[_VALUE] = inputs
+        record[_LOSS_FINITE:_EXPLODING] = flags
+        return record
+
+    def _nonfinite_cause(self, row: list[float]) -> str:
+        if not row[_LOSS_FINITE]:
+            return "the loss is not finite"
+        bad = [n for n, ok in zip(self.model.params, row[_LOSS_FINITE + 1:_EXPLODING]) if not ok]
+        return f"the gradient of {', '.join(bad)} is not finite"
+
+    def _deferred_step(self, step: int, record: torch.Tensor, out, cam) -> dict:
+        """A step whose verdict the host reads later: the guard's verdict on the device (non-finite, or an
+        exploding loss against ``LossWindow``), the update made or skipped there (``masked_step``), and only a
+        step that made its update counts in the densification statistics. The record waits in
+        ``_pending`` for the next read (``_resolve``)."""
+        value = record[_VALUE]
+        finite = record[_LOSS_FINITE:_EXPLODING].all()
+        exploding = finite & self.guard.exploding_on_device(value, self._loss_window(step))
+        apply = finite & ~exploding
+        record[_EXPLODING] = exploding
+        masked_step(self.optimizer, apply)
+        self.optimizer.zero_grad(set_to_none=True)
+        self._window.push(step, torch.where(apply, value, float("inf")))
+        self._pending.append((step, self.guard.stat_start, record))
+        # a step without its update is one in which no Gaussian was seen, for the densification statistics
+        return self._after_update(step, out._replace(radii=out.radii * apply), cam)
+
+    def _loss_window(self, step: int):
+        if self._window is None:  # after a new statistic: from the host's losses (none, at a phase's start)
+            self._window = LossWindow(self.cfg.train.explode_window, self.device)
+            self._window.rebuild(self.losses, self.guard.stat_start, step)
+        return self._window
+
+    def _restart_statistic(self, step: int) -> None:
+        """The exploding-loss statistic starts again at ``step`` (``DivergenceGuard.restart``), on the device too."""
+        self.guard.restart(step)
+        self._window = None
+
+    def _resolve(self, record: torch.Tensor | None = None) -> tuple[dict | None, list[float] | None]:
+        """The host read: the deferred steps' records, ``record`` (the reading step's own, if given) and, after
+        deferred steps, the parameters' flags, in one transfer. Replays the deferred verdicts (``_replay``); the
+        parameters must be finite after their updates. Returns (the rollback's result when they diverged, else
+        None; ``record`` as a list)."""
+        pending, self._pending = self._pending, []
+        parts = [r for _, _, r in pending] + ([record] if record is not None else [])
+        if not parts:
+            return None, None
+        if pending:
+            parts.append(self._parameter_flags().double())
+        values = torch.cat(parts).tolist()
+        w = parts[0].numel()
+        rows = [values[i * w:(i + 1) * w] for i in range(len(pending) + (record is not None))]
+        if pending:
+            result = self._replay(pending, rows[:len(pending)])
+            if result is None:
+                bad = [n for n, ok in zip(self.model.params, values[len(rows) * w:]) if not ok]
+                if bad:
+                    first, last = pending[0][0], pending[-1][0]
+                    result = self._diverge(last, f"the parameters {', '.join(bad)} are not finite after the optimiser "
+                                                 f"step (of one of steps {first}-{last}, read at step {last + 1})")
+            if result is not None:
+                return result, None
+        return None, (rows[-1] if record is not None else None)
+
+    def _replay(self, pending: list, rows: list[list[float]]) -> dict | None:
+        """The host's part of the deferred verdicts, in order (their updates were made or skipped on the device):
+        the log lines, the guard's counts and ``max_loss_ratio``, the losses. A divergence rolls back at the
+        step it happened (its result is returned; the later steps are undone with it)."""
+        latest = self.guard.stat_start
+        for (k, stat_start, _), row in zip(pending, rows):
+            if len(self.losses) != k:
+                raise RuntimeError(f"warpgs: internal error: {len(self.losses)} losses recorded before step {k}")
+            self.guard.stat_start = stat_start  # the statistic as it was at that step
+            value = row[_VALUE]
+            if not all(row[_LOSS_FINITE:_EXPLODING]):
+                result = self._skipped(k, self._nonfinite_cause(row))
+            else:
+                why = self.guard.exploding(value, self.losses)  # the same verdict, with its numbers
+                if not row[_EXPLODING]:
+                    self.guard.healthy()
+                    self.losses.append(value)
+                    continue
+                why = why or f"the loss {value:.4g} is above train.explode_factor x the running median"
+                if self.guard.exploded():
+                    return self._diverge(k, f"{self.guard.explode_steps} consecutive steps with an exploding loss "
+                                            f"(the last: {why})")
+                result = self._skipped(k, why)
+            if result.get("rolled_back"):
+                return result
+        self.guard.stat_start = latest
+        return None
+
+    def _abandon_pending(self) -> None:
+        """Training left by an exception between host reads: the deferred steps' losses go into the history as
+        the device judged them (NaN where the update was skipped), and nothing else is acted on."""
+        pending, self._pending = self._pending, []
+        try:
+            rows = torch.stack([r for _, _, r in pending]).tolist()
+        except Exception:  # noqa: BLE001 - the device may be what failed
+            rows = [None] * len(pending)
+        for row in rows:
+            ok = row is not None and all(row[_LOSS_FINITE:_EXPLODING]) and not row[_EXPLODING]
+            self.losses.append(row[_VALUE] if ok else float("nan"))
+        self._window = None
+
+    # ------------------------------------------------------------------------------------------
     # divergence: exploding losses, snapshots of the last good state, rollback
 
     def nonfinite_parameters(self) -> list[str]:
         """Names of the parameters that are not finite, or whose value as rendered is not (a log-scale
         above ~88 is an infinite scale, which the rasterizer refuses); one device sync."""
+        flags = self._parameter_flags().tolist()
+        return [n for n, ok in zip(self.model.params, flags) if not ok]
+
+    def _parameter_flags(self) -> torch.Tensor:
+        """Per parameter (in ``model.params``' order), on the device: whether it is finite, as stored and as
+        rendered."""
         p = self.model.params
-        checks = {n: torch.isfinite(t).all() for n, t in p.items()}
-        if "scales" in checks:
-            checks["scales"] = checks["scales"] & torch.isfinite(torch.exp(p["scales"].detach())).all()
-        flags = torch.stack(list(checks.values())).tolist()
-        return [n for n, ok in zip(checks, flags) if not ok]
+        flags = finite_flags([t.detach() for t in p.values()])
+        if "scales" in p:
+            i = list(p).index("scales")
+            flags[i] = flags[i] & torch.isfinite(torch.exp(p["scales"].detach())).all()
+        return flags
 
     def state_is_finite(self) -> bool:
         """Whether the parameters (as rendered), the optimiser's moments and the densification statistics
@@ -612,13 +858,14 @@ class Trainer:
         (the strategy may hold it); with ``progress`` the learning rates are set for the restored step and
         learning-rate scale, else they are as saved in the optimiser's state."""
         parts = st.get("parts", STATE_PARTS)
+        self._window = None  # the guard's statistic on the device: rebuilt from the restored losses
         if "model" in parts:
             for k, v in st["params"].items():
                 self.model.params[k] = torch.nn.Parameter(v.to(self.device, copy=True))
             self.model.max_sh_degree = st["max_sh_degree"]
             self.model.active_sh_degree = st["active_sh_degree"]
             self.optimizer = make_optimizer(self.model, self.cfg, self.scene_scale)
-            self.optimizer.load_state_dict(copy.deepcopy(st["optimizer"]))
+            self.optimizer.load_state_dict(with_adam_options(copy.deepcopy(st["optimizer"]), self.optimizer))
             self.state = {k: v.to(self.device, copy=True) for k, v in st["strategy_state"].items()}
         if "history" in parts:
             self.train_time = float(st["train_time"])
@@ -659,7 +906,7 @@ class Trainer:
         self.load_state_dict(self._snapshot)
         del self.losses[self.step:]
         self.curve = [row for row in self.curve if row["step"] <= self.step]
-        self.guard.restart(self._snapshot["stat_start"])
+        self._restart_statistic(self._snapshot["stat_start"])
         self.guard.healthy()
         return self.step
 
@@ -720,7 +967,7 @@ class Trainer:
             self.initial = self.evaluate(save_dir=None, lpips=False)["mean"]
         # a new phase (the full method's cycles, a resume): its losses make their own statistic, and its
         # start is a good state to come back to
-        self.guard.restart(self.step)
+        self._restart_statistic(self.step)
         if not self.take_snapshot():  # e.g. what was added between phases is not finite: back to the last good state
             self._diverge(self.step, f"the model is not finite at the start of training (step {self.step}: "
                                      f"{', '.join(self.nonfinite_parameters()) or 'optimiser state'})")
@@ -730,6 +977,7 @@ class Trainer:
         every = self.cfg.train.checkpoint_every
         ev_every = self.cfg.train.eval_every
         t0 = time.perf_counter()
+        self._phase_end = total
         try:
             while self.step < total:
                 info = self.train_step()
@@ -741,6 +989,9 @@ class Trainer:
                 bar.update(1)
                 self._update_bar(bar, info)
                 if self._stop:
+                    if self._pending and self._resolve()[0] is not None:  # Ctrl-C during a deferred step: the
+                        bar.n = self.step                                  # verdicts rolled back; that state is saved
+                        bar.refresh()
                     self.train_time += time.perf_counter() - t0
                     t0 = time.perf_counter()
                     path = self.save_checkpoint()
@@ -754,6 +1005,9 @@ class Trainer:
                     self.record_curve()
                     t0 = time.perf_counter()
         finally:
+            self._phase_end = None
+            if self._pending:  # an exception between host reads
+                self._abandon_pending()
             self.train_time += time.perf_counter() - t0
             bar.close()
             restore()
