@@ -516,6 +516,7 @@ def run_on_ray(specs: list[RunSpec], work: Path, logs: Path, *, max_retries: int
     started = bool(todo) and not ray.is_initialized()
     if started:
         start_ray(**(ray_init or {}))
+        progress.t0 = time.time()  # the ETA counts from the first task
     try:
         _run_tasks(ray, todo, work, logs, batch, records, progress, max_retries, overwrite)
     finally:
