@@ -5,6 +5,7 @@ test PSNR against training wall time and against Gaussian count (issue #8).
     python bench/suite.py --device cuda --data-root DIR    # GPU: the "full" preset (synthetic, fern, lego, DTU)
     python bench/suite.py --only baseline_1000,full_1000 --jobs 2
     python bench/suite.py --summary-only           # redraw charts and summary from results.json
+    python bench/suite.py --device cuda --ray      # through the batch runner on Ray: every GPU, retries
 
 Each entry of a preset is one ``python -m warpgs.pipelines.sparse`` run (its own process and output
 folder under --work): a method (baseline, full, an ablation of the paper's Table 4, compact mode) at an
@@ -86,14 +87,19 @@ def eval_every(run: Run) -> int:
     return max(run.iterations // 10, 50)
 
 
-def command(run: Run, device: str, work: Path, data_root: str | None) -> list[str]:
-    cmd = [sys.executable, "-m", "warpgs.pipelines.sparse", "--method", run.method, "--data", run.data,
-           "--iterations", str(run.iterations), "--device", device, "--out", str(work / run.name), "--no-progress",
-           "--overwrite",  # the suite decides what to reuse (execute): a run it starts replaces what its folder holds
-           "--set", f"train.eval_every={eval_every(run)}"]
+def sparse_args(run: Run, device: str, data_root: str | None) -> list[str]:
+    """The run's arguments of ``python -m warpgs.pipelines.sparse``, but its output folder."""
+    args = ["--method", run.method, "--data", run.data, "--iterations", str(run.iterations), "--device", device,
+            "--no-progress", "--set", f"train.eval_every={eval_every(run)}"]
     if data_root and run.data != "synthetic":
-        cmd += ["--data-root", data_root]
-    return cmd + list(run.args)
+        args += ["--data-root", data_root]
+    return args + list(run.args)
+
+
+def command(run: Run, device: str, work: Path, data_root: str | None) -> list[str]:
+    # --overwrite: the suite decides what to reuse (execute); a run it starts replaces what its folder holds
+    return [sys.executable, "-m", "warpgs.pipelines.sparse", *sparse_args(run, device, data_root),
+            "--out", str(work / run.name), "--overwrite"]
 
 
 def execute(run: Run, device: str, work: Path, data_root: str | None, fresh: bool) -> dict:
@@ -116,6 +122,32 @@ def execute(run: Run, device: str, work: Path, data_root: str | None, fresh: boo
     else:
         rec.update(status="failed", returncode=proc.returncode, log_tail=log.read_text()[-1500:])
     return rec
+
+
+def execute_on_ray(runs: list[Run], device: str, work: Path, data_root: str | None, fresh: bool, jobs: int,
+                   address: str | None, log=print) -> list[dict]:
+    """The runs as tasks of the batch runner (``warpgs.pipelines.batch``: Ray, retries from checkpoints) -> their
+    records. On CUDA each run asks for 1/``jobs`` of a GPU (``jobs`` runs per GPU, on every GPU Ray has); on
+    the CPU a local Ray gets ``jobs`` CPUs, one per run. Logs in ``work``/logs."""
+    from warpgs.pipelines import batch
+
+    cuda = device.startswith("cuda")
+    specs = [batch.RunSpec(r.name, sparse_args(r, device, data_root), r.data, None, r.method, None,
+                           num_gpus=1 / jobs if cuda else 0.0) for r in runs]
+    init = {"address": address} if address else {"num_cpus": None if cuda else jobs}
+    recs = batch.run_on_ray(specs, work, work / "logs", overwrite=fresh, log=log, ray_init=init)
+    records = []
+    for run, b in zip(runs, recs):
+        rec = {"run": asdict(run), "device": device, "out": b["out"], "status": b["status"], "wall_s": b.get("wall_s"),
+               "attempts": len(b.get("attempts") or []), "retries": b.get("retries")}
+        if b.get("reused"):
+            rec["reused"] = True
+        if b["status"] == "finished":
+            rec["metrics"] = _slim(b["metrics"])
+        else:
+            rec.update(returncode=b.get("returncode"), log_tail=b.get("log_tail") or b.get("error", ""))
+        records.append(rec)
+    return records
 
 
 def _slim(m: dict) -> dict:
@@ -237,7 +269,7 @@ def device_name(device: str) -> str:
 
 def run_suite(device: str = "cpu", preset: str | None = None, out: Path | None = None, work: Path | None = None,
               jobs: int | None = None, only: list[str] | None = None, data_root: str | None = None,
-              fresh: bool = False, log=print) -> list[dict]:
+              fresh: bool = False, log=print, ray: bool = False, address: str | None = None) -> list[dict]:
     preset = preset or ("full" if device.startswith("cuda") else "small")
     if preset not in PRESETS:
         raise ValueError(f"preset {preset!r}: available {', '.join(PRESETS)}")
@@ -269,8 +301,15 @@ def run_suite(device: str = "cpu", preset: str | None = None, out: Path | None =
         results_path.write_text(json.dumps({"info": info, "records": records}, indent=1))  # progress survives
         return rec
 
-    with ThreadPoolExecutor(max_workers=jobs) as pool:
-        list(pool.map(one, runs))
+    if ray or address:
+        for rec in execute_on_ray(runs, device, work, data_root, fresh, jobs, address, log):
+            m = rec.get("metrics") or {}
+            log(f"  {rec['run']['name']:<36} {rec['status']:<9}" + (f" PSNR {m['psnr']:.2f}  {m['num_gaussians']} "
+                                                                    f"Gaussians  {m['train_time_s']:.0f} s" if m else ""))
+            records.append(rec)
+    else:
+        with ThreadPoolExecutor(max_workers=jobs) as pool:
+            list(pool.map(one, runs))
     order = {r.name: i for i, r in enumerate(runs)}
     records.sort(key=lambda r: order[r["run"]["name"]])
     results_path.write_text(json.dumps({"info": info, "records": records}, indent=1))
@@ -292,6 +331,9 @@ def main(argv=None) -> int:
     ap.add_argument("--work", type=Path, default=None, help="run folders (default outputs/suite_<device>_<preset>)")
     ap.add_argument("--fresh", action="store_true", help="rerun runs that already finished")
     ap.add_argument("--summary-only", action="store_true", help="redraw charts and summary from --out/results.json")
+    ap.add_argument("--ray", action="store_true", help="run through the batch runner on Ray (warpgs.pipelines.batch: "
+                    "every GPU, retries from checkpoints); --jobs is then runs per GPU, or CPUs of a local Ray")
+    ap.add_argument("--address", default=None, help="with --ray: the Ray cluster to join (implies --ray)")
     a = ap.parse_args(argv)
     if a.device is None:
         import torch
@@ -305,8 +347,8 @@ def main(argv=None) -> int:
         return 0
     try:
         records = run_suite(a.device, a.preset, a.out, a.work, a.jobs, a.only.split(",") if a.only else None,
-                            a.data_root, a.fresh)
-    except ValueError as e:
+                            a.data_root, a.fresh, ray=a.ray, address=a.address)
+    except ValueError as e:  # also warpgs.pipelines.batch.BatchError: Ray is not installed
         print(f"error: {e}", file=sys.stderr)
         return 2
     return 0 if all(r.get("status") == "finished" for r in records) else 1

@@ -1,5 +1,6 @@
 """The benchmark suite (bench/suite.py) end to end on a tiny preset: runs, reuse, JSON, charts, summary."""
 
+import importlib.util
 import json
 import sys
 from pathlib import Path
@@ -37,3 +38,10 @@ def test_suite_runs_records_and_charts(tmp_path, monkeypatch):
     # a second call reuses finished runs instead of training again
     again = suite.run_suite("cpu", "tiny", out, work, jobs=1, only=["syn_base_10"], log=lambda *a: None)
     assert again[0].get("reused") and again[0]["metrics"]["psnr"] == by["syn_base_10"]["metrics"]["psnr"]
+    # --ray: the same records through the batch runner (nothing left to run, so Ray is not even started)
+    if importlib.util.find_spec("ray") is not None:
+        import ray
+
+        again = suite.run_suite("cpu", "tiny", out, work, jobs=1, only=["syn_base_20"], log=lambda *a: None, ray=True)
+        assert again[0].get("reused") and again[0]["metrics"] == by["syn_base_20"]["metrics"]
+        assert not ray.is_initialized()

@@ -130,3 +130,18 @@ def test_the_wheel_lists_every_package_and_carries_the_configs():
     assert set(meta["packages"]) - {"warpgs.configs"} == tree
     assert meta["package-dir"]["warpgs.configs"] == "configs" and (PKG.parent / "configs" / "baseline.yaml").is_file()
     assert set(meta["package-data"]["warpgs.configs"]) == {"*.yaml", "data/*.yaml"}
+
+
+OPTIONAL = ("ray",)  # extras (pyproject's optional-dependencies) a module may import only where it is used
+
+
+def test_optional_extras_are_imported_only_where_used():
+    """No module imports an optional extra when it is imported itself (warpgs.pipelines.batch imports Ray in
+    the functions that run a batch, so ``--list`` and the message saying what to install work without it)."""
+    top = []
+    for name, path in _modules().items():
+        for node in ast.parse(path.read_text()).body:
+            names = ([a.name for a in node.names] if isinstance(node, ast.Import)
+                     else [node.module or ""] if isinstance(node, ast.ImportFrom) else [])
+            top += [f"{name}: {n}" for n in names if n.split(".")[0] in OPTIONAL]
+    assert not top, top

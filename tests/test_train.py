@@ -115,6 +115,10 @@ def test_ctrl_c_saves_a_checkpoint_then_resume(scene, tmp_path, monkeypatch):
     straight = Trainer(_cfg(60), scene)
     straight.train()
     assert same_params(param_copy(straight), param_copy(resumed))
+    # a checkpoint of the middle of a phase: the resumed run judges its steps against the same statistic
+    # (and metrics.json's max_loss_ratio is the uninterrupted run's)
+    assert resumed.guard.stat_start == straight.guard.stat_start
+    assert resumed.guard.max_loss_ratio == straight.guard.max_loss_ratio
 
 
 def test_nan_guard_skips_bad_steps_and_gives_up(scene, tmp_path, monkeypatch):

@@ -63,6 +63,8 @@ def _process_start(pid: int) -> str | None:
 
 
 def _alive(pid: int) -> bool:
+    """Whether ``pid`` runs. A zombie does not: a run killed with its parent (a batch worker that died) is
+    reparented, and where nothing reaps it, it stays in the process table with its pid."""
     try:
         os.kill(pid, 0)
     except ProcessLookupError:
@@ -71,7 +73,10 @@ def _alive(pid: int) -> bool:
         return True
     except OSError:
         return False
-    return True
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[-1].split()[0] != "Z"  # field 3, the state
+    except (OSError, IndexError):
+        return True
 
 
 def _describe_owner(info: dict) -> str:

@@ -493,6 +493,8 @@ class Trainer:
         self._phase_end: int | None = None
         self._window: LossWindow | None = None
         self.saved_step: int | None = None  # the step of the checkpoint last written or read (messages)
+        self.in_phase = False  # inside train()'s loop: a checkpoint written now is in the middle of a phase
+        self.resumed = False  # a checkpoint of the middle of a phase was loaded: the next train() continues it
         self.compact_report: dict | None = None
         self.stopped_early: dict | None = None  # set by the caller when training stopped before the end
         self.reserved_steps = 0  # compact mode: the last steps, taken by the search's fine-tunes (warpgs/compact.py)
@@ -831,9 +833,10 @@ class Trainer:
         """A CPU copy of the training state, in ``parts`` (module docstring):
 
         - ``model``: the parameters (and SH degrees), Adam's moments, the densification statistics;
-        - ``progress``: the step, the RNGs, the view order, where the guard's statistic starts;
+        - ``progress``: the step, the RNGs, the view order, where the guard's statistic starts, whether this is
+          the middle of a phase (a resume continues that phase's statistic);
         - ``history``: training time, losses, learning-rate scale, recoveries, curve, initial metrics,
-          the running learning-rate schedule;
+          the running learning-rate schedule, the guard's largest loss ratio (metrics.json's ``max_loss_ratio``);
 
         and the method's share of each (``Method.state_dict``) under ``method``."""
         st: dict = {"parts": list(parts)}
@@ -844,12 +847,12 @@ class Trainer:
         if "progress" in parts:
             st.update(step=self.step, split_gen=self.split_gen.get_state(), drop_gen=self.drop_gen.get_state(),
                       view_rng=copy.deepcopy(self.view_rng.bit_generator.state), order=list(self.order),
-                      torch_rng=torch.get_rng_state(), stat_start=self.guard.stat_start)
+                      torch_rng=torch.get_rng_state(), stat_start=self.guard.stat_start, in_phase=self.in_phase)
         if "history" in parts:
             st.update(train_time=self.train_time, losses=list(self.losses), lr_scale=self.lr_scale,
                       recoveries=copy.deepcopy(self.recoveries), curve=copy.deepcopy(self.curve),
                       initial=copy.deepcopy(self.initial), n_before_compaction=self.n_before_compaction,
-                      phase=(self.phase_start, self.phase_len))
+                      phase=(self.phase_start, self.phase_len), max_loss_ratio=self.guard.max_loss_ratio)
         st["method"] = self.method.state_dict(parts)
         return st
 
@@ -877,6 +880,7 @@ class Trainer:
             self.n_before_compaction = st.get("n_before_compaction")
             if "phase" in st:
                 self.phase_start, self.phase_len = st["phase"]
+            self.guard.max_loss_ratio = float(st.get("max_loss_ratio", self.guard.max_loss_ratio))
         if "progress" in parts:
             self.step = int(st["step"])
             self.split_gen.set_state(st["split_gen"])
@@ -965,9 +969,13 @@ class Trainer:
         total = self.total_steps if iterations is None else iterations
         if self.initial is None and self.step == 0 and self.test_cams:
             self.initial = self.evaluate(save_dir=None, lpips=False)["mean"]
-        # a new phase (the full method's cycles, a resume): its losses make their own statistic, and its
-        # start is a good state to come back to
-        self._restart_statistic(self.step)
+        # a new phase (the full method's cycles): its losses make their own statistic. A run resumed from the
+        # middle of a phase continues that phase's statistic (stat_start came with the checkpoint), so it judges
+        # every step as the uninterrupted run did. Either way this is a good state to come back to.
+        if not self.resumed:
+            self._restart_statistic(self.step)
+        elif self.step < total:  # (a call with nothing to train, the full method's earlier phases, keeps it)
+            self.resumed = False
         if not self.take_snapshot():  # e.g. what was added between phases is not finite: back to the last good state
             self._diverge(self.step, f"the model is not finite at the start of training (step {self.step}: "
                                      f"{', '.join(self.nonfinite_parameters()) or 'optimiser state'})")
@@ -978,6 +986,7 @@ class Trainer:
         ev_every = self.cfg.train.eval_every
         t0 = time.perf_counter()
         self._phase_end = total
+        self.in_phase = True
         try:
             while self.step < total:
                 info = self.train_step()
@@ -1006,6 +1015,7 @@ class Trainer:
                     t0 = time.perf_counter()
         finally:
             self._phase_end = None
+            self.in_phase = False
             if self._pending:  # an exception between host reads
                 self._abandon_pending()
             self.train_time += time.perf_counter() - t0
@@ -1103,6 +1113,7 @@ class Trainer:
             raise CheckpointError(f"{path}: does not fit this run ({type(e).__name__}: "
                                   f"{str(e).splitlines()[0][:120] if str(e) else ''})") from None
         self.saved_step = self.step
+        self.resumed = bool(ck.get("in_phase"))
         return path
 
     # ------------------------------------------------------------------------------------------

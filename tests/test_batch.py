@@ -1,0 +1,166 @@
+"""The batch runner on Ray (issue 17, ``warpgs.pipelines.batch``): a batch of 4 tiny runs on a local Ray with
+two CPUs, one run's process killed with SIGKILL and another's Ray worker, a missing scene among them; then the
+same batch again. Planning, GPU shares and the missing-Ray message need no Ray.
+
+The runs are tiny nerfstudio captures of tiny_scene.py (48x48, 200 Gaussians, 100 steps, a checkpoint every 10).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from test_reliability import _wait_for  # polls a condition while a process runs
+from tiny_scene import write_nerfstudio
+from warpgs.pipelines import batch
+from warpgs.runfolder import LOCK, open_run_folder, read_lock
+
+REPO = Path(__file__).resolve().parents[1]
+TINY = ["--set", "model.init=box", "--set", "model.init_box=[-1.2,-1.2,-1.2,1.2,1.2,1.2]", "--set", "model.init_num=200",
+        "--set", "eval.lpips_weights=/nonexistent/alexnet.pth", "--set", "eval.fps_repeats=1",
+        "--set", "eval.save_images=false", "--set", "train.checkpoint_every=10", "--iterations", "100", "--device", "cpu"]
+TIMING = ("train_time_s", "render_fps", "peak_rss_mb", "stage_times_s", "curve")
+
+
+def test_gpu_shares_and_the_plan_need_no_ray(tmp_path, capsys):
+    assert batch.gpu_share(768, 512, 500_000) == 1 / 4  # the real captures, no Gaussian budget
+    assert batch.gpu_share(128, 96, 12_000) == 1 / 8  # the synthetic scene: the smallest share
+    assert batch.gpu_share(960, 540, 500_000) == 1 / 3  # DL3DV's 960P images_4
+    assert batch.gpu_share(1920, 1080, 1_000_000) == 1.0
+    data = write_nerfstudio(tmp_path / "scene")
+    args = ["--data", f"{data},{tmp_path / 'missing'},synthetic", "--views", "2,3", "--method", "compare", "--seeds", "0,1",
+            "--out", str(tmp_path / "b"), "--list"]
+    assert batch.main(args) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert lines[0] == f"24 runs into {tmp_path / 'b' / 'runs'}:"
+    rows = {ln.split()[0]: ln for ln in lines[1:]}
+    assert "48x48" in rows["scene_2v_baseline_s0"] and "0.125 GPU" in rows["scene_3v_full_s1"]
+    assert "size unknown" in rows["missing_3v_baseline_s0"] and "128x96" in rows["synthetic_2v_full_s1"]
+    assert batch.main(args + ["--device", "cpu"]) == 0 and "GPU" not in capsys.readouterr().out
+    # a bad setting of every run is one line before anything starts
+    assert batch.main(["--data", str(data), "--set", "train.iterations=0", "--list"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("error: ") and "train.iterations = 0" in err[0]
+    assert batch.main(["--gpus-per-run", "1.5", "--list"]) == 2
+    assert "--gpus-per-run 1.5: must be in (0, 1]" in capsys.readouterr().err
+
+
+def test_without_ray_it_says_what_to_install(monkeypatch, capsys):
+    monkeypatch.setitem(sys.modules, "ray", None)  # import ray -> ImportError
+    assert batch.main(["--data", "synthetic"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == ["error: the batch runner needs Ray, which is not installed: pip install 'warpgs[ray]'"]
+
+
+def test_a_zombie_holds_no_lock(tmp_path):
+    """A run killed with its batch worker is reparented, and where nothing reaps it, it stays a zombie with its
+    pid: its lock is stale all the same."""
+    child = subprocess.Popen([sys.executable, "-c", "pass"])  # never waited for: a zombie once it exits
+    deadline = time.monotonic() + 30
+    while Path(f"/proc/{child.pid}/stat").read_text().rsplit(")", 1)[-1].split()[0] != "Z":
+        assert time.monotonic() < deadline
+        time.sleep(0.05)
+    out = tmp_path / "run"
+    out.mkdir()
+    (out / LOCK).write_text(json.dumps({"pid": child.pid, "host": os.uname().nodename, "token": "z"}))
+    notes = []
+    open_run_folder(out, log=notes.append).release()
+    assert len(notes) == 1 and f"pid {child.pid}" in notes[0]
+    child.wait()
+
+
+def test_batch_with_killed_runs_and_a_bad_scene(tmp_path):
+    pytest.importorskip("ray", reason="the batch runner needs Ray: pip install 'warpgs[ray]'")
+    data = write_nerfstudio(tmp_path / "ring_a")  # two tiny captures x seeds 0 and 1, and a scene that is not there
+    other = write_nerfstudio(tmp_path / "ring_b", n_frames=12)
+    out = tmp_path / "batch"
+    runs, logs = out / "runs", out / "logs"
+    argv = ["--data", f"{data},{other},{tmp_path / 'no_such_scene'}", "--views", "3", "--method", "baseline", "--seeds", "0,1",
+            *TINY, "--out", str(out), "--cpus", "2", "--max-retries", "2", "--progress-every", "5"]
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(REPO), os.environ.get("PYTHONPATH", "")]), "OMP_NUM_THREADS": "1"}
+    t0 = time.monotonic()
+    driver = subprocess.Popen([sys.executable, "-m", "warpgs.pipelines.batch", *argv], cwd=REPO, env=env,
+                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    # the same run as the one whose process is killed, uninterrupted (the batch gives its runs OMP_NUM_THREADS=1)
+    ref = subprocess.Popen([sys.executable, "-m", "warpgs.pipelines.sparse", "--data", str(data), "--views", "3",
+                            "--method", "baseline", "--seed", "0", *TINY, "--no-progress", "--out", str(tmp_path / "ref")],
+                           cwd=REPO, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    killed, worker = "ring_a_3v_baseline_s0", "ring_a_3v_baseline_s1"
+    try:
+        # a checkpoint written, the run still going: SIGKILL to the run's process (the pid in its folder's lock) ...
+        _wait_for(lambda: (runs / killed / "checkpoint.pt").exists() and (runs / killed / LOCK).exists(), driver)
+        pid = read_lock(runs / killed)["pid"]
+        assert not (runs / killed / "metrics.json").exists()
+        os.kill(pid, signal.SIGKILL)
+        # ... and to the Ray worker of another run (its run dies with it)
+        _wait_for(lambda: (runs / worker / "checkpoint.pt").exists(), driver)
+        worker_pid = batch.read_attempts(logs / f"{worker}.attempts.jsonl")[-1]["worker_pid"]
+        assert not (runs / worker / "metrics.json").exists()
+        os.kill(worker_pid, signal.SIGKILL)
+        stdout, stderr = driver.communicate(timeout=240)
+    finally:
+        for p in (driver, ref):
+            if p.poll() is None:
+                p.kill()
+    assert ref.wait(timeout=120) == 0, ref.stderr.read()
+    took = time.monotonic() - t0
+    assert driver.returncode == 1, stderr  # not every run finished: the bad scene's
+    assert "Traceback" not in stderr, stderr
+    progress = [ln for ln in stderr.splitlines() if ln.startswith("batch: ") and " done" in ln]
+    assert progress[-1].startswith("batch: 4/6 done, 0 running, 2 failed, 0 waiting;"), progress
+
+    res = json.loads((out / "results.json").read_text())
+    by = {r["name"]: r for r in res["runs"]}
+    good = [n for n in by if n.startswith("ring_")]
+    bad = [n for n in by if n.startswith("no_such_scene_")]
+    assert len(good) == 4 and len(bad) == 2
+    for n in good:
+        assert by[n]["status"] == "finished" and by[n]["metrics"]["iterations"] == 100, by[n]
+    for n in bad:  # reported with the run's own error line, and not retried
+        assert by[n]["status"] == "failed" and len(by[n]["attempts"]) == 1, by[n]
+        assert by[n]["error"].startswith("error: ") and "no_such_scene" in by[n]["error"]
+
+    # the killed run: retried once, with --resume from its checkpoint, to the same metrics as the uninterrupted run
+    a = by[killed]["attempts"]
+    assert len(a) == 2 and a[0]["returncode"] == -signal.SIGKILL and a[1]["resume"] and a[1]["from_step"] >= 10, a
+    assert f"--resume {runs / killed}" in (logs / f"{killed}.log").read_text()
+    assert by[killed]["retries"] == [f"attempt 1: killed by SIGKILL; attempt 2 resumed at step {a[1]['from_step']}"]
+    got, want = (json.loads((d / "metrics.json").read_text()) for d in (runs / killed, tmp_path / "ref"))
+    assert {k: v for k, v in got.items() if k not in TIMING} == {k: v for k, v in want.items() if k not in TIMING}
+    assert [c["psnr"] for c in got["curve"]] == [c["psnr"] for c in want["curve"]]
+    # the run whose worker died: its attempt has no end; the retry resumed it
+    w = by[worker]["attempts"]
+    assert len(w) == 2 and "end" not in w[0] and w[1]["resume"] and w[1]["from_step"] >= 10, w
+    assert by[worker]["retries"][0].startswith("attempt 1: its worker died")
+
+    # the table over seeds, the per-run stage times, the charts
+    groups = {(g["scene"], g["views"]): g for g in res["groups"]}
+    g = groups[("ring_b", "3")]
+    psnrs = [by[f"ring_b_3v_baseline_s{s}"]["metrics"]["psnr"] for s in (0, 1)]
+    assert g["finished"] == 2 and g["psnr"]["min"] == min(psnrs) and g["psnr"]["max"] == max(psnrs)
+    assert groups[("no_such_scene", "3")]["finished"] == 0
+    md = (out / "results.md").read_text()
+    assert "| ring_a | 3 | baseline | 2/2 |" in md and "## Runs that did not finish" in md and "## Retries" in md
+    assert by[killed]["metrics"]["stage_times_s"]["train_s"] > 0
+    for f in ("psnr_vs_time.png", "psnr_vs_gaussians.png"):
+        assert (out / f).stat().st_size > 1000
+
+    # the same batch again: the finished runs are not run (no Ray task, no attempt)
+    specs = [s for s in batch.plan(batch.build_parser().parse_args(argv)) if s.name in good]
+    assert sorted(s.name for s in specs) == sorted(good)
+    again = batch.run_on_ray(specs, runs, logs, log=lambda msg: None)
+    assert all(r["status"] == "finished" and r["reused"] for r in again)
+    assert [r["metrics"]["psnr"] for r in again] == [by[s.name]["metrics"]["psnr"] for s in specs]
+    assert len(batch.read_attempts(logs / f"{killed}.attempts.jsonl")) == 2
+    # ... but not a batch of other settings into the same folder (its runs would be reused as they are)
+    specs[0].argv[specs[0].argv.index("--iterations") + 1] = "200"
+    with pytest.raises(batch.BatchError, match=f"run {specs[0].name} was made with other settings .*--overwrite"):
+        batch.run_on_ray(specs, runs, logs, log=lambda msg: None)
+    print(f"batch test: {took:.0f} s")

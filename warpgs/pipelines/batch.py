@@ -1,0 +1,695 @@
+"""Many runs at once: scenes x view counts x methods x seeds on every GPU (or CPU core) of a machine or a Ray
+cluster, ``python -m warpgs.pipelines.batch``. Needs Ray: ``pip install 'warpgs[ray]'``.
+
+    python -m warpgs.pipelines.batch --data castle_p30,herz_jesus_p25 --views 3,6,9 --method compare --seeds 0,1,2
+    python -m warpgs.pipelines.batch --data synthetic --views 3 --seeds 0,1,2 --iterations 300 --device cpu
+    python -m warpgs.pipelines.batch --address auto ...     # on a cluster started with `ray start`
+    python -m warpgs.pipelines.batch ... --list             # the runs and their GPU shares; nothing runs
+
+Each run is one Ray task that starts ``python -m warpgs.pipelines.sparse`` into ``OUT/runs/<name>`` (its own
+process: a run killed by the OOM killer or ``kill -9`` is a process death this module sees, and nothing of it
+stays in the worker). ``--method compare`` makes two runs, baseline and full. A ``--data`` entry is a dataset
+name (``synthetic``, ``llff``, ...), a scene folder, or a scene of ``--dataset`` (DL3DV by default:
+``castle_p30`` is ``--data dl3dv --scene castle_p30``).
+
+Faults (issue 17):
+
+- a run whose process dies (killed, out of memory: host or GPU) or whose Ray worker dies is retried, at most
+  ``--max-retries`` times, and the retry continues from the run's last checkpoint (``--resume``); every
+  attempt is recorded in ``OUT/logs/<name>.attempts.jsonl`` and in the results;
+- a run that stops with a clear error (exit code 2, ``error: ...``: a bad scene, bad settings) is reported
+  with that line and not retried; the other runs go on;
+- running the same command again skips every run whose ``metrics.json`` is complete and resumes the others.
+
+Resources: a run asks Ray for ``--cpus-per-run`` CPUs (1) and, on CUDA, for a share of a GPU, so that small
+runs pack onto one GPU (``gpu_share``: megapixels / 2 + millions of Gaussians / 10, rounded up to 1/k and
+kept in [1/8, 1]; ``--gpus-per-run`` overrides it). Ray sets each run's ``CUDA_VISIBLE_DEVICES``.
+
+Outputs in ``--out`` (default ``outputs/batch``): ``results.json`` and ``results.md`` (median and range over
+seeds per scene, views and method; every run with its stage times, attempts and wall time; the GPU-hours
+used), ``psnr_vs_time.png``, ``psnr_vs_gaussians.png``; a progress line while it runs (done / running /
+failed, ETA). Exit code 0 when every run finished, 1 when some did not, 2 on bad input (one line).
+"""
+
+from __future__ import annotations
+
+import argparse
+import itertools
+import json
+import math
+import os
+import re
+import signal
+import socket
+import subprocess
+import sys
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+INSTALL_HINT = "pip install 'warpgs[ray]'"
+MIN_GPU_SHARE = 1 / 8
+PIXELS_PER_GPU = 2.0e6  # gpu_share: a run of this many pixels per image takes a whole GPU ...
+GAUSSIANS_PER_GPU = 1.0e7  # ... as does one of this many Gaussians
+GAUSSIANS_WITHOUT_BUDGET = 500_000  # the estimate where strategy.max_gaussians is 0 (no budget)
+STOPPED = (130, -signal.SIGINT)  # Ctrl-C: the run checkpointed and stopped; not a fault to retry
+
+
+class BatchError(ValueError):
+    """Bad input for the whole batch (one line, exit code 2)."""
+
+
+class RunDied(RuntimeError):
+    """A run's process died (a signal, or out of memory): Ray retries the task, which resumes the run."""
+
+
+@dataclass
+class RunSpec:
+    """One run of a batch: the arguments of ``python -m warpgs.pipelines.sparse`` (without ``--out``), the
+    keys it is grouped by in the results, and what it asks Ray for."""
+
+    name: str  # its folder under OUT/runs and its log's name
+    argv: list
+    scene: str
+    views: int | str | None
+    method: str
+    seed: int | None
+    num_cpus: float = 1.0
+    num_gpus: float = 0.0
+    image_size: list | None = None  # [width, height] as probed (what the GPU share came from)
+
+
+# ----------------------------------------------------------------------------------------------
+# planning: the runs, their configs and their resources
+
+
+def split_list(text: str | None, flag: str, cast=str) -> list:
+    if text is None:
+        return [None]
+    items = [t.strip() for t in str(text).split(",") if t.strip()]
+    if not items:
+        raise BatchError(f"{flag} {text!r}: expected a comma-separated list")
+    try:
+        return [cast(t) for t in items]
+    except ValueError:
+        raise BatchError(f"{flag} {text!r}: expected a comma-separated list of numbers") from None
+
+
+def data_args(entry: str, dataset: str) -> tuple[list[str], str]:
+    """A ``--data`` entry -> (the run's data arguments, a short tag for run names). A dataset name or an
+    existing path stays as it is; ``DATASET:SCENE`` and a bare scene name (of ``dataset``) become
+    ``--data DATASET --scene SCENE``."""
+    from warpgs.data.registry import dataset_names
+
+    if entry in dataset_names():
+        return ["--data", entry], entry
+    if ":" in entry and entry.split(":", 1)[0] in dataset_names():
+        name, scene = entry.split(":", 1)
+        return ["--data", name, "--scene", scene], scene
+    p = Path(entry).expanduser()
+    if p.exists() or os.sep in entry:  # a path (one that does not exist is the run's to report)
+        return ["--data", str(p.resolve())], p.name or "scene"
+    return ["--data", dataset, "--scene", entry], entry
+
+
+def gpu_share(width: int, height: int, gaussians: int) -> float:
+    """The GPU share one run asks Ray for: megapixels / 2 + millions of Gaussians / 10, rounded up to 1/k (so
+    that k runs fill a GPU with nothing left over) and kept in [1/8, 1]. At 768x512 (0.39 MP) with no
+    Gaussian budget (estimated 500k) that is 1/4; the synthetic scene's 128x96 with 12k is 1/8; 1080p with
+    1M Gaussians is 1. Measured peak allocations stay far below a GPU's memory (at most 3.3 GB at 768x512,
+    bench/results/real_captures); the share limits how many runs contend for one GPU's compute."""
+    raw = width * height / PIXELS_PER_GPU + gaussians / GAUSSIANS_PER_GPU
+    if raw >= 1:
+        return 1.0
+    return max(MIN_GPU_SHARE, 1 / math.floor(1 / raw))
+
+
+def probe_image_size(cfg) -> tuple[int, int] | None:
+    """The size of the images a run of ``cfg`` trains on, read without decoding any: the synthetic scene's
+    from its options, a nerfstudio capture's from transforms.json and the ``images_N`` folder it will use,
+    other formats from their first image's header. None where the scene cannot be found (the run says why)."""
+    from PIL import Image
+
+    from warpgs.data.registry import dataset_names, detect_format, read_data_config, resolve_scene_dir
+    from warpgs.data.scene import SceneError
+
+    d = cfg.data
+    try:
+        if d.name in dataset_names():
+            dcfg = read_data_config(d.name)
+            downscale = d.downscale or dcfg.get("downscale")
+            if dcfg["format"] == "synthetic":
+                opts = {**dcfg.get("options", {}), **d.options}
+                return int(opts.get("width", 256)) // (downscale or 1), int(opts.get("height", 192)) // (downscale or 1)
+            folder, fmt = resolve_scene_dir(d.name, dcfg, d.scene, d.root)
+        else:
+            fmt, folder = detect_format(d.name)
+            downscale = d.downscale
+    except (SceneError, OSError, ValueError):
+        return None
+    folder = Path(folder)
+    meta = folder if folder.is_file() else folder / "transforms.json"
+    if fmt == "nerfstudio" and meta.is_file():
+        try:
+            m = json.loads(meta.read_text())
+            frame = m["frames"][0]
+            w, h = int(frame.get("w", m["w"])), int(frame.get("h", m["h"]))
+        except (OSError, ValueError, KeyError, IndexError, TypeError):
+            return None
+        if downscale is None:  # the first of images/, images_2/4/8 holding the first frame (the loader's order)
+            rel = Path(frame["file_path"])
+            downscale = next((f for f in (1, 2, 4, 8) if (meta.parent / (rel.parent.name + (f"_{f}" if f > 1 else ""))
+                                                            / rel.name).is_file()), 1)
+        return w // downscale, h // downscale
+    base = folder.parent if folder.is_file() else folder
+    scaled = base / f"images_{downscale}"  # LLFF's images_8: already at that size
+    search, factor = (scaled, 1) if downscale and scaled.is_dir() else (base, downscale or 1)
+    for p in sorted(search.rglob("*")):
+        if p.suffix.lower() in (".png", ".jpg", ".jpeg") and "mask" not in p.parent.name:
+            try:
+                with Image.open(p) as im:
+                    w, h = im.size
+            except OSError:
+                continue
+            return w // factor, h // factor
+    return None
+
+
+def run_name(tag: str, views, method: str, seed) -> str:
+    parts = [re.sub(r"[^A-Za-z0-9_.-]+", "_", tag)]
+    if views is not None:
+        parts.append(f"{views}v")
+    parts.append(method)
+    if seed is not None:
+        parts.append(f"s{seed}")
+    return "_".join(parts)
+
+
+def plan(args) -> list[RunSpec]:
+    """The batch's runs (every --data x --views x method x --seeds), each config built and checked as the
+    run itself will (``BatchError`` naming the run on a bad value), with its resources: a GPU share unless
+    ``--device cpu``."""
+    from warpgs.config import ConfigError
+    from warpgs.pipelines.sparse import build_parser, make_config
+
+    methods = {"compare": ["baseline", "full"], "baseline": ["baseline"], "full": ["full"]}.get(args.method)
+    if methods is None:
+        raise BatchError(f"--method {args.method!r}: available methods are baseline, full, compare")
+    common = []
+    for f in args.config:
+        common += ["--config", str(Path(f).resolve())]
+    for s in args.set:
+        common += ["--set", s]
+    if args.iterations is not None:
+        common += ["--iterations", str(args.iterations)]
+    if args.data_root is not None:
+        common += ["--data-root", str(Path(args.data_root).expanduser().resolve())]
+    if args.device is not None:
+        common += ["--device", args.device]
+    entries = {}  # --data entry -> (its data arguments, a tag no other entry has)
+    for entry in split_list(args.data, "--data"):
+        data, tag = data_args(entry, args.dataset)
+        taken = {t for _, t in entries.values()}
+        entries[entry] = (data, tag if tag not in taken else next(f"{tag}-{k}" for k in itertools.count(2)
+                                                                   if f"{tag}-{k}" not in taken))
+    runs = []
+    for entry, views, method, seed in itertools.product(entries, split_list(args.views, "--views"), methods,
+                                                        split_list(args.seeds, "--seeds", int)):
+        data, tag = entries[entry]
+        argv = data + (["--views", str(views)] if views is not None else []) + ["--method", method]
+        argv += (["--seed", str(seed)] if seed is not None else []) + common + ["--no-progress"]
+        try:
+            cfg, _ = make_config(build_parser().parse_args(argv))
+        except ConfigError as e:
+            raise BatchError(f"{entry}, {method}: {e}") from None
+        name = run_name(tag, cfg.data.views, method, cfg.train.seed)
+        size = probe_image_size(cfg)
+        spec = RunSpec(name, argv, tag, cfg.data.views, method, cfg.train.seed, num_cpus=args.cpus_per_run,
+                       image_size=list(size) if size else None)
+        if args.device != "cpu":  # main() drops the shares when the cluster has no GPU
+            budget = cfg.strategy.max_gaussians or GAUSSIANS_WITHOUT_BUDGET
+            # no size: the scene is not there, and the run will stop at once with the loader's message
+            spec.num_gpus = args.gpus_per_run or (gpu_share(*size, budget) if size else MIN_GPU_SHARE)
+        runs.append(spec)
+    return runs
+
+
+# ----------------------------------------------------------------------------------------------
+# one run (the Ray task's body): start it, resume it, or skip it
+
+
+def metrics_complete(path: Path, method: str | None = None) -> dict | None:
+    """The metrics of a finished run in ``path`` (its metrics.json with every record its method writes:
+    the full method's ``cycles`` come after the common ones), else None."""
+    try:
+        m = json.loads((Path(path) / "metrics.json").read_text())
+    except (OSError, ValueError):
+        return None
+    if not isinstance(m, dict):
+        return None
+    need = ("psnr", "iterations", "num_gaussians", "stage_times_s") + (("cycles",) if (method or m.get("method")) == "full" else ())
+    return m if all(k in m for k in need) else None
+
+
+RECORD_KEYS = ("method", "scene", "train_views", "test_views", "resolution", "iterations", "psnr", "ssim", "lpips",
+               "masked", "num_gaussians", "train_time_s", "render_fps", "peak_cuda_allocated_mb", "peak_rss_mb",
+               "device", "seed", "final_loss", "stopped_early", "recoveries", "curve", "compact", "stage_times_s")
+
+
+def slim_metrics(m: dict) -> dict:
+    """What the results keep of a run's metrics.json: the figures, and its stage times with the full
+    method's per-cycle pseudo-view and densification times summed in."""
+    out = {k: m[k] for k in RECORD_KEYS if k in m}
+    stages = dict(out.get("stage_times_s") or {})
+    for key in ("pseudo_views_s", "densify_s"):
+        times = [c[key] for c in m.get("cycles") or [] if isinstance(c.get(key), (int, float))]
+        if times:
+            stages[key] = round(sum(times), 2)
+    out["stage_times_s"] = stages
+    return out
+
+
+def _append(path: Path, row: dict) -> None:
+    with open(path, "a") as f:
+        f.write(json.dumps(row) + "\n")
+
+
+def read_attempts(path: Path, batch: str | None = None) -> list[dict]:
+    """The attempts of a run (its ``.attempts.jsonl``; of batch ``batch`` only, when given): one dict per
+    attempt, ``end`` missing for one whose process or worker died before it could write it."""
+    attempts: list[dict] = []
+    try:
+        lines = Path(path).read_text().splitlines()
+    except OSError:
+        return attempts
+    for line in lines:
+        try:
+            row = json.loads(line)
+        except ValueError:
+            continue
+        if "start" in row:
+            attempts.append(row)
+        elif attempts and row.get("attempt") == attempts[-1]["attempt"]:
+            attempts[-1].update(row)
+    return [a for a in attempts if batch is None or a.get("batch") == batch]
+
+
+def describe_end(a: dict) -> str:
+    """One attempt's end in words."""
+    if "returncode" not in a:
+        return "its worker died (no end recorded)"
+    rc = a["returncode"]
+    if rc < 0:
+        try:
+            return f"killed by {signal.Signals(-rc).name}"
+        except ValueError:
+            return f"killed by signal {-rc}"
+    return f"out of memory (exit code {rc})" if a.get("oom") else f"exit code {rc}"
+
+
+def _last_error(text: str) -> str | None:
+    lines = [ln for ln in text.splitlines() if ln.startswith("error: ")]
+    return lines[-1] if lines else None
+
+
+def _prepare_run_process() -> None:
+    """In the run's process before it starts (Linux): SIGKILL when its parent, the Ray worker, dies, so that a
+    killed worker leaves no run behind holding the folder's lock; and SIGINT as in a terminal (a Ray worker
+    blocks or ignores it, and a child inherits both), so that Ctrl-C of the batch makes the run checkpoint."""
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT, signal.SIGTERM})
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+    try:
+        import ctypes
+
+        ctypes.CDLL("libc.so.6", use_errno=True).prctl(1, signal.SIGKILL)  # PR_SET_PDEATHSIG
+    except (OSError, AttributeError):
+        pass
+
+
+def finished_record(name: str, out: Path, metrics: dict, attempts: list[dict]) -> dict:
+    return {"name": name, "out": str(out), "status": "finished", "reused": not attempts, "attempts": attempts,
+            "wall_s": round(sum(a.get("wall_s", 0) for a in attempts), 2) if attempts else None,
+            "metrics": slim_metrics(metrics)}
+
+
+def execute_run(spec: dict, out: str, logs: str, batch: str, overwrite: bool = False) -> dict:
+    """Runs ``spec`` (a ``RunSpec`` as a dict) into ``out`` -> its record; ``batch`` names this batch in the
+    attempts file. A run with complete metrics is skipped (unless ``overwrite`` and this batch has not run it
+    yet); one with a checkpoint (an earlier attempt, an earlier batch) is resumed. Raises ``RunDied`` when the
+    run's process dies, so that Ray retries it; a clean error (exit code 2) is a record with status
+    ``failed``, not an exception."""
+    out, logs = Path(out), Path(logs)
+    logs.mkdir(parents=True, exist_ok=True)
+    log, attempts_path = logs / f"{spec['name']}.log", logs / f"{spec['name']}.attempts.jsonl"
+    earlier = read_attempts(attempts_path, batch)
+    fresh = overwrite and not earlier  # --overwrite: this batch's first attempt starts the run over
+    done = None if fresh else metrics_complete(out, spec["method"])
+    if done is not None:
+        return finished_record(spec["name"], out, done, earlier)
+    resume = not fresh and any((out / f).is_file() for f in ("checkpoint.pt", "checkpoint.prev.pt", "config.yaml"))
+    import warpgs
+
+    cmd = [sys.executable, "-m", "warpgs.pipelines.sparse"]
+    cmd += ["--resume", str(out), "--no-progress"] if resume else [*spec["argv"], "--out", str(out)]
+    cmd += ["--overwrite"] if fresh else []
+    env = {**os.environ, "PYTHONUNBUFFERED": "1", "OMP_NUM_THREADS": str(max(1, int(spec.get("num_cpus") or 1))),
+           "PYTHONPATH": os.pathsep.join(p for p in (str(Path(warpgs.__file__).resolve().parents[1]),
+                                                     os.environ.get("PYTHONPATH")) if p)}
+    number, host = len(earlier) + 1, socket.gethostname()
+    _append(attempts_path, {"batch": batch, "attempt": number, "start": time.time(), "host": host, "worker_pid": os.getpid(),
+                            "resume": resume, "cuda_visible_devices": os.environ.get("CUDA_VISIBLE_DEVICES")})
+    t0 = time.time()
+    with open(log, "a") as f:
+        f.write(f"==== batch {batch}, attempt {number} on {host}: {' '.join(cmd)}\n")
+        f.flush()
+        offset = f.tell()
+        proc = subprocess.Popen(cmd, stdout=f, stderr=subprocess.STDOUT, env=env,
+                                preexec_fn=_prepare_run_process if sys.platform.startswith("linux") else None)
+        _append(attempts_path, {"attempt": number, "pid": proc.pid})
+        rc = proc.wait()
+    with open(log, errors="replace") as f:
+        f.seek(offset)
+        text = f.read()
+    resumed = re.search(r"resumed \S+ at step (\d+)", text)
+    oom = rc not in (0, 2) and re.search(r"out of memory|OutOfMemoryError|MemoryError", text[-3000:]) is not None
+    _append(attempts_path, {"attempt": number, "end": time.time(), "wall_s": round(time.time() - t0, 2),
+                            "returncode": rc, "oom": oom, "from_step": int(resumed.group(1)) if resumed else None})
+    attempts = read_attempts(attempts_path, batch)
+    metrics = metrics_complete(out, spec["method"])
+    if metrics is not None and rc in (0, 1):  # 1: stopped early (diverged) with the last good state's metrics
+        return finished_record(spec["name"], out, metrics, attempts)
+    if (rc < 0 and rc not in STOPPED) or oom:
+        raise RunDied(f"{spec['name']}: attempt {number} {describe_end(attempts[-1])}")
+    tail = text[-1500:]
+    return {"name": spec["name"], "out": str(out), "status": "stopped" if rc in STOPPED else "failed",
+            "returncode": rc, "attempts": attempts, "wall_s": round(sum(a.get("wall_s", 0) for a in attempts), 2),
+            "error": _last_error(text) or (tail.strip().splitlines() or ["no output"])[-1], "log_tail": tail}
+
+
+# ----------------------------------------------------------------------------------------------
+# the batch on Ray
+
+
+def import_ray():
+    """Ray, or ``BatchError`` saying what to install."""
+    try:
+        import ray
+    except ImportError:
+        raise BatchError(f"the batch runner needs Ray, which is not installed: {INSTALL_HINT}") from None
+    return ray
+
+
+def start_ray(address: str | None = None, num_cpus: int | None = None, num_gpus: int | None = None):
+    """``ray.init``: a local Ray (``num_cpus`` / ``num_gpus`` of this machine, default all) or the cluster at
+    ``address``; quiet (no dashboard, the runs' output goes to their own logs)."""
+    import logging
+
+    ray = import_ray()
+    if not ray.is_initialized():
+        kwargs = dict(include_dashboard=False, log_to_driver=False, logging_level=logging.ERROR)
+        if address:
+            kwargs["address"] = address
+        else:
+            kwargs.update(num_cpus=num_cpus, num_gpus=num_gpus)
+        ray.init(**kwargs)
+    return ray
+
+
+def _fmt_time(s: float | None) -> str:
+    if s is None or not math.isfinite(s):
+        return "?"
+    s = int(round(s))
+    return f"{s // 3600}h{s % 3600 // 60:02d}m" if s >= 3600 else f"{s // 60}m{s % 60:02d}s"
+
+
+class Progress:
+    """The batch's progress line: done / running / failed / waiting, elapsed, ETA (from the runs this batch
+    finished: elapsed / finished x left). Printed when a count changes, and every ``every`` seconds."""
+
+    def __init__(self, total: int, log=print, every: float = 60.0):
+        self.total, self.log, self.every = total, log, every
+        self.t0 = time.time()
+        self.done = self.reused = self.failed = 0
+        self.last: tuple | None = None
+        self.last_time = 0.0
+
+    def record(self, rec: dict) -> None:
+        if rec.get("status") == "finished":
+            self.done += 1
+            self.reused += bool(rec.get("reused"))
+        else:
+            self.failed += 1
+
+    def line(self, running: int) -> str:
+        elapsed = time.time() - self.t0
+        left = self.total - self.done - self.failed
+        ran = self.done - self.reused + self.failed
+        eta = elapsed / ran * left if ran and left else (0.0 if not left else None)
+        reused = f" ({self.reused} reused)" if self.reused else ""
+        return (f"batch: {self.done}/{self.total} done{reused}, {running} running, {self.failed} failed, "
+                f"{max(0, left - running)} waiting; {_fmt_time(elapsed)} elapsed, ETA {_fmt_time(eta)}")
+
+    def show(self, running: int, force: bool = False) -> None:
+        state = (self.done, self.failed, running)
+        if force or state != self.last or time.time() - self.last_time >= self.every:
+            self.log(self.line(running))
+            self.last, self.last_time = state, time.time()
+
+
+def _running(names: set[str], logs: Path, batch: str) -> int:
+    """Runs with an attempt under way (started, not ended), from their attempt files."""
+    n = 0
+    for name in names:
+        a = read_attempts(logs / f"{name}.attempts.jsonl", batch)
+        n += bool(a) and "end" not in a[-1]
+    return n
+
+
+def record_settings(specs: list[RunSpec], logs: Path, overwrite: bool) -> None:
+    """Keeps each run's arguments in ``logs/<name>.argv.json``; ``BatchError`` when one holds other arguments
+    (an earlier batch into this folder with other settings: its runs would be reused or resumed as they were),
+    unless ``overwrite``."""
+    for s in specs:
+        p = logs / f"{s.name}.argv.json"
+        try:
+            before = json.loads(p.read_text())
+        except (OSError, ValueError):
+            before = None
+        if before is not None and before != s.argv and not overwrite:
+            changed = sorted(set(map(str, before)) ^ set(map(str, s.argv)))
+            raise BatchError(f"{logs.parent}: run {s.name} was made with other settings ({' '.join(changed[:6])} "
+                             "differ); choose another --out, or --overwrite to run everything again")
+    for s in specs:
+        (logs / f"{s.name}.argv.json").write_text(json.dumps(s.argv))
+
+
+def retries_in_words(attempts: list[dict]) -> list[str]:
+    """Each attempt that was followed by another: how it ended, and where the next one resumed."""
+    return [f"attempt {a['attempt']}: {describe_end(a)}; attempt {b['attempt']} "
+            + (f"resumed at step {b['from_step']}" if b.get("from_step") is not None else "started over")
+            for a, b in zip(attempts, attempts[1:])]
+
+
+def run_on_ray(specs: list[RunSpec], work: Path, logs: Path, *, max_retries: int = 2, overwrite: bool = False,
+               log=print, progress_every: float = 60.0, ray_init: dict | None = None) -> list[dict]:
+    """Runs ``specs`` as Ray tasks into ``work/<name>``, logs in ``logs``; returns their records in the order of
+    ``specs``, each with its ``spec`` and ``retries``. A run that finished already is not submitted (unless
+    ``overwrite``). Ray is started (``start_ray(**ray_init)``, shut down at the end) only where it is not
+    running yet and there is a run to submit."""
+    import secrets
+
+    ray = import_ray()
+    work, logs = Path(work).resolve(), Path(logs).resolve()
+    logs.mkdir(parents=True, exist_ok=True)
+    record_settings(specs, logs, overwrite)
+    batch = time.strftime("%Y%m%d-%H%M%S-") + secrets.token_hex(3)
+    progress = Progress(len(specs), log, progress_every)
+    records: dict[str, dict] = {}
+    todo = []
+    for s in specs:
+        done = None if overwrite else metrics_complete(work / s.name, s.method)
+        if done is not None:  # no task for a finished run
+            records[s.name] = finished_record(s.name, work / s.name, done, [])
+            progress.record(records[s.name])
+        else:
+            todo.append(s)
+    started = bool(todo) and not ray.is_initialized()
+    if started:
+        start_ray(**(ray_init or {}))
+        progress.t0 = time.time()  # the ETA counts from the first task
+    try:
+        _run_tasks(ray, todo, work, logs, batch, records, progress, max_retries, overwrite)
+    finally:
+        if started:
+            ray.shutdown()
+    progress.show(0, force=True)
+    return [{**records[s.name], "spec": asdict(s), "retries": retries_in_words(records[s.name].get("attempts") or [])}
+            for s in specs]
+
+
+def _run_tasks(ray, todo: list[RunSpec], work: Path, logs: Path, batch: str, records: dict, progress: Progress,
+               max_retries: int, overwrite: bool) -> None:
+    """Submits one task per run of ``todo`` and collects their records into ``records`` as they end."""
+    task = ray.remote(execute_run)
+    refs = {}
+    for s in todo:
+        opts = dict(num_cpus=s.num_cpus, max_retries=max_retries, retry_exceptions=[RunDied], name=s.name)
+        if s.num_gpus:
+            opts["num_gpus"] = s.num_gpus
+        refs[task.options(**opts).remote(asdict(s), str(work / s.name), str(logs), batch, overwrite)] = s
+    pending = set(refs)
+    try:
+        while pending:
+            progress.show(_running({refs[r].name for r in pending}, logs, batch))
+            ready, _ = ray.wait(list(pending), num_returns=1, timeout=2.0)
+            for ref in ready:
+                pending.discard(ref)
+                s = refs[ref]
+                try:
+                    rec = ray.get(ref)
+                except Exception as e:  # noqa: BLE001 - retries spent: RunDied, or the worker died each time
+                    attempts = read_attempts(logs / f"{s.name}.attempts.jsonl", batch)
+                    last = describe_end(attempts[-1]) if attempts else type(e).__name__
+                    rec = {"name": s.name, "out": str(work / s.name), "status": "failed", "attempts": attempts,
+                           "wall_s": round(sum(a.get("wall_s", 0) for a in attempts), 2),
+                           "error": f"died in each of {len(attempts)} attempts (the last: {last}; --max-retries {max_retries})"}
+                records[s.name] = rec
+                progress.record(rec)
+    except KeyboardInterrupt:
+        stop_runs([refs[r].name for r in pending], logs, batch)
+        raise
+
+
+def stop_runs(names: list[str], logs: Path, batch: str, timeout: float = 120.0) -> None:
+    """Ctrl-C: SIGINT to every run of ``names`` under way on this host (each writes a checkpoint and stops, as
+    after Ctrl-C in a terminal), then waits for them; a run on another node is left to ``ray.shutdown``
+    (which kills it: it continues from its last periodic checkpoint)."""
+    here, stopping = socket.gethostname(), []
+    for name in names:
+        a = read_attempts(logs / f"{name}.attempts.jsonl", batch)
+        if a and "end" not in a[-1] and a[-1].get("host") == here and a[-1].get("pid"):
+            try:
+                os.kill(a[-1]["pid"], signal.SIGINT)
+                stopping.append(a[-1]["pid"])
+            except OSError:
+                pass
+    t0 = time.time()
+    while stopping and time.time() - t0 < timeout:
+        stopping = [p for p in stopping if Path(f"/proc/{p}").exists() and
+                    Path(f"/proc/{p}/stat").read_text().rsplit(")", 1)[-1].split()[0] != "Z"]
+        time.sleep(0.2)
+
+
+# ----------------------------------------------------------------------------------------------
+# command line
+
+
+def build_parser() -> argparse.ArgumentParser:
+    ap = argparse.ArgumentParser(prog="python -m warpgs.pipelines.batch", description=__doc__,
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    g = ap.add_argument_group("runs (every combination of the lists)")
+    g.add_argument("--data", default="synthetic",
+                   help="comma-separated: dataset names, scene folders, or scenes of --dataset (default: synthetic)")
+    g.add_argument("--dataset", default="dl3dv", help="the dataset a bare scene name belongs to (default: dl3dv)")
+    g.add_argument("--data-root", default=None, help="folder holding the datasets (as for warpgs.pipelines.sparse)")
+    g.add_argument("--views", default=None, help="comma-separated training view counts (default: the dataset's)")
+    g.add_argument("--method", default="compare", help="baseline, full or compare (both; default)")
+    g.add_argument("--seeds", default="0", help="comma-separated seeds (default: 0)")
+    g.add_argument("--iterations", type=int, default=None, help="training steps of every run")
+    g.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="config override of every run (repeatable)")
+    g.add_argument("--config", action="append", default=[], metavar="FILE", help="extra YAML config of every run (repeatable)")
+    g.add_argument("--device", default=None, help="cpu or cuda (default: cuda when the Ray cluster has GPUs)")
+    g = ap.add_argument_group("scheduling")
+    g.add_argument("--address", default=None, help="Ray cluster to join (auto, HOST:PORT, ray://...); default: a local Ray")
+    g.add_argument("--cpus", type=int, default=None, help="local Ray: CPUs it may use (default: all)")
+    g.add_argument("--gpus", type=int, default=None, help="local Ray: GPUs it may use (default: all)")
+    g.add_argument("--cpus-per-run", type=float, default=1.0, help="CPUs each run asks for (default: 1)")
+    g.add_argument("--gpus-per-run", type=float, default=None, help="GPU share each run asks for (default: gpu_share)")
+    g.add_argument("--max-retries", type=int, default=2, help="retries of a run whose process or worker died (default: 2)")
+    g = ap.add_argument_group("outputs")
+    g.add_argument("--out", default="outputs/batch", help="batch folder: runs/, logs/, results (default: outputs/batch)")
+    g.add_argument("--overwrite", action="store_true", help="run every run again from the start, finished or not")
+    g.add_argument("--list", action="store_true", help="print the runs and their resources; run nothing")
+    g.add_argument("--progress-every", type=float, default=60.0, help="seconds between progress lines when nothing changes")
+    return ap
+
+
+def check_args(a) -> None:
+    if a.gpus_per_run is not None and not 0 < a.gpus_per_run <= 1:
+        raise BatchError(f"--gpus-per-run {a.gpus_per_run}: must be in (0, 1]")
+    if a.cpus_per_run <= 0:
+        raise BatchError(f"--cpus-per-run {a.cpus_per_run}: must be > 0")
+    if a.max_retries < 0:
+        raise BatchError(f"--max-retries {a.max_retries}: must be >= 0")
+    if a.device is not None and a.device != "cpu" and not a.device.startswith("cuda"):
+        raise BatchError(f"--device {a.device!r}: cpu or cuda (Ray gives each run its GPU)")
+    if a.device is not None and a.device.startswith("cuda:"):
+        raise BatchError(f"--device {a.device}: give cuda; Ray picks each run's GPU (CUDA_VISIBLE_DEVICES)")
+
+
+def print_plan(specs: list[RunSpec], log=print) -> None:
+    for s in specs:
+        size = "x".join(map(str, s.image_size)) if s.image_size else "size unknown"
+        gpu = f", {s.num_gpus:.3g} GPU" if s.num_gpus else ""
+        log(f"  {s.name:<40} {size:>10}  {s.num_cpus:g} CPU{gpu}")
+
+
+def main(argv=None) -> int:
+    from warpgs.pipelines.batch_report import write_results
+
+    a = build_parser().parse_args(argv)
+    out = Path(a.out).resolve()
+    ray = started = None
+    try:
+        check_args(a)
+        if not a.list:
+            import_ray()  # before any work: what to install, when it is missing
+        specs = plan(a)  # every config checked before Ray starts; GPU shares unless --device cpu
+        if a.list:
+            print(f"{len(specs)} runs into {out / 'runs'}:")
+            print_plan(specs)
+            return 0
+        ray = import_ray()
+        started = not ray.is_initialized()
+        start_ray(a.address, a.cpus, a.gpus)
+        gpus = ray.cluster_resources().get("GPU", 0)
+        if a.device == "cuda" and not gpus:
+            raise BatchError("--device cuda: the Ray cluster has no GPU" + ("" if a.address else " on this machine"))
+        device = a.device or ("cuda" if gpus else "cpu")
+        for s in specs:
+            s.argv += [] if a.device else ["--device", device]
+            s.num_gpus = s.num_gpus if device == "cuda" else 0.0
+    except BatchError as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 2
+    try:
+        res = ray.cluster_resources()
+        info = {"command": "python -m warpgs.pipelines.batch " + " ".join(argv if argv is not None else sys.argv[1:]),
+                "date": time.strftime("%Y-%m-%d %H:%M"), "device": device, "address": a.address or "local",
+                "cluster": {k: res[k] for k in ("CPU", "GPU") if k in res}, "nodes": len(ray.nodes()),
+                "max_retries": a.max_retries, "runs": len(specs)}
+        print(f"batch: {len(specs)} runs on {info['nodes']} node(s) "
+              f"({', '.join(f'{v:g} {k}' for k, v in info['cluster'].items())}); runs in {out / 'runs'}, "
+              f"logs in {out / 'logs'}", file=sys.stderr)
+        t0 = time.time()
+        try:
+            records = run_on_ray(specs, out / "runs", out / "logs", max_retries=a.max_retries, overwrite=a.overwrite,
+                                 log=lambda msg: print(msg, file=sys.stderr), progress_every=a.progress_every)
+        except BatchError as e:
+            print(f"error: {e}", file=sys.stderr)
+            return 2
+        except KeyboardInterrupt:
+            print("\nbatch: stopped; the unfinished runs keep their checkpoints: run the same command again to "
+                  "continue", file=sys.stderr)
+            return 130
+        info["wall_s"] = round(time.time() - t0, 2)
+        paths = write_results(records, info, out)
+        print(f"batch: wrote {', '.join(str(p) for p in paths)}", file=sys.stderr)
+        return 0 if all(r["status"] == "finished" for r in records) else 1
+    finally:
+        if started and ray.is_initialized():
+            ray.shutdown()
+
+
+if __name__ == "__main__":
+    sys.exit(main())
