@@ -33,6 +33,7 @@ import torch
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from warpgs.data.stress import look_along  # noqa: E402
 from warpgs.model import GaussianModel  # noqa: E402
 from warpgs.view import FrameLoop, Run, Viewer  # noqa: E402
 
@@ -54,15 +55,7 @@ def orbit(k: int, frames: int, centre: np.ndarray, radius: float) -> np.ndarray:
     """World-to-camera of frame ``k`` of a circle around ``centre`` (OpenCV axes, looking at it)."""
     a = 2 * math.pi * k / max(frames, 1)
     eye = centre + radius * np.array([math.sin(a), -0.3, -math.cos(a)])
-    z = centre - eye
-    z /= np.linalg.norm(z)
-    x = np.cross(z, [0.0, -1.0, 0.0])
-    x /= np.linalg.norm(x)
-    y = np.cross(z, x)
-    vm = np.eye(4)
-    vm[:3, :3] = np.stack([x, y, z])
-    vm[:3, 3] = -vm[:3, :3] @ eye
-    return vm
+    return look_along(eye, centre - eye, np.array([0.0, -1.0, 0.0]))
 
 
 def main(argv=None) -> int:
