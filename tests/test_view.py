@@ -300,7 +300,7 @@ def test_viewer_in_a_real_browser(run_dir):
     """The page in headless Chromium: the first frame arrives and is what the browser shows; a mouse drag on
     the canvas moves the camera, and a new, different frame arrives and is shown; a jump to a test view
     through viser's client API puts the browser's camera there, renders that view and shows its ground
-    truth beside the render in the panel."""
+    truth beside the render in the panel; the panel's mode menu switches to alpha frames."""
     browser_path = _browser_or_skip()
     from playwright.sync_api import sync_playwright
 
@@ -308,8 +308,11 @@ def test_viewer_in_a_real_browser(run_dir):
 
     run = load_run(run_dir)
     viewer = Viewer(run, host="127.0.0.1", port=0, res=256, preview_res=128)
-    for frusta in viewer._frusta.values():  # the frusta would cover parts of the frame compared below
-        viewer._show(frusta, False)
+    viewer.toggles["train cameras"].value = False  # the frusta would cover parts of the frame compared below
+    viewer.toggles["test cameras"].value = False
+    assert not any(f.visible for group in viewer._frusta.values() for f in group)
+    assert set(viewer.toggles) == {"train cameras", "test cameras", "cycle 1 pseudo", "cycle 1 kept", "cycle 1 added",
+                                   "cycle 1 removed"}
     try:
         with sync_playwright() as pw:
             browser = pw.chromium.launch(executable_path=browser_path, args=[
@@ -347,8 +350,11 @@ def test_viewer_in_a_real_browser(run_dir):
                 # render | ground truth
                 view = run.test[1]
                 client = viewer.server.get_clients()[client_id]
+                viewer.toggles["test cameras"].value = True
                 n = loop.frames
                 viewer.go_to(client, "test", view)
+                # the view's own frustum (its image would fill the screen) is hidden, the other test view's is not
+                assert [f.visible for f in viewer._frusta["test"]] == [True, False]
                 _wait(_settled(loop, n), "a frame at the test view", state=state)
                 _wait(lambda: np.allclose(client.camera.position, pose_from_viewmat(view.viewmat)[1], atol=1e-4),
                       "the browser's camera to reach the test view", 20)
@@ -356,6 +362,13 @@ def test_viewer_in_a_real_browser(run_dir):
                 pair = viewer.compare.image
                 assert pair.shape == (view.height, 2 * view.width, 3)
                 assert np.abs(pair[:, view.width:].astype(int) - np.round(view.image * 255)).max() <= 2
+
+                # the panel's render mode: an alpha frame (grey, white where the model covers the view)
+                n = loop.frames
+                viewer.mode_menu.value = "alpha"
+                _wait(_settled(loop, n), "an alpha frame", state=state)
+                a = loop.last.astype(int)
+                assert (a[..., 0] == a[..., 1]).all() and (a[..., 1] == a[..., 2]).all() and a.max() > 200
             finally:
                 browser.close()
     finally:

@@ -326,7 +326,9 @@ def scene_extent(run: Run) -> tuple[np.ndarray, float]:
 
 class Viewer:
     """A viser server showing ``run``; ``url`` is where to open it, ``loops`` the connected browsers' frame
-    loops (client id -> ``FrameLoop``), ``close()`` stops it. ``res`` / ``preview_res``: longest side of the
+    loops (client id -> ``FrameLoop``), ``close()`` stops it. The panel's checkboxes are ``toggles`` ("train
+    cameras", "test cameras", "cycle N pseudo" / "kept" / "added" / "removed"; setting ``.value`` acts as a
+    click), the render mode menu ``mode_menu``. ``res`` / ``preview_res``: longest side of the
     still / moving frames (None: 1920 / 1920 on CUDA, 640 / 256 on the CPU)."""
 
     def __init__(self, run: Run, host: str = "0.0.0.0", port: int = 8080, res: int | None = None,
@@ -347,6 +349,8 @@ class Viewer:
         self.port = self.server.get_port()
         self.centre, self.size = scene_extent(run)
         self._frusta: dict[str, list] = {"train": [], "test": []}
+        self._frustum_of: dict[tuple[str, str], object] = {}
+        self._hidden = None  # the frustum of the view jumped to last
         self._build_scene()
         self._build_panel()
         self.server.on_client_connect(self._connect)
@@ -387,6 +391,7 @@ class Viewer:
                     format="jpeg", wxyz=wxyz, position=pos)
                 handle.on_click(lambda event, v=v, kind=kind: self.go_to(event.client, kind, v))
                 self._frusta[kind].append(handle)
+                self._frustum_of[(kind, v.name)] = handle
         self._cycle_nodes: dict[tuple[int, str], list] = {}
         for cyc in run.cycles:
             nodes = []
@@ -425,9 +430,10 @@ class Viewer:
 
     def _build_panel(self) -> None:
         gui, run = self.server.gui, self.run
+        self.toggles, self.targets = {}, {}
         gui.add_markdown(f"**{run.name}**: {len(run.model):,} Gaussians, {run.summary()}")
         with gui.add_folder("Render"):
-            mode = gui.add_dropdown("mode", MODES, initial_value="rgb")
+            mode = self.mode_menu = gui.add_dropdown("mode", MODES, initial_value="rgb")
             res = gui.add_slider("resolution", min=64, max=4096, step=16, initial_value=self.res,
                                  hint="longest side of a still frame (moving: the preview resolution)")
 
@@ -449,14 +455,15 @@ class Viewer:
                 for kind in ("train", "test"):
                     box = gui.add_checkbox(f"{kind} cameras ({len(self._frusta[kind])})", initial_value=True)
                     box.on_update(lambda _e, kind=kind, box=box: self._show(self._frusta[kind], box.value))
-                self._targets = {f"{k}/{v.name}": (k, v) for k, group in (("train", run.train), ("test", run.test))
+                    self.toggles[f"{kind} cameras"] = box
+                self.targets = {f"{k}/{v.name}": (k, v) for k, group in (("train", run.train), ("test", run.test))
                                  for v in group}
-                go = gui.add_dropdown("go to view", ["(free camera)"] + list(self._targets), initial_value="(free camera)")
+                go = gui.add_dropdown("go to view", ["(free camera)"] + list(self.targets), initial_value="(free camera)")
 
                 @go.on_update
                 def _(event) -> None:
-                    if go.value in self._targets and event.client is not None:
-                        self.go_to(event.client, *self._targets[go.value])
+                    if go.value in self.targets and event.client is not None:
+                        self.go_to(event.client, *self.targets[go.value])
 
                 self.compare_caption = gui.add_markdown("pick a view: its render appears here beside its image")
                 self.compare = gui.add_image(np.zeros((8, 16, 3), np.uint8))
@@ -472,6 +479,7 @@ class Viewer:
                             if part != "pseudo" else None
                         box = gui.add_checkbox(label + (f" ({count:,})" if count is not None else ""), initial_value=False)
                         box.on_update(lambda _e, nodes=nodes, box=box: self._show(nodes, box.value))
+                        self.toggles[f"cycle {cyc.index} {part}"] = box
 
     @staticmethod
     def _show(nodes, visible: bool) -> None:
@@ -481,6 +489,12 @@ class Viewer:
     def go_to(self, client, kind: str, view: View) -> None:
         """Moves ``client``'s camera to ``view`` and shows its render beside its image in the panel."""
         wxyz, pos = pose_from_viewmat(view.viewmat)
+        # from inside its own frustum the view would see that frustum's image instead of the render
+        previous, self._hidden = self._hidden, self._frustum_of.get((kind, view.name))
+        if previous is not None and previous is not self._hidden:
+            previous.visible = self.toggles[f"{previous.name.split('/')[1]} cameras"].value
+        if self._hidden is not None:
+            self._hidden.visible = False
         with client.atomic():
             client.camera.fov = view.fov_y
             client.camera.position = pos
