@@ -287,6 +287,29 @@ def _screenshot(page) -> np.ndarray:
     return np.asarray(Image.open(io.BytesIO(page.screenshot())).convert("RGB"), np.float32) / 255.0
 
 
+def _shown(page, loop, timeout: float = 30.0) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+    """(screenshot, frame, its viewmat, their difference) once the page shows the loop's newest frame (the
+    browser decodes and draws it a little after the server sent it, seconds on a loaded machine; a camera still
+    gliding after a drag may send one more), or at the timeout."""
+    t0 = time.monotonic()
+    while True:
+        frame, viewmat = loop.last, loop.last_viewmat
+        shot = _screenshot(page)
+        err = _shown_error(shot, frame)
+        if err < 0.03 or time.monotonic() - t0 > timeout:
+            return shot, frame, viewmat, err
+        time.sleep(0.25)
+
+
+def _save_on_failure(name: str, shot: np.ndarray, frame: np.ndarray) -> str:
+    """Keeps the screenshot and the frame under outputs/test_artifacts/ for a failed comparison; -> where."""
+    out = REPO / "outputs" / "test_artifacts"
+    out.mkdir(parents=True, exist_ok=True)
+    Image.fromarray((shot * 255).astype(np.uint8)).save(out / f"view_{name}_screenshot.png")
+    Image.fromarray(frame).save(out / f"view_{name}_frame.png")
+    return f"see {out}/view_{name}_*.png"
+
+
 def _shown_error(shot: np.ndarray, frame: np.ndarray) -> float:
     """Mean difference between a screenshot and a frame stretched over the page, where no panel,
     notification or axes gizmo covers the canvas (left half, lower middle)."""
@@ -327,10 +350,9 @@ def test_viewer_in_a_real_browser(run_dir):
                     return f"frames {loop.frames}, last final {loop.last_final}, last render {loop.last_render_s:.2f} s"
 
                 _wait(_settled(loop, 0), "the first frame", state=state)
-                first, first_vm = loop.last, loop.last_viewmat
+                shot1, first, first_vm, err1 = _shown(page, loop)
                 assert first.shape == (160, 256, 3) and first.std() > 5
-                shot1 = _screenshot(page)
-                assert _shown_error(shot1, first) < 0.03
+                assert err1 < 0.03, _save_on_failure("first", shot1, first)
 
                 # a drag on the canvas: the browser moves its camera and tells the server
                 n = loop.frames
@@ -339,12 +361,11 @@ def test_viewer_in_a_real_browser(run_dir):
                 page.mouse.move(320, 240, steps=6)
                 page.mouse.up()
                 _wait(_settled(loop, n), "a frame after the drag", state=state)
-                second, second_vm = loop.last, loop.last_viewmat
+                shot2, second, second_vm, err2 = _shown(page, loop)
                 assert np.abs(second_vm - first_vm).max() > 1e-3, "the drag did not move the camera"
                 assert np.abs(second.astype(float) - first).mean() > 5, "the new frame looks like the old one"
-                shot2 = _screenshot(page)
-                assert _shown_error(shot2, second) < 0.03
-                assert _shown_error(shot2, first) > 3 * _shown_error(shot2, second) + 0.01
+                assert err2 < 0.03, _save_on_failure("second", shot2, second)
+                assert _shown_error(shot2, first) > 3 * err2 + 0.01, _save_on_failure("second_vs_first", shot2, first)
 
                 # jump to a test view: the browser's camera follows, the frame is that view's, the panel shows
                 # render | ground truth
