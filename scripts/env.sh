@@ -52,6 +52,19 @@ if [ ! -x "$WARPGS_VENV/bin/python" ] || [ "$(cat "$_stamp" 2>/dev/null)" != "$_
     fi
   fi
   "${_pip[@]}" -e "$WARPGS_ROOT[test]" 2>&1 | grep -v -e '^WARNING: Location' >&2 || true
+  # The viewer's browser test (tests/test_view.py) drives a real Chromium through playwright's pip package
+  # (no `playwright install`): Debian's chromium-headless-shell. Optional: without one that test skips.
+  if ! command -v chromium-headless-shell >/dev/null 2>&1 && ! command -v chromium >/dev/null 2>&1; then
+    if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then
+      _say "installing chromium-headless-shell (the viewer's browser test)"
+      { DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium-headless-shell >/dev/null 2>&1 || {
+          apt-get update -qq >/dev/null 2>&1 && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium-headless-shell >/dev/null 2>&1; }; } \
+        || _say "note: chromium-headless-shell could not be installed; the viewer's browser test will skip"
+    else
+      _say "note: no headless Chromium for the viewer's browser test (it will skip); to run it:"
+      _say "    sudo apt-get install -y chromium-headless-shell   (or set WARPGS_CHROMIUM=/path/to/chromium)"
+    fi
+  fi
   # LPIPS: the lpips package declares torchvision, whose PyPI build would replace the CPU torch; warpgs
   # needs only lpips's code (it supplies AlexNet's layout itself), so install it without dependencies.
   "${_pip[@]}" --no-deps "lpips>=0.1.4" 2>&1 | grep -v -e '^WARNING: Location' >&2 || true

@@ -384,6 +384,85 @@ def test_distortion_is_removed_or_refused(tmp_path):
     assert np.abs(distorted_image(0)[..., 0][inner] / 255.0 - ref[inner]).max() > 0.15
 
 
+def _numpy_undistort_coords(K, dist, width, height):
+    """The loader's own undistortion before it used OpenCV (kept here as the oracle): for each pixel centre of
+    the pinhole image, where it lies in the distorted one (library convention, centres at +0.5)."""
+    fx, fy, cx, cy = K[0, 0], K[1, 1], K[0, 2], K[1, 2]
+    g = {k: float(dist.get(k, 0.0)) for k in ("k1", "k2", "k3", "k4", "k5", "k6", "p1", "p2")}
+    u, v = np.meshgrid(np.arange(width) + 0.5, np.arange(height) + 0.5)
+    x, y = (u - cx) / fx, (v - cy) / fy
+    r2 = x * x + y * y
+    radial = (1 + r2 * (g["k1"] + r2 * (g["k2"] + r2 * g["k3"]))) / (1 + r2 * (g["k4"] + r2 * (g["k5"] + r2 * g["k6"])))
+    xd = x * radial + 2 * g["p1"] * x * y + g["p2"] * (r2 + 2 * x * x)
+    yd = y * radial + g["p1"] * (r2 + 2 * y * y) + 2 * g["p2"] * x * y
+    return fx * xd + cx, fy * yd + cy
+
+
+def _numpy_remap(a, u, v, nearest=False):
+    """The loader's old sampler (the oracle): bilinear at continuous pixel coordinates, edges clamped."""
+    h, w = a.shape[:2]
+    if nearest:
+        return a[np.clip(np.floor(v).astype(int), 0, h - 1), np.clip(np.floor(u).astype(int), 0, w - 1)]
+    x, y = np.clip(u - 0.5, 0, w - 1), np.clip(v - 0.5, 0, h - 1)
+    j0, i0 = np.minimum(np.floor(x).astype(int), w - 2), np.minimum(np.floor(y).astype(int), h - 2)
+    fx, fy = x - j0, y - i0
+    if a.ndim == 3:
+        fx, fy = fx[..., None], fy[..., None]
+    return (a[i0, j0] * (1 - fx) * (1 - fy) + a[i0, j0 + 1] * fx * (1 - fy)
+            + a[i0 + 1, j0] * (1 - fx) * fy + a[i0 + 1, j0 + 1] * fx * fy).astype(a.dtype)
+
+
+# fox-like captures (nerfstudio / instant-ngp OPENCV with k1, k2, p1, p2), the case above, COLMAP's
+# SIMPLE_RADIAL and a FULL_OPENCV rational model
+DISTORTION_CASES = {
+    "fox_like": (1080 // 8, 1920 // 8, 1375.5 / 8, {"k1": 0.0335, "k2": -0.0245, "p1": 0.0011, "p2": -0.0008}),
+    "strong": (36, 48, 40.0, {"k1": -0.25, "k2": 0.05, "p1": 0.004, "p2": -0.003}),
+    "simple_radial": (60, 80, 70.0, {"k1": 0.08}),
+    "full_opencv": (48, 64, 50.0, {"k1": -0.1, "k2": 0.02, "k3": -0.003, "k4": 0.05, "k5": -0.01, "k6": 0.002,
+                                   "p1": 0.002, "p2": 0.001}),
+}
+
+
+@pytest.mark.parametrize("case", sorted(DISTORTION_CASES))
+def test_opencv_undistortion_matches_the_former_numpy_one(case):
+    """OpenCV's map + remap give what the loader's own numpy code gave: sample positions to 1e-3 px (the
+    maps are float32; OpenCV 5 is exact for 1, 3 and 4 channels, older versions interpolate at 1/32-pixel steps,
+    which the bounds allow), bilinear values to 1/32 of the largest step between neighbouring pixels,
+    nearest-neighbour values exactly except at exact ties. Without the half-pixel shift between the library's
+    pixel centres and OpenCV's, every bound here fails."""
+    from warpgs.data.nerfstudio import undistort_image
+
+    h, w, f, dist = DISTORTION_CASES[case]
+    K = np.array([[f, 0, w / 2 + 0.3], [0, f * 1.01, h / 2 - 0.2], [0, 0, 1.0]])
+    rng = np.random.default_rng(7)
+    # a smooth image plus noise: both sharp steps and gradients
+    yy, xx = np.mgrid[0:h, 0:w]
+    rgb = (0.5 + 0.3 * np.sin(xx[..., None] * [0.3, 0.17, 0.05] + yy[..., None] * [0.11, 0.23, 0.4])
+           + 0.15 * rng.random((h, w, 3))).astype(np.float32)
+    u, v = _numpy_undistort_coords(K, dist, w, h)
+    want = _numpy_remap(rgb, u, v)
+    got = undistort_image(rgb, K, dist)
+    assert got.shape == rgb.shape and got.dtype == np.float32
+    step = max(np.abs(np.diff(rgb, axis=0)).max(), np.abs(np.diff(rgb, axis=1)).max())
+    err = np.abs(got - want).max()
+    assert err <= step / 32 + 1e-6, (err, step)
+    # the positions themselves, through a coordinate image (bilinear interpolation of a linear ramp is exact)
+    ramp = np.stack([*np.meshgrid(np.arange(w) + 0.5, np.arange(h) + 0.5), np.zeros((h, w))], -1).astype(np.float32)
+    inside = (u > 0.5) & (u < w - 0.5) & (v > 0.5) & (v < h - 0.5)
+    pos = undistort_image(ramp, K, dist)
+    assert inside.mean() > 0.5
+    assert np.abs(pos[..., 0] - u)[inside].max() < 1 / 32 + 1e-3 and np.abs(pos[..., 1] - v)[inside].max() < 1 / 32 + 1e-3
+    # masks and depth: nearest neighbour
+    mask = rng.random((h, w)) > 0.5
+    depth = rng.uniform(1, 5, (h, w)).astype(np.float32)
+    for a in (mask, depth):
+        got_n = undistort_image(a, K, dist, nearest=True)
+        assert got_n.dtype == a.dtype and got_n.shape == a.shape
+        assert (got_n == _numpy_remap(a, u, v, nearest=True)).mean() > 0.995
+    # the distortion does move pixels, so the comparison is not trivially between identities
+    assert np.abs(np.hypot(u - ramp[..., 0], v - ramp[..., 1])).max() > 0.3
+
+
 # ----------------------------------------------------------------------------------------------
 # bad input
 

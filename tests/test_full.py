@@ -36,6 +36,12 @@ def test_full_method_end_to_end_and_resume(tmp_path, capsys):
         assert (out / f).is_file(), f
     seqs = sorted((out / "cycle_1" / "pseudo").glob("seq_*"))
     assert len(seqs) == 2 and len(list(seqs[0].glob("uncertainty_*.png"))) == 5
+    # the viewer reads each cycle's trajectories and densified cloud from these files
+    from warpgs.view import load_run
+
+    cycles = load_run(out, cameras=False).cycles
+    assert [c.index for c in cycles] == [1, 2] and all(len(c.trajectories) == 2 for c in cycles)
+    assert all(t.shape == (5, 4, 4) for t in cycles[0].trajectories) and cycles[0].cloud["origin"] is not None
     # a resumed run with more iterations continues from the checkpoint (cycles already done are kept)
     assert main(["--resume", str(out), "--iterations", "40", "--no-progress"]) == 0
     m2 = json.loads((out / "metrics.json").read_text())

@@ -18,7 +18,7 @@ LAYERS = [
     ["config"],
     ["evaluation", "train"],
     ["compact"],
-    ["pipelines"],
+    ["pipelines", "view"],
 ]
 RANK = {name: i for i, names in enumerate(LAYERS) for name in names}
 

@@ -220,7 +220,7 @@ class GaussianModel(nn.Module):
         means = col("x", "y", "z")
         sh0 = col("f_dc_0", "f_dc_1", "f_dc_2")[:, None, :]
         rest = col(*[f"f_rest_{i}" for i in range(n_rest)]) if n_rest else torch.zeros(means.shape[0], 0)
-        shN = rest.reshape(-1, 3, per_channel).transpose(1, 2)  # channel-major on disk -> [N, K-1, 3]
+        shN = rest.reshape(means.shape[0], 3, per_channel).transpose(1, 2)  # channel-major on disk -> [N, K-1, 3]
         opac = torch.from_numpy(np.asarray(v["opacity"], np.float32))
         scales = col("scale_0", "scale_1", "scale_2")
         quats = col("rot_0", "rot_1", "rot_2", "rot_3")

@@ -4,7 +4,7 @@
     python -m warpgs.viz cloud.ply --png view.png       # the same view to an image, headless
     python -m warpgs.viz point_cloud.ply --png v.png --color rgb --size 1280x960 --point-size 3
 
-Reads any vertex PLY (through trimesh): a plain point cloud (``red/green/blue``), a 3D-GS Gaussian
+Reads any vertex PLY (through ``warpgs.ply``, i.e. plyfile): a plain point cloud (``red/green/blue``), a 3D-GS Gaussian
 file (centres coloured by their DC colour), or a densification cloud written by ``save_origin_ply``,
 whose ``origin`` property marks each point kept (an existing Gaussian), added (a new Gaussian) or
 removed (a stereo point dropped as an outlier); with ``--color auto`` (default) such a cloud is
@@ -32,7 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from warpgs.console import filtered_stderr
-from warpgs.ply import keep_finite, write_vertices
+from warpgs.ply import keep_finite, read_elements, write_vertices
 
 def save_image(path: str | Path, image) -> Path:
     """Saves [H, W, 3] or [H, W] values in [0, 1] (numpy or torch) as an 8-bit PNG; NaN is written as 0."""
@@ -62,26 +62,15 @@ def read_cloud(path: str | Path, drop_invalid: bool = False) -> dict:
     'kind': 'points' | 'gaussians' | 'mesh'} from any PLY with vertices. Points (for a Gaussian file: Gaussians,
     every field) with non-finite values are refused with their count (``ValueError``), or with
     ``drop_invalid`` dropped with one warning line."""
-    import trimesh
-
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"{path}: no such file")
-    try:
-        geom = trimesh.load(str(path), process=False)
-    except Exception as e:
-        raise ValueError(f"{path}: cannot read it as PLY ({e})") from e
-    if isinstance(geom, trimesh.Scene):
-        geom = trimesh.util.concatenate(list(geom.geometry.values())) if geom.geometry else None
-    raw = (getattr(geom, "metadata", None) or {}).get("_ply_raw", {}).get("vertex", {}).get("data")
-    names = raw.dtype.names if raw is not None and raw.dtype.names else ()
-    if raw is not None and all(k in names for k in ("x", "y", "z")):
-        points = np.stack([raw["x"], raw["y"], raw["z"]], 1).astype(np.float32)
-    elif geom is not None and hasattr(geom, "vertices"):
-        points = np.asarray(geom.vertices, np.float32)
-    else:
-        raise ValueError(f"{path}: PLY has no vertices")
-    colors, kind = None, "mesh" if isinstance(geom, trimesh.Trimesh) and len(geom.faces) else "points"
+    raw, counts = read_elements(path)
+    names = tuple(raw)
+    if not all(k in names for k in ("x", "y", "z")):
+        raise ValueError(f"{path}: PLY vertices have no x, y, z")
+    points = np.stack([raw["x"], raw["y"], raw["z"]], 1).astype(np.float32)
+    colors, kind = None, "mesh" if counts.get("face", 0) else "points"
     if all(f"f_dc_{i}" in names for i in range(3)):
         kind = "gaussians"
         colors = np.clip(np.stack([raw[f"f_dc_{i}"] for i in range(3)], 1) * SH_C0 + 0.5, 0, 1).astype(np.float32)
@@ -91,10 +80,6 @@ def read_cloud(path: str | Path, drop_invalid: bool = False) -> dict:
                 c = np.stack([raw[k] for k in keys], 1)
                 colors = (c.astype(np.float32) / 255.0) if c.dtype.kind in "ui" else c.astype(np.float32)
                 break
-        if colors is None and getattr(getattr(geom, "visual", None), "vertex_colors", None) is not None:
-            vc = np.asarray(geom.visual.vertex_colors)
-            if len(vc) == len(points):
-                colors = vc[:, :3].astype(np.float32) / 255.0
     origin = np.asarray(raw["origin"], np.uint8) if "origin" in names else None
     cols = {"x": points[:, 0], "y": points[:, 1], "z": points[:, 2]}
     if kind == "gaussians":  # a Gaussian is invalid when any of its values is (opacity, scales, rotation too)

@@ -10,7 +10,7 @@ the COLMAP world to make those poses), image folders ``images``, ``images_2``, `
 
 Poses are used as stored (no recentring or rescaling): the loaded world is the frame of the poses,
 and ``Scene.world_transform`` maps the COLMAP world into it (``applied_transform``, or the identity).
-Lens distortion is removed by resampling each image onto the pinhole camera with the same K
+Lens distortion is removed by resampling each image onto the pinhole camera with the same K (OpenCV)
 (``undistort=True``) or refused with an error (``undistort=False``); it is never ignored.
 """
 
@@ -56,38 +56,25 @@ COLMAP_MODEL_DIRS = ("colmap/sparse/0", "sparse/0", "sparse", "colmap/sparse", "
 # shared pieces
 
 
-def undistort_coords(K: np.ndarray, dist: dict[str, float], width: int, height: int) -> tuple[np.ndarray, np.ndarray]:
-    """For each pixel centre of the undistorted (pinhole, same K) image, where it lies in the distorted one.
+def undistort_image(a: np.ndarray, K: np.ndarray, dist: dict[str, float], nearest: bool = False) -> np.ndarray:
+    """``a`` (H, W[, C]) resampled from the distorted camera onto the pinhole camera with the same K, by
+    OpenCV (``initUndistortRectifyMap`` + ``remap``; edges replicated): bilinear, or ``nearest`` for masks
+    and depth. OpenCV's radial-tangential model (k1..k6 rational, p1, p2) covers COLMAP's SIMPLE_RADIAL,
+    RADIAL, OPENCV and FULL_OPENCV and nerfstudio's OPENCV. ``K`` is in the library's convention (pixel
+    centres at +0.5); OpenCV puts them at integers, hence the half-pixel shift of the principal point."""
+    import cv2
 
-    OpenCV's radial-tangential model (k1..k6 rational, p1, p2), which covers COLMAP's SIMPLE_RADIAL,
-    RADIAL, OPENCV and FULL_OPENCV and nerfstudio's OPENCV.
-    """
-    fx, fy, cx, cy = K[0, 0], K[1, 1], K[0, 2], K[1, 2]
-    g = {k: float(dist.get(k, 0.0)) for k in DISTORTION_KEYS}
-    u, v = np.meshgrid(np.arange(width) + 0.5, np.arange(height) + 0.5)
-    x, y = (u - cx) / fx, (v - cy) / fy
-    r2 = x * x + y * y
-    radial = (1 + r2 * (g["k1"] + r2 * (g["k2"] + r2 * g["k3"]))) / (1 + r2 * (g["k4"] + r2 * (g["k5"] + r2 * g["k6"])))
-    xd = x * radial + 2 * g["p1"] * x * y + g["p2"] * (r2 + 2 * x * x)
-    yd = y * radial + g["p1"] * (r2 + 2 * y * y) + 2 * g["p2"] * x * y
-    return fx * xd + cx, fy * yd + cy
-
-
-def remap(a: np.ndarray, u: np.ndarray, v: np.ndarray, nearest: bool = False) -> np.ndarray:
-    """Samples ``a`` (H, W[, C]) at continuous pixel coordinates (library convention), edges clamped."""
     h, w = a.shape[:2]
-    if nearest:
-        j = np.clip(np.floor(u).astype(int), 0, w - 1)
-        i = np.clip(np.floor(v).astype(int), 0, h - 1)
-        return a[i, j]
-    x, y = np.clip(u - 0.5, 0, w - 1), np.clip(v - 0.5, 0, h - 1)
-    j0, i0 = np.minimum(np.floor(x).astype(int), w - 2), np.minimum(np.floor(y).astype(int), h - 2)
-    fx, fy = x - j0, y - i0
-    if a.ndim == 3:
-        fx, fy = fx[..., None], fy[..., None]
-    out = (a[i0, j0] * (1 - fx) * (1 - fy) + a[i0, j0 + 1] * fx * (1 - fy)
-           + a[i0 + 1, j0] * (1 - fx) * fy + a[i0 + 1, j0 + 1] * fx * fy)
-    return out.astype(a.dtype)
+    g = {k: float(dist.get(k, 0.0)) for k in DISTORTION_KEYS}
+    coeffs = np.array([g["k1"], g["k2"], g["p1"], g["p2"], g["k3"], g["k4"], g["k5"], g["k6"]], np.float64)
+    Kcv = np.asarray(K, np.float64).copy()
+    Kcv[0, 2] -= 0.5
+    Kcv[1, 2] -= 0.5
+    map_x, map_y = cv2.initUndistortRectifyMap(Kcv, coeffs, None, Kcv, (w, h), cv2.CV_32FC1)
+    src = a.astype(np.uint8) if a.dtype == bool else a
+    out = cv2.remap(src, map_x, map_y, cv2.INTER_NEAREST if nearest else cv2.INTER_LINEAR,
+                    borderMode=cv2.BORDER_REPLICATE)
+    return out.astype(a.dtype).reshape(a.shape)
 
 
 def _has_distortion(dist: dict[str, float]) -> bool:
@@ -303,12 +290,11 @@ def load_nerfstudio(
                     f"{src}: the camera has lens distortion {({k: v for k, v in dist.items() if v})}; "
                     "load with undistort=True (resamples to a pinhole camera) or undistort the images first"
                 )
-            u, v = undistort_coords(K, dist, rgb.shape[1], rgb.shape[0])
-            rgb = remap(rgb, u, v)
+            rgb = undistort_image(rgb, K, dist)
             if mask is not None:
-                mask = remap(mask, u, v, nearest=True)
+                mask = undistort_image(mask, K, dist, nearest=True)
             if depth is not None:
-                depth = remap(depth, u, v, nearest=True)
+                depth = undistort_image(depth, K, dist, nearest=True)
         return make_camera(Path(fr["file_path"]).stem, c2w, K, rgb, mask, depth, img_path)
 
     train = [load_frame(k) for k in train_idx]
@@ -502,8 +488,7 @@ def load_colmap(
             if not undistort:
                 raise SceneError(f"{src}: camera {cam.id} ({cam.model}) has lens distortion {dist}; "
                                  "load with undistort=True or undistort the images first (colmap image_undistorter)")
-            u, v = undistort_coords(K, dist, rgb.shape[1], rgb.shape[0])
-            rgb = remap(rgb, u, v)
+            rgb = undistort_image(rgb, K, dist)
         return make_camera(Path(im.name).stem, c2w, K, rgb, image_path=p)
 
     train = [load_frame(k) for k in train_idx]
