@@ -30,6 +30,13 @@ from warpgs.kernels import rasterize as kr
 from warpgs.kernels import sh as ksh
 
 
+def _tile_grid(dev: str, width: int, height: int) -> tuple[int, int, int]:
+    """(tile edge, tiles across, tiles down) of an image on Warp device ``dev`` (the edge is the device's:
+    ``kr.tile_size_for``)."""
+    ts = kr.tile_size_for(dev)
+    return ts, (width + ts - 1) // ts, (height + ts - 1) // ts
+
+
 class RenderOutput(NamedTuple):
     image: torch.Tensor
     depth: torch.Tensor
@@ -61,9 +68,7 @@ class _Project(torch.autograd.Function):
         dev = device_of(means)
         stream = stream_of(dev)
         n = means.shape[0]
-        ts = kr.tile_size_for(dev)
-        tiles_x = (width + ts - 1) // ts
-        tiles_y = (height + ts - 1) // ts
+        ts, tiles_x, tiles_y = _tile_grid(dev, width, height)
         f = dict(device=means.device, dtype=torch.float32)
         means2d = torch.empty(n, 2, **f)
         conics = torch.empty(n, 3, **f)
@@ -180,8 +185,7 @@ class _Composite(torch.autograd.Function):
                 width, height, alpha_max, deterministic):
         dev = device_of(means2d)
         stream = stream_of(dev)
-        ts = kr.tile_size_for(dev)
-        tiles_x = (width + ts - 1) // ts
+        tiles_x = _tile_grid(dev, width, height)[1]
         n_threads = kr.compositing_threads(dev, ranges.shape[0])
         f = dict(device=means2d.device, dtype=torch.float32)
         splats = torch.empty(means2d.shape[0], 10, **f)
@@ -208,8 +212,7 @@ class _Composite(torch.autograd.Function):
         splats, background, ranges, gauss_ids, depth, alpha, last = ctx.saved_tensors
         width, height, alpha_max, deterministic = ctx.cfg
         dev = device_of(splats)
-        ts = kr.tile_size_for(dev)
-        tiles_x = (width + ts - 1) // ts
+        tiles_x = _tile_grid(dev, width, height)[1]
         n = splats.shape[0]
         # the CPU backend runs one thread, so its float sums are deterministic already
         fixed = bool(deterministic) and (dev != "cpu" or deterministic == "fixed")
@@ -347,9 +350,7 @@ def rasterize(
         if n and bool((quats.detach().norm(dim=-1) == 0).any()):
             _fail("quats", "contains a zero quaternion, which has no rotation")
 
-    ts = kr.tile_size_for(device_of(means))
-    tiles_x = (width + ts - 1) // ts
-    tiles_y = (height + ts - 1) // ts
+    _, tiles_x, tiles_y = _tile_grid(device_of(means), width, height)
     means2d, conics, depths, opac_eff, radii, tiles_touched = _Project.apply(
         means, quats, scales, opacities, viewmat, K, width, height, eps2d, near_plane, far_plane, antialiased
     )

@@ -47,7 +47,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from warpgs.geometry import camera_centres, quat_to_rotmat, rotmat_to_quat
+from warpgs.geometry import camera_centres, pose, quat_to_rotmat, rotmat_to_quat
 from warpgs.model import GaussianModel
 from warpgs.viz import ORIGIN_COLORS, ORIGIN_NAMES, default_camera, read_cloud
 
@@ -171,11 +171,7 @@ def pinhole(fov_y: float, width: int, height: int) -> np.ndarray:
 def viewmat_from_pose(wxyz, position) -> np.ndarray:
     """World-to-camera 4x4 of a camera at ``position`` with orientation ``wxyz`` (camera to world, OpenCV axes:
     viser's camera frame)."""
-    R = quat_to_rotmat(np.asarray(wxyz, np.float64))
-    vm = np.eye(4)
-    vm[:3, :3] = R.T
-    vm[:3, 3] = -R.T @ np.asarray(position, np.float64)
-    return vm
+    return pose(quat_to_rotmat(np.asarray(wxyz, np.float64)), position)
 
 
 def pose_from_viewmat(viewmat) -> tuple[np.ndarray, np.ndarray]:
