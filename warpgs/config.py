@@ -114,6 +114,20 @@ class TrainConfig:
     #   inputs instead of ``background`` (warpgs/farfield.py; captures without alpha)
     far_field_bins: int = 16  # elevation bands of the far field
     prune_unseen_at_end: bool = False  # at the end, drop Gaussians no training view needs (costs novel-view PSNR)
+    # CoR-GS (Zhang et al., ECCV 2024; warpgs/coreg.py): a second model trained beside the first from the same
+    # initial Gaussians, on the same views, with its own random streams; twice the training cost. The first model
+    # is the one evaluated and exported
+    co_reg: bool = False
+    co_prune_every: int = 500  # co-pruning every this many steps after strategy.refine_start_iter (CoR-GS: 500,
+    #   at a densification step); 0: no co-pruning
+    co_prune_dist: float = 0.75  # co-pruning drops a Gaussian with no centre of the other model within this x the
+    #   scene scale (optim.scene_scale: the training cameras' extent). CoR-GS's tau = 5 on LLFF 3 views is in
+    #   COLMAP's units, where the middle 80% of the 20 camera centres span 10: the 3 training views, at both ends
+    #   and the middle, have an extent of about 6.5, so tau is about 0.75 of it
+    co_reg_weight: float = 1.0  # x (l1_weight L1 + ssim_weight D-SSIM) between the two models' renders of a pose
+    #   between two neighbouring training views, each against the other's detached render (CoR-GS: 1); 0: off
+    co_reg_start: int = 500  # first step of the co-regularisation (CoR-GS's LLFF script: 500)
+    co_reg_frames: int = 24  # pseudo poses between each pair of neighbouring training views, drawn in turn
     # divergence (warpgs/train.py): a non-finite loss or gradient, or a loss above explode_factor x the median
     # of the phase's last explode_window finite losses, skips the step; max_nan_steps skipped steps in a row,
     # explode_patience exploding ones in a row, or non-finite parameters after the optimiser step roll back to
@@ -137,7 +151,8 @@ class TrainConfig:
               "eval_every": ">= 0", "background": "[0, 1]", "drop_rate": "[0, 1)", "max_nan_steps": ">= 1",
               "explode_factor": ">= 0", "explode_window": ">= 1", "explode_patience": ">= 1", "snapshot_every": ">= 0",
               "max_recoveries": ">= 0", "recovery_lr_factor": "(0, 1]", "cpu_threads": ">= 0", "sync_every": ">= 1",
-              "far_field": FAR_FIELD_RULE, "far_field_bins": ">= 1"}
+              "far_field": FAR_FIELD_RULE, "far_field_bins": ">= 1", "co_prune_every": ">= 0", "co_prune_dist": "> 0",
+              "co_reg_weight": ">= 0", "co_reg_start": ">= 0", "co_reg_frames": ">= 1"}
 
 
 @dataclass

@@ -18,6 +18,12 @@ One input view per iteration (3D-GS's shuffled order); loss = 0.8 L1 + 0.2 D-SSI
 when ``loss.depth_weight`` > 0 and the view has a depth prior); Adam with 3D-GS's learning rates and an
 exponentially decaying position rate; densification by ``DefaultStrategy``.
 
+With ``train.co_reg`` (CoR-GS, ``warpgs.coreg``) a second model trains beside the first on the same views, with
+its own optimiser, strategy and random streams; the two are co-pruned and co-regularised on poses between the
+training views. Each step adds its loss to the first model's before the one backward, both optimisers step on the
+guard's one verdict (``optimizers``; the guard checks both models' ``trained_parameters``), and its state goes
+into every part of the state under ``pair``. The first model is the one evaluated and exported.
+
 Reproducibility: ``train.seed`` seeds the initialisation, the view order and the split noise (each
 its own generator, all saved in checkpoints, so a resumed run continues exactly as an uninterrupted
 one). On the CPU, Warp's kernels run on one thread, so two runs with one seed give identical numbers;
@@ -345,6 +351,27 @@ def _cpu_copy(obj):
     return copy.deepcopy(obj)
 
 
+def model_state(model: GaussianModel, optimizer: torch.optim.Optimizer, state: dict) -> dict:
+    """A CPU copy of one model's training state: its parameters and SH degrees, Adam's moments, the
+    densification statistics (``Trainer.state_dict``'s ``model`` part; the co-regularised pair's second model's)."""
+    return dict(params=_cpu_copy(dict(model.params)), max_sh_degree=model.max_sh_degree,
+                active_sh_degree=model.active_sh_degree, optimizer=_cpu_copy(optimizer.state_dict()),
+                strategy_state=_cpu_copy(state))
+
+
+def load_model_state(st: dict, model: GaussianModel, cfg: Config, scene_scale: float, device
+                     ) -> tuple[torch.optim.Adam, dict]:
+    """Puts ``model_state``'s copy ``st`` back into ``model`` (on ``device``; ``st`` stays usable); returns the
+    new optimiser, with the saved moments, and the densification statistics."""
+    for k, v in st["params"].items():
+        model.params[k] = torch.nn.Parameter(v.to(device, copy=True))
+    model.max_sh_degree = st["max_sh_degree"]
+    model.active_sh_degree = st["active_sh_degree"]
+    optimizer = make_optimizer(model, cfg, scene_scale)
+    optimizer.load_state_dict(with_adam_options(copy.deepcopy(st["optimizer"]), optimizer))
+    return optimizer, {k: v.to(device, copy=True) for k, v in st["strategy_state"].items()}
+
+
 def _all_finite(tensors) -> bool:
     """Whether every tensor is finite, with one device sync."""
     checks = [torch.isfinite(t).all() for t in tensors if isinstance(t, torch.Tensor) and t.is_floating_point()]
@@ -502,6 +529,12 @@ class Trainer:
         # that ``finish`` calls in order, after training and before the test metrics. They are attached by
         # whoever builds the trainer (warpgs.pipelines.sparse.make_trainer), so this module imports none of them.
         self.stages: list = []
+        # CoR-GS (train.co_reg): the second model of the co-regularised pair, its optimiser and strategy
+        self.pair = None
+        if cfg.train.co_reg:
+            from warpgs.coreg import CoRegPair
+
+            self.pair = CoRegPair(self)
         self.method = method if method is not None else Method()
         self.method.attach(self)
 
@@ -515,6 +548,19 @@ class Trainer:
     @property
     def total_steps(self) -> int:
         return self.cfg.train.iterations - self.reserved_steps
+
+    @property
+    def optimizers(self) -> list[torch.optim.Optimizer]:
+        """The optimisers of the models being trained: the model's, then (``train.co_reg``) its partner's."""
+        return [self.optimizer] + ([self.pair.optimizer] if self.pair is not None else [])
+
+    def trained_parameters(self) -> dict[str, torch.Tensor]:
+        """The parameters being trained, by name: the model's, then (``train.co_reg``) its partner's as
+        ``partner.<name>``. The divergence guard checks them all."""
+        params = dict(self.model.params)
+        if self.pair is not None:
+            params.update({f"partner.{k}": v for k, v in self.pair.model.params.items()})
+        return params
 
     def means_lr(self, step: int) -> float:
         """The means' learning rate: exponential decay over the running schedule, from ``phase_start``
@@ -530,6 +576,14 @@ class Trainer:
         return self.order.pop()
 
     def compute_loss(self, out, cam) -> tuple[torch.Tensor, dict]:
+        """The training loss of the render ``out`` of the input view ``cam``: the inputs' (``input_loss``) and
+        the method's terms (``Method.loss_terms``); (loss, its parts by name)."""
+        loss, parts = self.input_loss(out, cam)
+        return self.method.loss_terms(out, cam, loss, parts), parts
+
+    def input_loss(self, out, cam) -> tuple[torch.Tensor, dict]:
+        """The loss of a render ``out`` of the input view ``cam`` against it: w1 L1 + w2 D-SSIM, and the alpha
+        and depth-prior terms where they are on (``loss.*``); its parts by name, the whole as ``inputs``."""
         lc = self.cfg.loss
         l1 = losses.l1(out.image, cam.image)
         loss = lc.l1_weight * l1
@@ -549,7 +603,7 @@ class Trainer:
         # what the divergence guard judges: the inputs' loss, which the method's terms (extra views, priors
         # that appear in a later phase) leave out
         parts["inputs"] = loss
-        return self.method.loss_terms(out, cam, loss, parts), parts
+        return loss, parts
 
     def background_for(self, cam) -> torch.Tensor:
         """What ``cam`` (anything with viewmat, K, width, height) sees behind the Gaussians: the far field's
@@ -578,9 +632,10 @@ class Trainer:
         exploding step's gradient never reaches the parameters."""
         step = self.step
         self.model.active_sh_degree = min(step // max(self.cfg.train.sh_degree_interval, 1), self.model.max_sh_degree)
-        for g in self.optimizer.param_groups:
-            if g["name"] == "means":
-                g["lr"] = self.means_lr(step) * self.lr_scale
+        for opt in self.optimizers:
+            for g in opt.param_groups:
+                if g["name"] == "means":
+                    g["lr"] = self.means_lr(step) * self.lr_scale
         cam = self.train_cams[self.next_view()]
         cam, bg = self.with_training_background(cam, self.split_gen)
         # no input checks in the rasterizer (each is a host read): the guard checks the loss, the gradients and
@@ -588,6 +643,8 @@ class Trainer:
         out = self.model.render(cam.viewmat, cam.K, cam.width, cam.height, background=bg,
                                 opacity_scale=self.dropout_scale(step), check_finite=False)
         loss, parts = self.compute_loss(out, cam)
+        if self.pair is not None:  # its partner on the same view, and the two co-regularised (one backward for both)
+            loss = loss + self.pair.loss(step, cam, bg, parts)
         loss.backward()
         # the guard judges the input views' loss: extra views (the full method's pseudo views) change what is
         # optimised and can be far off at first without anything diverging
@@ -608,8 +665,9 @@ class Trainer:
                 return self._diverge(step, f"{self.guard.explode_steps} consecutive steps with an exploding loss "
                                            f"(the last: {exploding})")
             return self._skip(step, exploding)
-        self.optimizer.step()
-        self.optimizer.zero_grad(set_to_none=True)
+        for opt in self.optimizers:
+            opt.step()
+            opt.zero_grad(set_to_none=True)
         self.guard.healthy()
         info = self._after_update(step, out, cam)
         bad = self.nonfinite_parameters()
@@ -623,32 +681,46 @@ class Trainer:
             self.take_snapshot(step + 1)
         return {"loss": value, "psnr": -10 * math.log10(max(row[_MSE], 1e-10)), **info}
 
-    def _after_update(self, step: int, out, cam) -> dict:
-        """What follows a step's update: densification (the strategy), pruning the unseen when it finds the
-        budget spent, and a new statistic after an opacity reset (whose jump in the loss is expected)."""
-        info = self.strategy.step_post_backward(self.model, self.optimizer, self.state, step, out,
-                                                cam.width, cam.height, self.scene_scale, generator=self.split_gen)
-        s = self.strategy
-        if (s.prune_unseen_when_full and s.max_gaussians > 0 and (info["cloned"] or info["split"] or info["pruned"])
-                and len(self.model) >= s.max_gaussians):
-            # the budget is spent: free what the training views do not use, so growth can go on where it helps
-            info["pruned_unseen"] = s.prune_unseen(self.model, self.optimizer, self.state, self.train_cams, self.background)
+    def _after_update(self, step: int, out, cam, apply: torch.Tensor | None = None) -> dict:
+        """What follows a step's update: densification (``densify``), the co-regularised partner's and the
+        co-pruning (``train.co_reg``), and a new statistic after an opacity reset (whose jump in the loss is
+        expected). ``apply``: a deferred step's verdict (``out``'s radii are already masked with it)."""
+        info = self.densify(self.strategy, self.model, self.optimizer, self.state, step, out, cam, self.split_gen)
+        if self.pair is not None:
+            info["co_pruned"] = self.pair.after_update(step, cam, apply)
         if info.get("reset"):
             self._restart_statistic(step + 1)
         return info
 
-    def dropout_scale(self, step: int) -> torch.Tensor | None:
-        """DropGaussian's factors for one training render at ``step``: 0 for a Gaussian dropped at the rate
-        ``train.drop_rate`` x step / iterations, 1 / (1 - rate) for the others; None when off."""
+    def densify(self, strategy, model: GaussianModel, optimizer, state: dict, step: int, out, cam,
+                generator: torch.Generator) -> dict:
+        """The strategy's densification of ``model`` after step ``step``'s update (``out``: its render of the
+        view ``cam``), and pruning the unseen when it finds the budget spent; returns what changed."""
+        info = strategy.step_post_backward(model, optimizer, state, step, out, cam.width, cam.height,
+                                           self.scene_scale, generator=generator)
+        s = strategy
+        if (s.prune_unseen_when_full and s.max_gaussians > 0 and (info["cloned"] or info["split"] or info["pruned"])
+                and len(model) >= s.max_gaussians):
+            # the budget is spent: free what the training views do not use, so growth can go on where it helps
+            info["pruned_unseen"] = s.prune_unseen(model, optimizer, state, self.train_cams, self.background)
+        return info
+
+    def dropout_scale(self, step: int, model: GaussianModel | None = None,
+                      generator: torch.Generator | None = None) -> torch.Tensor | None:
+        """DropGaussian's factors for one training render of ``model`` (default: the trainer's) at ``step``: 0
+        for a Gaussian dropped at the rate ``train.drop_rate`` x step / iterations, 1 / (1 - rate) for the
+        others, drawn from ``generator`` (default: ``drop_gen``); None when off."""
         rate = self.drop_rate * min(step / max(self.total_steps, 1), 1.0)
         if rate <= 0:
             return None
-        keep = torch.rand(len(self.model), device=self.device, generator=self.drop_gen) >= rate
+        n = len(model if model is not None else self.model)
+        keep = torch.rand(n, device=self.device, generator=generator or self.drop_gen) >= rate
         return keep.float() / (1.0 - rate)
 
     def _skip(self, step: int, why: str) -> dict:
         """A step judged on the host that makes no update."""
-        self.optimizer.zero_grad(set_to_none=True)
+        for opt in self.optimizers:
+            opt.zero_grad(set_to_none=True)
         result = self._skipped(step, why)
         if self._window is not None and not result.get("rolled_back"):
             self._window.push(step, float("nan"))
@@ -692,7 +764,7 @@ class Trainer:
         parameter's gradient are finite (1 / 0), exploding (a deferred verdict's), the render's MSE (where
         read)]."""
         zero = loss.new_zeros(())
-        flags = finite_flags([loss] + [zero if p.grad is None else p.grad for p in self.model.params.values()])
+        flags = finite_flags([loss] + [zero if p.grad is None else p.grad for p in self.trained_parameters().values()])
         record = torch.zeros(len(flags) + 3, dtype=torch.float64, device=loss.device)
         record[_VALUE] = inputs
         record[_LOSS_FINITE:_EXPLODING] = flags
@@ -701,7 +773,7 @@ class Trainer:
     def _nonfinite_cause(self, row: list[float]) -> str:
         if not row[_LOSS_FINITE]:
             return "the loss is not finite"
-        bad = [n for n, ok in zip(self.model.params, row[_LOSS_FINITE + 1:_EXPLODING]) if not ok]
+        bad = [n for n, ok in zip(self.trained_parameters(), row[_LOSS_FINITE + 1:_EXPLODING]) if not ok]
         return f"the gradient of {', '.join(bad)} is not finite"
 
     def _deferred_step(self, step: int, record: torch.Tensor, out, cam) -> dict:
@@ -714,12 +786,13 @@ class Trainer:
         exploding = finite & self.guard.exploding_on_device(value, self._loss_window(step))
         apply = finite & ~exploding
         record[_EXPLODING] = exploding
-        masked_step(self.optimizer, apply)
-        self.optimizer.zero_grad(set_to_none=True)
+        for opt in self.optimizers:
+            masked_step(opt, apply)
+            opt.zero_grad(set_to_none=True)
         self._window.push(step, torch.where(apply, value, float("inf")))
         self._pending.append((step, self.guard.stat_start, record))
         # a step without its update is one in which no Gaussian was seen, for the densification statistics
-        return self._after_update(step, out._replace(radii=out.radii * apply), cam)
+        return self._after_update(step, out._replace(radii=out.radii * apply), cam, apply)
 
     def _loss_window(self, step: int):
         if self._window is None:  # after a new statistic: from the host's losses (none, at a phase's start)
@@ -749,7 +822,7 @@ class Trainer:
         if pending:
             result = self._replay(pending, rows[:len(pending)])
             if result is None:
-                bad = [n for n, ok in zip(self.model.params, values[len(rows) * w:]) if not ok]
+                bad = [n for n, ok in zip(self.trained_parameters(), values[len(rows) * w:]) if not ok]
                 if bad:
                     first, last = pending[0][0], pending[-1][0]
                     result = self._diverge(last, f"the parameters {', '.join(bad)} are not finite after the optimiser "
@@ -806,24 +879,25 @@ class Trainer:
         """Names of the parameters that are not finite, or whose value as rendered is not (a log-scale
         above ~88 is an infinite scale, which the rasterizer refuses); one device sync."""
         flags = self._parameter_flags().tolist()
-        return [n for n, ok in zip(self.model.params, flags) if not ok]
+        return [n for n, ok in zip(self.trained_parameters(), flags) if not ok]
 
     def _parameter_flags(self) -> torch.Tensor:
-        """Per parameter (in ``model.params``' order), on the device: whether it is finite, as stored and as
-        rendered."""
-        p = self.model.params
+        """Per parameter (in ``trained_parameters``' order), on the device: whether it is finite, as stored and
+        as rendered."""
+        p = self.trained_parameters()
         flags = finite_flags([t.detach() for t in p.values()])
-        if "scales" in p:
-            i = list(p).index("scales")
-            flags[i] = flags[i] & torch.isfinite(torch.exp(p["scales"].detach())).all()
+        for i, (name, t) in enumerate(p.items()):
+            if name.rsplit(".", 1)[-1] == "scales":
+                flags[i] = flags[i] & torch.isfinite(torch.exp(t.detach())).all()
         return flags
 
     def state_is_finite(self) -> bool:
-        """Whether the parameters (as rendered), the optimiser's moments and the densification statistics
+        """Whether the parameters (as rendered), the optimisers' moments and the densification statistics
         are all finite."""
-        tensors = list(self.state.values())
-        for st in self.optimizer.state.values():
-            tensors += [v for v in st.values() if isinstance(v, torch.Tensor)]
+        tensors = list(self.state.values()) + (list(self.pair.state.values()) if self.pair is not None else [])
+        for opt in self.optimizers:
+            for st in opt.state.values():
+                tensors += [v for v in st.values() if isinstance(v, torch.Tensor)]
         return not self.nonfinite_parameters() and _all_finite(tensors)
 
     # ------------------------------------------------------------------------------------------
@@ -838,12 +912,11 @@ class Trainer:
         - ``history``: training time, losses, learning-rate scale, recoveries, curve, initial metrics,
           the running learning-rate schedule, the guard's largest loss ratio (metrics.json's ``max_loss_ratio``);
 
-        and the method's share of each (``Method.state_dict``) under ``method``."""
+        and the method's share of each (``Method.state_dict``) under ``method``, the co-regularised pair's second
+        model's (``train.co_reg``; ``warpgs.coreg.CoRegPair.state_dict``) under ``pair``."""
         st: dict = {"parts": list(parts)}
         if "model" in parts:
-            st.update(params=_cpu_copy(dict(self.model.params)), max_sh_degree=self.model.max_sh_degree,
-                      active_sh_degree=self.model.active_sh_degree, optimizer=_cpu_copy(self.optimizer.state_dict()),
-                      strategy_state=_cpu_copy(self.state))
+            st.update(model_state(self.model, self.optimizer, self.state))
         if "progress" in parts:
             st.update(step=self.step, split_gen=self.split_gen.get_state(), drop_gen=self.drop_gen.get_state(),
                       view_rng=copy.deepcopy(self.view_rng.bit_generator.state), order=list(self.order),
@@ -854,6 +927,8 @@ class Trainer:
                       initial=copy.deepcopy(self.initial), n_before_compaction=self.n_before_compaction,
                       phase=(self.phase_start, self.phase_len), max_loss_ratio=self.guard.max_loss_ratio)
         st["method"] = self.method.state_dict(parts)
+        if self.pair is not None:
+            st["pair"] = self.pair.state_dict(parts)
         return st
 
     def load_state_dict(self, st: dict) -> None:
@@ -863,13 +938,7 @@ class Trainer:
         parts = st.get("parts", STATE_PARTS)
         self._window = None  # the guard's statistic on the device: rebuilt from the restored losses
         if "model" in parts:
-            for k, v in st["params"].items():
-                self.model.params[k] = torch.nn.Parameter(v.to(self.device, copy=True))
-            self.model.max_sh_degree = st["max_sh_degree"]
-            self.model.active_sh_degree = st["active_sh_degree"]
-            self.optimizer = make_optimizer(self.model, self.cfg, self.scene_scale)
-            self.optimizer.load_state_dict(with_adam_options(copy.deepcopy(st["optimizer"]), self.optimizer))
-            self.state = {k: v.to(self.device, copy=True) for k, v in st["strategy_state"].items()}
+            self.optimizer, self.state = load_model_state(st, self.model, self.cfg, self.scene_scale, self.device)
         if "history" in parts:
             self.train_time = float(st["train_time"])
             self.losses = list(st["losses"])
@@ -891,6 +960,9 @@ class Trainer:
             torch.set_rng_state(st["torch_rng"])
             if "stat_start" in st:
                 self.guard.stat_start = st["stat_start"]
+        if self.pair is not None:
+            self.pair.load_state_dict(st.get("pair"), parts)
+        if "progress" in parts:
             self.apply_lr_scale()
         self.method.load_state_dict(st.get("method", {}))
 
@@ -917,8 +989,9 @@ class Trainer:
     def apply_lr_scale(self) -> None:
         """Sets every group's learning rate to its base rate x ``lr_scale`` (the means' is set each step)."""
         base = base_learning_rates(self.cfg, self.scene_scale)
-        for g in self.optimizer.param_groups:
-            g["lr"] = (self.means_lr(self.step) if g["name"] == "means" else base[g["name"]]) * self.lr_scale
+        for opt in self.optimizers:
+            for g in opt.param_groups:
+                g["lr"] = (self.means_lr(self.step) if g["name"] == "means" else base[g["name"]]) * self.lr_scale
 
     def last_checkpoint(self) -> Path | None:
         path = self.out / CHECKPOINT if self.out is not None else None
@@ -928,7 +1001,8 @@ class Trainer:
         """A divergence at ``step``: rolls back to the last good state with lower learning rates, or, when
         ``train.max_recoveries`` are spent (or there is no good state), stops with ``TrainingDiverged``."""
         tc = self.cfg.train
-        self.optimizer.zero_grad(set_to_none=True)
+        for opt in self.optimizers:
+            opt.zero_grad(set_to_none=True)
         if self._snapshot is None or len(self.recoveries) >= tc.max_recoveries:
             if self._snapshot is not None:
                 self.restore_snapshot()  # leave the model at the last good state, never at the diverged one
@@ -1107,6 +1181,9 @@ class Trainer:
                 self.log(f"warpgs: note: the checkpoint's {section} config differs from this run's; using this run's")
         if ck.get("format", 1) == 1:
             ck = _upgrade_format_1(ck, self.cfg.train.sh_degree_interval)
+        if ck.get("pair") is not None and self.pair is None:
+            self.log("warpgs: note: the checkpoint holds a co-regularised pair (train.co_reg); this run goes on with "
+                     "its first model alone")
         try:
             self.load_state_dict(ck)
         except (KeyError, TypeError, ValueError, RuntimeError) as e:  # a file of another model or version
@@ -1154,6 +1231,8 @@ class Trainer:
         fps = render_fps(lambda i: self.render(self.test_cams[i] if self.test_cams else self.train_cams[i]),
                          len(self.test_cams) or len(self.train_cams), self.cfg.eval.fps_repeats, self.device)
         metrics = run_metrics(self, ev, train_ev, fps)
+        if self.pair is not None:
+            metrics["co_reg"] = self.pair.report()
         if out is not None:
             write_run_outputs(self, metrics)
         return self.method.finish(metrics, baseline)
