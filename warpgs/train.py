@@ -16,7 +16,10 @@ snapshot of a divergence rollback ``model`` and ``progress``, compact mode's sea
 
 One input view per iteration (3D-GS's shuffled order); loss = 0.8 L1 + 0.2 D-SSIM (+ a Pearson depth term
 when ``loss.depth_weight`` > 0 and the view has a depth prior); Adam with 3D-GS's learning rates and an
-exponentially decaying position rate; densification by ``DefaultStrategy``.
+exponentially decaying position rate; densification by ``DefaultStrategy``. Weight-free regularisers, each
+off by default: DropGaussian (``train.drop_rate``) and opacity noise (``train.opacity_noise``) on the
+training renders' opacities (``Trainer.opacity_scale``; evaluation renders all Gaussians as they are), and
+an anisotropy prior on the scales (``train.scale_reg``).
 
 Reproducibility: ``train.seed`` seeds the initialisation, the view order and the split noise (each
 its own generator, all saved in checkpoints, so a resumed run continues exactly as an uninterrupted
@@ -468,6 +471,8 @@ class Trainer:
         self.drop_rate = cfg.train.drop_rate  # the full method may set its own (full.drop_rate)
         if not 0.0 <= self.drop_rate < 1.0:
             raise ValueError(f"train.drop_rate must be in [0, 1), got {self.drop_rate}")
+        if not 0.0 <= cfg.train.opacity_noise <= 1.0:  # a factor 1 + eps with |eps| <= sigma stays >= 0
+            raise ValueError(f"train.opacity_noise must be in [0, 1], got {cfg.train.opacity_noise}")
         self.view_rng = np.random.default_rng(seed + 2)
         self.order: list[int] = []
         self.optimizer = make_optimizer(self.model, cfg, self.scene_scale)
@@ -547,8 +552,13 @@ class Trainer:
             loss = loss + lc.depth_weight * dl
             parts["depth"] = dl
         # what the divergence guard judges: the inputs' loss, which the method's terms (extra views, priors
-        # that appear in a later phase) leave out
+        # that appear in a later phase) and the priors on the parameters leave out
         parts["inputs"] = loss
+        tc = self.cfg.train
+        if tc.scale_reg > 0:
+            sr = losses.scale_anisotropy_loss(self.model.params["scales"], tc.scale_reg_ratio)
+            loss = loss + tc.scale_reg * sr
+            parts["scale_reg"] = sr
         return self.method.loss_terms(out, cam, loss, parts), parts
 
     def background_for(self, cam) -> torch.Tensor:
@@ -586,7 +596,7 @@ class Trainer:
         # no input checks in the rasterizer (each is a host read): the guard checks the loss, the gradients and
         # the parameters, and a step with non-finite ones makes no update
         out = self.model.render(cam.viewmat, cam.K, cam.width, cam.height, background=bg,
-                                opacity_scale=self.dropout_scale(step), check_finite=False)
+                                opacity_scale=self.opacity_scale(step), check_finite=False)
         loss, parts = self.compute_loss(out, cam)
         loss.backward()
         # the guard judges the input views' loss: extra views (the full method's pseudo views) change what is
@@ -645,6 +655,20 @@ class Trainer:
             return None
         keep = torch.rand(len(self.model), device=self.device, generator=self.drop_gen) >= rate
         return keep.float() / (1.0 - rate)
+
+    def opacity_scale(self, step: int) -> torch.Tensor | None:
+        """The per-Gaussian opacity factors of one training render at ``step`` (evaluation renders use none):
+        DropGaussian's (``dropout_scale``) times Co-Adaptation's opacity noise (``train.opacity_noise`` = sigma:
+        1 + eps, eps ~ N(0, sigma^2) clipped to [-sigma, sigma] as in the authors' code). Both come from
+        ``drop_gen``, the mask first, so a run without noise draws exactly what it drew before. None when
+        both are off. The rasterizer caps alpha at ``alpha_max`` where a factor above 1 would pass it."""
+        scale = self.dropout_scale(step)
+        sigma = self.cfg.train.opacity_noise
+        if sigma <= 0:
+            return scale
+        eps = torch.randn(len(self.model), device=self.device, generator=self.drop_gen) * sigma
+        noise = 1.0 + eps.clamp(-sigma, sigma)
+        return noise if scale is None else scale * noise
 
     def _skip(self, step: int, why: str) -> dict:
         """A step judged on the host that makes no update."""
