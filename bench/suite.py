@@ -6,6 +6,7 @@ test PSNR against training wall time and against Gaussian count (issue #8).
     python bench/suite.py --only baseline_1000,full_1000 --jobs 2
     python bench/suite.py --summary-only           # redraw charts and summary from results.json
     python bench/suite.py --device cuda --ray      # through the batch runner on Ray: every GPU, retries
+    python bench/suite.py --device cuda --data-root DIR --preset switches --scenes fern_3v --seeds 0,1
 
 Each entry of a preset is one ``python -m warpgs.pipelines.sparse`` run (its own process and output
 folder under --work): a method (baseline, full, an ablation of the paper's Table 4, compact mode) at an
@@ -22,6 +23,16 @@ charts). A failed run is recorded with the end of its log and the suite goes on.
 Wall times are the training time the trainer measures (evaluation excluded) with runs sharing the
 machine, so compare times within one suite run; the speed of one method alone is in metrics.json of
 a run made with --jobs 1.
+
+The ``switches`` preset (issue 14) runs each weight-free regulariser (``SWITCHES``: the baseline and the
+full method, each alone and with one switch on) on every case of ``SWITCH_CASES`` (the synthetic room,
+fern 3 views, lego 8 views, DTU 65 3 views, castle_p30 and herz_jesus_p25 at 3 and 9 views) over seeds 0, 1
+and 2: 8 x 11 x 3 = 264 runs. --scenes, --seeds and --only (switch labels) select a part of it. Runs
+repeated over seeds are one point per (scene, switch) in the charts and tables: the median, with the
+spread (min, max) as error bars and brackets. It also writes switches.md / switches.json
+(bench/switch_table.py: the table the README quotes, and issue 14's rule for which switch may become a
+default). A switch this checkout's config does not know (``train.co_reg`` before its branch is merged) is
+a failed run with the config's error, found before anything starts.
 """
 
 from __future__ import annotations
@@ -30,6 +41,7 @@ import argparse
 import json
 import os
 import platform
+import statistics
 import subprocess
 import sys
 import time
@@ -38,6 +50,9 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from bench import switch_table  # noqa: E402
 
 
 @dataclass
@@ -50,6 +65,8 @@ class Run:
     iterations: int
     args: list = field(default_factory=list)  # extra CLI arguments (--set ..., --ablation ..., --compact)
     label: str = ""  # series name in the charts (runs of one label at several budgets form a line)
+    case: str = ""  # the scene's name in charts and tables (e.g. castle_p30_3v); "": the scene the run reports
+    seed: int | None = None  # --seed; None: the config's. Runs differing only in it are one point (the median)
 
     def __post_init__(self):
         self.label = self.label or self.method
@@ -80,7 +97,46 @@ FULL = (
     + _budgets("dtu", "full", (3000,))
 )
 
-PRESETS = {"small": SMALL, "full": FULL}
+# issue 14: every weight-free switch against the default it would change, on every scene, seeds 0-2.
+# Budgets as in the issue's figures: the synthetic room's default, fern and DTU at 3000 (bench/results/suite_cuda),
+# lego at its config's 10000 (session 4), the captures at images_8 and 3000 (issue 13).
+SWITCH_CASES = {  # case: (dataset, iterations, arguments)
+    "synthetic": ("synthetic", 1000, []),
+    "fern_3v": ("llff", 3000, ["--scene", "fern", "--views", "3"]),
+    "lego_8v": ("blender", 10000, ["--scene", "lego", "--views", "8"]),
+    "dtu65_3v": ("dtu", 3000, ["--scene", "scan65", "--views", "3"]),
+    **{f"{scene}_{v}v": ("dl3dv", 3000, ["--scene", scene, "--views", str(v), "--downscale", "8"])
+       for scene in ("castle_p30", "herz_jesus_p25") for v in (3, 9)},
+}
+SWITCH_SEEDS = (0, 1, 2)
+SWITCHES = {  # label: (method, --set overrides); the label named after its method is that method's default
+    "baseline": ("baseline", []),
+    "baseline+drop": ("baseline", ["train.drop_rate=0.2"]),  # DropGaussian's rate
+    "baseline+opacity_noise": ("baseline", ["train.opacity_noise=0.8"]),  # Co-Adaptation's largest sigma
+    "baseline+scale_reg": ("baseline", ["train.scale_reg=0.01"]),  # r = train.scale_reg_ratio (10)
+    "baseline+co_reg": ("baseline", ["train.co_reg=true"]),  # CoR-GS
+    "full": ("full", []),
+    "full+drop": ("full", ["full.drop_rate=0.2"]),  # the captures' config has it already: there = full
+    "full+opacity_noise": ("full", ["train.opacity_noise=0.8"]),
+    "full+scale_reg": ("full", ["train.scale_reg=0.01"]),
+    "full+pseudo_depth_smooth": ("full", ["full.pseudo_depth_smooth=0.1"]),  # Monodepth's weight
+    "full+co_reg": ("full", ["train.co_reg=true"]),
+}
+
+
+def switch_runs(cases=SWITCH_CASES, switches=SWITCHES, seeds=SWITCH_SEEDS) -> list[Run]:
+    """One run per case, switch and seed; named <case>_<switch>_<iterations>_s<seed> ('+' as '-')."""
+    runs = []
+    for case, (data, its, args) in cases.items():
+        for label, (method, sets) in switches.items():
+            for seed in seeds:
+                extra = list(args) + [a for kv in sets for a in ("--set", kv)]
+                runs.append(Run(f"{case}_{label.replace('+', '-')}_{its}_s{seed}", data, method, its, extra, label,
+                                case, seed))
+    return runs
+
+
+PRESETS = {"small": SMALL, "full": FULL, "switches": switch_runs()}
 
 
 def eval_every(run: Run) -> int:
@@ -93,7 +149,28 @@ def sparse_args(run: Run, device: str, data_root: str | None) -> list[str]:
             "--no-progress", "--set", f"train.eval_every={eval_every(run)}"]
     if data_root and run.data != "synthetic":
         args += ["--data-root", data_root]
+    if run.seed is not None:
+        args += ["--seed", str(run.seed)]
     return args + list(run.args)
+
+
+def config_error(run: Run) -> str | None:
+    """The error of the run's ``--set`` overrides against this checkout's config (a key it does not know, a
+    value out of range), or None: such a run is recorded as failed without starting it."""
+    from warpgs.config import ConfigError, load_config
+
+    sets = [run.args[i + 1] for i, a in enumerate(run.args[:-1]) if a == "--set"]
+    try:
+        load_config(overrides=sets)
+    except ConfigError as e:
+        return f"error: {e}"
+    return None
+
+
+def not_started(run: Run, device: str, work: Path, error: str) -> dict:
+    """The record of a run refused before it started (``config_error``)."""
+    return {"run": asdict(run), "device": device, "out": str(work / run.name), "status": "failed",
+            "returncode": None, "log_tail": error}
 
 
 def command(run: Run, device: str, work: Path, data_root: str | None) -> list[str]:
@@ -110,6 +187,9 @@ def execute(run: Run, device: str, work: Path, data_root: str | None, fresh: boo
     if metrics_path.is_file() and not fresh:
         rec.update(status="finished", reused=True, metrics=_slim(json.loads(metrics_path.read_text())))
         return rec
+    error = config_error(run)
+    if error:
+        return not_started(run, device, work, error)
     out.mkdir(parents=True, exist_ok=True)
     log = out.parent / f"{run.name}.log"
     t0 = time.perf_counter()
@@ -128,16 +208,20 @@ def execute_on_ray(runs: list[Run], device: str, work: Path, data_root: str | No
                    address: str | None, log=print) -> list[dict]:
     """The runs as tasks of the batch runner (``warpgs.pipelines.batch``: Ray, retries from checkpoints) -> their
     records. On CUDA each run asks for 1/``jobs`` of a GPU (``jobs`` runs per GPU, on every GPU Ray has); on
-    the CPU a local Ray gets ``jobs`` CPUs, one per run. Logs in ``work``/logs."""
+    the CPU a local Ray gets ``jobs`` CPUs, one per run. Logs in ``work``/logs. A run whose config this
+    checkout refuses (``config_error``) is recorded as failed and not submitted."""
     from warpgs.pipelines import batch
 
     cuda = device.startswith("cuda")
-    specs = [batch.RunSpec(r.name, sparse_args(r, device, data_root), r.data, None, r.method, None,
-                           num_gpus=1 / jobs if cuda else 0.0) for r in runs]
+    errors = {r.name: config_error(r) for r in runs}
+    refused = {r.name: not_started(r, device, work, errors[r.name]) for r in runs if errors[r.name]}
+    runs_ok = [r for r in runs if r.name not in refused]
+    specs = [batch.RunSpec(r.name, sparse_args(r, device, data_root), r.data, None, r.method, r.seed,
+                           num_gpus=1 / jobs if cuda else 0.0) for r in runs_ok]
     init = {"address": address} if address else {"num_cpus": None if cuda else jobs}
-    recs = batch.run_on_ray(specs, work, work / "logs", overwrite=fresh, log=log, ray_init=init)
-    records = []
-    for run, b in zip(runs, recs):
+    recs = batch.run_on_ray(specs, work, work / "logs", overwrite=fresh, log=log, ray_init=init) if specs else []
+    records = list(refused.values())
+    for run, b in zip(runs_ok, recs):
         rec = {"run": asdict(run), "device": device, "out": b["out"], "status": b["status"], "wall_s": b.get("wall_s"),
                "attempts": len(b.get("attempts") or []), "retries": b.get("retries")}
         if b.get("reused"):
@@ -161,17 +245,42 @@ def _slim(m: dict) -> dict:
 # charts and summary
 
 
+def scene_of(rec: dict) -> str:
+    """A record's scene in charts and tables: its run's case, else the scene its metrics name."""
+    return rec["run"].get("case") or rec["metrics"]["scene"]
+
+
+def _point(recs: list[dict]) -> dict:
+    """One point of a chart or a table row from runs that differ only in their seed: the median of each
+    metric, the PSNR's min and max, and the test-PSNR curve of the run whose PSNR is the median's."""
+    def med(key):
+        vals = [r["metrics"].get(key) for r in recs]
+        return statistics.median(vals) if vals and all(v is not None for v in vals) else None
+
+    psnrs = [r["metrics"]["psnr"] for r in recs]
+    middle = min(recs, key=lambda r: abs(r["metrics"]["psnr"] - statistics.median(psnrs)))
+    return {"iterations": recs[0]["run"]["iterations"], "n": len(recs), "psnr": statistics.median(psnrs),
+            "psnr_min": min(psnrs), "psnr_max": max(psnrs), "ssim": med("ssim"), "lpips": med("lpips"),
+            "num_gaussians": med("num_gaussians"), "train_time_s": med("train_time_s"),
+            "render_fps": med("render_fps"), "device": recs[0]["metrics"].get("device", ""),
+            "curve": middle["metrics"].get("curve") or []}
+
+
 def _series(records: list[dict]) -> dict:
-    """{scene: {label: [records sorted by iterations]}} of the finished runs."""
-    out: dict = {}
+    """{scene: {label: [points sorted by iterations]}} of the finished runs, a point per budget (its seeds'
+    median; ``_point``). Scenes and labels in the order of the records."""
+    groups: dict = {}
     for r in records:
         if r.get("status") != "finished":
             continue
-        m = r["metrics"]
-        out.setdefault(m["scene"], {}).setdefault(r["run"]["label"], []).append(r)
-    for scene in out.values():
-        for recs in scene.values():
-            recs.sort(key=lambda r: r["run"]["iterations"])
+        key = (r["run"]["label"], r["run"]["iterations"])
+        groups.setdefault(scene_of(r), {}).setdefault(key, []).append(r)
+    out: dict = {}
+    for scene, by_key in groups.items():
+        for (label, _), recs in by_key.items():
+            out.setdefault(scene, {}).setdefault(label, []).append(_point(recs))
+        for points in out[scene].values():
+            points.sort(key=lambda p: p["iterations"])
     return out
 
 
@@ -188,32 +297,40 @@ def plot(records: list[dict], out: Path) -> list[Path]:
     for kind, xlabel, xkey in (("time", "training wall time (s)", "train_time_s"),
                                ("gaussians", "Gaussians (final count)", "num_gaussians")):
         n = len(series)
-        fig, axes = plt.subplots(1, n, figsize=(5.2 * n, 4.2), squeeze=False)
-        for ax, (scene, labels) in zip(axes[0], sorted(series.items())):
-            for i, (label, recs) in enumerate(sorted(labels.items())):
-                color = f"C{i % 10}"
-                xs = [r["metrics"][xkey] for r in recs]
-                ys = [r["metrics"]["psnr"] for r in recs]
-                ax.plot(xs, ys, "o-", color=color, label=label, ms=5)
+        cols = min(n, 4)
+        rows = -(-n // cols)
+        fig, axes = plt.subplots(rows, cols, figsize=(5.2 * cols, 4.2 * rows), squeeze=False)
+        for ax in axes.flat[n:]:
+            ax.axis("off")
+        for ax, (scene, labels) in zip(axes.flat, series.items()):
+            for i, (label, points) in enumerate(labels.items()):
+                color, marker = f"C{i % 10}", "osD^v"[(i // 10) % 5]
+                xs = [p[xkey] for p in points]
+                ys = [p["psnr"] for p in points]
+                ax.plot(xs, ys, marker + "-", color=color, label=label, ms=5)
+                spread = [(p["psnr"] - p["psnr_min"], p["psnr_max"] - p["psnr"]) for p in points]
+                if any(p["n"] > 1 for p in points):  # the seeds' min and max around their median
+                    ax.errorbar(xs, ys, yerr=list(zip(*spread)), fmt="none", ecolor=color, capsize=3, lw=1)
                 if kind == "time":  # the longest run's test-PSNR curve along its training time
-                    curve = recs[-1]["metrics"].get("curve") or []
+                    curve = points[-1]["curve"]
                     if curve:
                         ax.plot([c["train_time_s"] for c in curve], [c["psnr"] for c in curve], ":", color=color,
                                 alpha=0.6, lw=1)
-                for r, x, y in zip(recs, xs, ys):
-                    ax.annotate(str(r["run"]["iterations"]), (x, y), fontsize=6, alpha=0.7,
+                for p, x, y in zip(points, xs, ys):
+                    ax.annotate(str(p["iterations"]), (x, y), fontsize=6, alpha=0.7,
                                 textcoords="offset points", xytext=(3, 3))
-            dev = recs[0]["metrics"].get("device", "")
-            ax.set_title(f"{scene} ({dev})", fontsize=10)
+            ax.set_title(f"{scene} ({points[0]['device']})", fontsize=10)
             ax.set_xlabel(xlabel)
             ax.set_ylabel("test PSNR (dB)")
             if kind == "time":
                 ax.set_xscale("log")
             ax.grid(alpha=0.3)
             ax.legend(fontsize=7)
+        seeds = "\npoints over seeds: the median, bars from min to max" if any(
+            p["n"] > 1 for labels in series.values() for points in labels.values() for p in points) else ""
         fig.suptitle("PSNR against " + ("training time (labels: iterations; dotted: test PSNR during the "
-                                        "longest run)" if kind == "time" else "model size (labels: iterations)"),
-                     fontsize=10)
+                                        "longest run)" if kind == "time" else "model size (labels: iterations)")
+                     + seeds, fontsize=10)
         fig.tight_layout()
         path = out / f"psnr_vs_{kind}.png"
         fig.savefig(path, dpi=120)
@@ -229,17 +346,19 @@ def write_summary(records: list[dict], info: dict, out: Path) -> Path:
     lines = ["# warpgs benchmark suite", "",
              f"Preset `{info['preset']}` on {info['device_name']} ({info['device']}), {info['date']}; "
              f"{sum(r.get('status') == 'finished' for r in records)} of {len(records)} runs finished, "
-             f"{info['jobs']} at a time (times are with runs sharing the machine).", "",
+             f"{info['jobs']} at a time (times are with runs sharing the machine). Where a row has several runs "
+             "(seeds), each figure is their median and the PSNR's [min, max] follows it.", "",
              "![PSNR against time](psnr_vs_time.png)", "", "![PSNR against Gaussians](psnr_vs_gaussians.png)", ""]
-    for scene, labels in sorted(_series(records).items()):
-        lines += [f"## {scene}", "", "| method | iterations | PSNR | SSIM | LPIPS | Gaussians | training (s) | FPS |",
-                  "|---|---|---|---|---|---|---|---|"]
-        for label, recs in sorted(labels.items()):
-            for r in recs:
-                m = r["metrics"]
-                lines.append(f"| {label} | {m['iterations']} | {f(m['psnr'], '.2f')} | {f(m['ssim'], '.3f')} | "
-                             f"{f(m.get('lpips'), '.3f')} | {m['num_gaussians']} | {f(m['train_time_s'], '.1f')} | "
-                             f"{f(m.get('render_fps'), '.0f')} |")
+    for scene, labels in _series(records).items():
+        lines += [f"## {scene}", "",
+                  "| method | iterations | PSNR | SSIM | LPIPS | Gaussians | training (s) | FPS | runs |",
+                  "|---|---|---|---|---|---|---|---|---|"]
+        for label, points in labels.items():
+            for p in points:
+                psnr = f(p["psnr"], ".2f") + (f" [{p['psnr_min']:.2f}, {p['psnr_max']:.2f}]" if p["n"] > 1 else "")
+                lines.append(f"| {label} | {p['iterations']} | {psnr} | {f(p['ssim'], '.3f')} | "
+                             f"{f(p['lpips'], '.3f')} | {f(p['num_gaussians'], '.0f')} | {f(p['train_time_s'], '.1f')} | "
+                             f"{f(p['render_fps'], '.0f')} | {p['n']} |")
         lines.append("")
     failed = [r for r in records if r.get("status") != "finished"]
     if failed:
@@ -267,21 +386,61 @@ def device_name(device: str) -> str:
     return f"{platform.processor() or 'CPU'} ({os.cpu_count()} cores)"
 
 
+def select_runs(runs: list[Run], preset: str, only: list[str] | None = None, scenes: list[str] | None = None,
+                seeds: list[int] | None = None, iterations: int | None = None) -> list[Run]:
+    """The part of a preset to run: ``only`` run names, labels, datasets or cases; ``scenes`` cases (or the
+    scene a run reports: its dataset for presets without cases); ``seeds``; ``iterations`` replaces every
+    run's budget (its name gets ``_it<N>``, so its folder is not an earlier run's). A name that selects
+    nothing is a ``ValueError`` listing what there is."""
+    for flag, wanted, keys in (("--only", only, lambda r: (r.name, r.label, r.data, r.case)),
+                               ("--scenes", scenes, lambda r: (r.case or r.data,)),
+                               ("--seeds", seeds, lambda r: (r.seed,))):
+        if not wanted:
+            continue
+        unknown = [w for w in wanted if not any(w in keys(r) for r in runs)]
+        if unknown:
+            have = sorted({str(k) for r in runs for k in keys(r) if k is not None})
+            raise ValueError(f"{flag} {', '.join(map(str, unknown))}: not in preset {preset} (it has: {', '.join(have)})")
+        runs = [r for r in runs if any(k in wanted for k in keys(r))]
+    if iterations is not None:
+        if iterations < 1:
+            raise ValueError(f"--iterations {iterations}: must be >= 1")
+        runs = [Run(f"{r.name}_it{iterations}", r.data, r.method, iterations, list(r.args), r.label, r.case, r.seed)
+                for r in runs]
+    return runs
+
+
+def default_out(device: str, preset: str) -> Path:
+    """bench/results/suite_<device> for the small and full presets, suite_<device>_<preset> for the others."""
+    dev_tag = "cuda" if device.startswith("cuda") else "cpu"
+    return ROOT / "bench" / "results" / (f"suite_{dev_tag}" if preset in ("small", "full") else f"suite_{dev_tag}_{preset}")
+
+
+def earlier_records(path: Path, preset: str) -> list[dict]:
+    """The records of an earlier results.json of the same preset at ``path`` ([] when there is none): the
+    runs a call leaves out keep theirs, so a preset run in parts (--scenes, --seeds, --only) adds up in one
+    file."""
+    try:
+        earlier = json.loads(path.read_text())
+    except (OSError, ValueError):
+        return []
+    return earlier.get("records", []) if earlier.get("info", {}).get("preset") == preset else []
+
+
 def run_suite(device: str = "cpu", preset: str | None = None, out: Path | None = None, work: Path | None = None,
               jobs: int | None = None, only: list[str] | None = None, data_root: str | None = None,
-              fresh: bool = False, log=print, ray: bool = False, address: str | None = None) -> list[dict]:
+              fresh: bool = False, log=print, ray: bool = False, address: str | None = None,
+              scenes: list[str] | None = None, seeds: list[int] | None = None,
+              iterations: int | None = None) -> list[dict]:
+    """Runs (a part of) a preset and writes results.json, the charts and summary.md (and for runs with cases,
+    switches.md / switches.json) in ``out``; returns the records of the runs of this call. results.json
+    keeps the records of the preset's other runs from an earlier call (``earlier_records``)."""
     preset = preset or ("full" if device.startswith("cuda") else "small")
     if preset not in PRESETS:
         raise ValueError(f"preset {preset!r}: available {', '.join(PRESETS)}")
-    runs = PRESETS[preset]
-    if only:
-        unknown = [o for o in only if not any(o in (r.name, r.label, r.data) for r in runs)]
-        if unknown:
-            raise ValueError(f"--only {', '.join(unknown)}: not a run, label or dataset of preset {preset} "
-                             f"(runs: {', '.join(r.name for r in runs)})")
-        runs = [r for r in runs if r.name in only or r.label in only or r.data in only]
+    runs = select_runs(PRESETS[preset], preset, only, scenes, seeds, iterations)
     dev_tag = "cuda" if device.startswith("cuda") else "cpu"
-    out = out or ROOT / "bench" / "results" / f"suite_{dev_tag}"
+    out = out or default_out(device, preset)
     work = work or ROOT / "outputs" / f"suite_{dev_tag}_{preset}"
     jobs = jobs or (min(2, os.cpu_count() or 1) if dev_tag == "cpu" else 6)
     out.mkdir(parents=True, exist_ok=True)
@@ -291,43 +450,71 @@ def run_suite(device: str = "cpu", preset: str | None = None, out: Path | None =
     log(f"suite: {len(runs)} runs of preset {preset} on {info['device_name']}, {jobs} at a time; work in {work}")
     records: list[dict] = []
     results_path = out / "results.json"
+    earlier = earlier_records(results_path, preset)
+    rank = {(r.case, r.label, r.seed, r.data): i for i, r in enumerate(PRESETS[preset])}
+
+    def save(recs):  # this call's records and the earlier ones of the preset's other runs, in the preset's order
+        names = {x["run"]["name"] for x in recs}
+        merged = [r for r in earlier if r["run"]["name"] not in names] + recs
+        merged.sort(key=lambda r: rank.get((r["run"].get("case", ""), r["run"]["label"], r["run"].get("seed"),
+                                            r["run"]["data"]), len(rank)))
+        results_path.write_text(json.dumps({"info": {**info, "runs": len(merged)}, "records": merged}, indent=1))
+        return merged
+
+    def report(rec: dict) -> dict:
+        rec.setdefault("machine", info["device_name"])
+        rec.setdefault("date", info["date"])
+        m = rec.get("metrics") or {}
+        log(f"  {rec['run']['name']:<36} {rec['status']:<9}" + (f" PSNR {m['psnr']:.2f}  {m['num_gaussians']} "
+                                                                f"Gaussians  {m['train_time_s']:.0f} s" if m else ""))
+        records.append(rec)
+        return rec
 
     def one(run: Run) -> dict:
-        rec = execute(run, device, work, data_root, fresh)
-        m = rec.get("metrics") or {}
-        log(f"  {run.name:<36} {rec['status']:<9}" + (f" PSNR {m['psnr']:.2f}  {m['num_gaussians']} Gaussians  "
-                                                       f"{m['train_time_s']:.0f} s" if m else ""))
-        records.append(rec)
-        results_path.write_text(json.dumps({"info": info, "records": records}, indent=1))  # progress survives
+        rec = report(execute(run, device, work, data_root, fresh))
+        save(list(records))  # progress survives
         return rec
 
     if ray or address:
         for rec in execute_on_ray(runs, device, work, data_root, fresh, jobs, address, log):
-            m = rec.get("metrics") or {}
-            log(f"  {rec['run']['name']:<36} {rec['status']:<9}" + (f" PSNR {m['psnr']:.2f}  {m['num_gaussians']} "
-                                                                    f"Gaussians  {m['train_time_s']:.0f} s" if m else ""))
-            records.append(rec)
+            report(rec)
     else:
         with ThreadPoolExecutor(max_workers=jobs) as pool:
             list(pool.map(one, runs))
     order = {r.name: i for i, r in enumerate(runs)}
     records.sort(key=lambda r: order[r["run"]["name"]])
-    results_path.write_text(json.dumps({"info": info, "records": records}, indent=1))
-    plot(records, out)
-    write_summary(records, info, out)
-    log(f"suite: wrote {results_path}, {out / 'psnr_vs_time.png'}, {out / 'psnr_vs_gaussians.png'}, "
-        f"{out / 'summary.md'}")
+    merged = save(records)
+    written = write_reports(merged, {**info, "runs": len(merged)}, out)
+    log(f"suite: wrote {results_path}, " + ", ".join(str(p) for p in written))
+    if any(r["run"].get("case") for r in merged):  # the switches preset: issue 14's default-selection rule
+        for line in switch_table.verdict_lines(merged):
+            log(f"suite: {line}")
     return records
+
+
+def write_reports(records: list[dict], info: dict, out: Path) -> list[Path]:
+    """The charts, summary.md and, for runs with cases (the switches preset), switches.md / switches.json."""
+    paths = plot(records, out) + [write_summary(records, info, out)]
+    if any(r["run"].get("case") for r in records):
+        paths += switch_table.write(records, info, out)
+    return paths
 
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--device", default=None, help="cpu or cuda (default: cuda if available)")
     ap.add_argument("--preset", default=None, choices=list(PRESETS), help="default: small on cpu, full on cuda")
-    ap.add_argument("--only", default=None, help="comma-separated run names, labels or datasets of the preset")
+    ap.add_argument("--only", default=None, help="comma-separated run names, labels (switches), datasets or cases "
+                    "of the preset")
+    ap.add_argument("--scenes", default=None, help="comma-separated cases of the preset (switches: "
+                    + ", ".join(SWITCH_CASES) + ")")
+    ap.add_argument("--seeds", default=None, help="comma-separated seeds (switches: 0,1,2)")
+    ap.add_argument("--iterations", type=int, default=None, help="replace every run's budget (smoke tests)")
     ap.add_argument("--jobs", type=int, default=None, help="runs at a time (default: 2 on cpu, 6 on cuda)")
-    ap.add_argument("--data-root", default=None, help="folder holding llff_fern, blender_lego, dtu_scan65, ...")
-    ap.add_argument("--out", type=Path, default=None)
+    ap.add_argument("--data-root", default=None, help="folder holding llff_fern, blender_lego, dtu_scan65, castle_p30, "
+                    "herz_jesus_p25, ...")
+    ap.add_argument("--out", type=Path, default=None, help="default bench/results/suite_<device> (small, full) or "
+                    "suite_<device>_<preset>")
     ap.add_argument("--work", type=Path, default=None, help="run folders (default outputs/suite_<device>_<preset>)")
     ap.add_argument("--fresh", action="store_true", help="rerun runs that already finished")
     ap.add_argument("--summary-only", action="store_true", help="redraw charts and summary from --out/results.json")
@@ -340,14 +527,20 @@ def main(argv=None) -> int:
 
         a.device = "cuda" if torch.cuda.is_available() else "cpu"
     if a.summary_only:
-        out = a.out or ROOT / "bench" / "results" / f"suite_{'cuda' if a.device.startswith('cuda') else 'cpu'}"
+        out = a.out or default_out(a.device, a.preset or ("full" if a.device.startswith("cuda") else "small"))
         data = json.loads((out / "results.json").read_text())
-        plot(data["records"], out)
-        print(f"wrote {write_summary(data['records'], data['info'], out)}")
+        for path in write_reports(data["records"], data["info"], out):
+            print(f"wrote {path}")
         return 0
     try:
+        seeds = [int(x) for x in a.seeds.split(",")] if a.seeds else None
+    except ValueError:
+        print(f"error: --seeds {a.seeds!r}: expected comma-separated integers", file=sys.stderr)
+        return 2
+    try:
         records = run_suite(a.device, a.preset, a.out, a.work, a.jobs, a.only.split(",") if a.only else None,
-                            a.data_root, a.fresh, ray=a.ray, address=a.address)
+                            a.data_root, a.fresh, ray=a.ray, address=a.address,
+                            scenes=a.scenes.split(",") if a.scenes else None, seeds=seeds, iterations=a.iterations)
     except ValueError as e:  # also warpgs.pipelines.batch.BatchError: Ray is not installed
         print(f"error: {e}", file=sys.stderr)
         return 2

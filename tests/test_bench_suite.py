@@ -1,9 +1,12 @@
-"""The benchmark suite (bench/suite.py) end to end on a tiny preset: runs, reuse, JSON, charts, summary."""
+"""The benchmark suite (bench/suite.py) end to end on a tiny preset: runs, reuse, JSON, charts, summary; the
+switches preset of issue 14 and its table (bench/switch_table.py) on a fake results.json."""
 
 import importlib.util
 import json
 import sys
 from pathlib import Path
+
+import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
@@ -45,3 +48,113 @@ def test_suite_runs_records_and_charts(tmp_path, monkeypatch):
         again = suite.run_suite("cpu", "tiny", out, work, jobs=1, only=["syn_base_20"], log=lambda *a: None, ray=True)
         assert again[0].get("reused") and again[0]["metrics"] == by["syn_base_20"]["metrics"]
         assert not ray.is_initialized()
+
+
+# ----------------------------------------------------------------------------------------------
+# issue 14: the switches preset and its table
+
+
+def test_switches_preset_covers_every_case_switch_and_seed():
+    from warpgs.pipelines.sparse import build_parser
+
+    runs = suite.PRESETS["switches"]
+    assert len(runs) == len(suite.SWITCH_CASES) * len(suite.SWITCHES) * len(suite.SWITCH_SEEDS) == 264
+    assert {(r.case, r.label, r.seed) for r in runs} == {(c, s, k) for c in suite.SWITCH_CASES
+                                                          for s in suite.SWITCHES for k in suite.SWITCH_SEEDS}
+    assert len({r.name for r in runs}) == len(runs)
+    for r in runs:  # the command line parses, and each --set is known to the config or is the co-reg switch
+        args = build_parser().parse_args(suite.sparse_args(r, "cuda", "/data"))
+        assert args.seed == r.seed and args.method == r.method
+        err = suite.config_error(r)
+        assert err is None or "co_reg" in err, err
+    castle = next(r for r in runs if r.case == "castle_p30_9v")
+    assert castle.data == "dl3dv" and castle.iterations == 3000
+    assert castle.args[:6] == ["--scene", "castle_p30", "--views", "9", "--downscale", "8"]
+    # subsets: switches, scenes, seeds, a smaller budget; a name that selects nothing is an error naming it
+    part = suite.select_runs(runs, "switches", only=["baseline", "full+drop"], scenes=["fern_3v", "synthetic"],
+                             seeds=[1], iterations=40)
+    assert [(r.case, r.label, r.seed, r.iterations) for r in part] == [
+        ("synthetic", "baseline", 1, 40), ("synthetic", "full+drop", 1, 40),
+        ("fern_3v", "baseline", 1, 40), ("fern_3v", "full+drop", 1, 40)]
+    assert part[0].name == "synthetic_baseline_1000_s1_it40"
+    with pytest.raises(ValueError, match="--scenes fern: not in preset switches"):
+        suite.select_runs(runs, "switches", scenes=["fern"])
+    with pytest.raises(ValueError, match="--seeds 7"):
+        suite.select_runs(runs, "switches", seeds=[7])
+
+
+def test_a_switch_the_config_does_not_know_is_a_failed_run_not_a_crash(tmp_path, monkeypatch):
+    runs = [suite.Run("syn_unknown_s0", "synthetic", "baseline", 10, ["--set", "train.no_such_switch=true"],
+                      "baseline+no_such_switch", "synthetic", 0)]
+    monkeypatch.setitem(suite.PRESETS, "unknown", runs)
+    out, work = tmp_path / "out", tmp_path / "work"
+    records = suite.run_suite("cpu", "unknown", out, work, jobs=1, log=lambda *a: None)
+    assert records[0]["status"] == "failed" and "unknown key 'no_such_switch'" in records[0]["log_tail"]
+    assert not (work / "syn_unknown_s0").exists()  # refused before anything started
+    saved = json.loads((out / "results.json").read_text())
+    assert saved["records"][0]["status"] == "failed"
+
+
+def _fake_record(case, label, method, seed, psnr, status="finished", time_s=100.0):
+    rec = {"run": {"name": f"{case}_{label}_s{seed}", "data": "d", "method": method, "iterations": 3000,
+                   "args": [], "label": label, "case": case, "seed": seed},
+           "device": "cuda", "status": status, "machine": "NVIDIA H200", "date": "2026-12-01 10:00"}
+    if status == "finished":
+        rec["metrics"] = {"scene": case, "psnr": psnr, "ssim": 0.5, "num_gaussians": 1000 + seed,
+                          "train_time_s": time_s, "device": "cuda", "iterations": 3000}
+    else:
+        rec["log_tail"] = "error: train (from --set train.co_reg=true): unknown key 'co_reg'"
+    return rec
+
+
+def _fake_results():
+    """Two scenes, seeds 0-2: 'good' gains +0.5 and -0.2 dB (median +0.15: qualifies), 'harmful' +1.0 and
+    -0.5 (a scene loses more than 0.3), 'flat' 0 and 0 (no rise), 'broken' failed everywhere."""
+    base = {"a": [20.0, 20.4, 19.8], "b": [15.0, 15.1, 14.9]}
+    shift = {"good": {"a": 0.5, "b": -0.2}, "harmful": {"a": 1.0, "b": -0.5}, "flat": {"a": 0.0, "b": 0.0}}
+    records = []
+    for case in ("a", "b"):
+        for seed in range(3):
+            records.append(_fake_record(case, "baseline", "baseline", seed, base[case][seed]))
+            for label, d in shift.items():
+                records.append(_fake_record(case, f"baseline+{label}", "baseline", seed, base[case][seed] + d[case],
+                                            time_s=200.0 if label == "harmful" else 100.0))
+            records.append(_fake_record(case, "baseline+broken", "baseline", seed, None, status="failed"))
+    return {"info": {"preset": "switches", "device": "cuda", "device_name": "NVIDIA H200", "date": "2026-12-01 10:00"},
+            "records": records}
+
+
+def test_switch_table_and_the_default_selection_rule(tmp_path, capsys):
+    from bench import switch_table
+
+    data = _fake_results()
+    verdicts = {v["switch"]: v for v in switch_table.select_defaults(data["records"])}
+    assert set(verdicts) == {"baseline+good", "baseline+harmful", "baseline+flat", "baseline+broken"}
+    good = verdicts["baseline+good"]
+    assert good["qualifies"] and good["gains_db"] == pytest.approx({"a": 0.5, "b": -0.2})
+    assert good["median_gain_db"] == pytest.approx(0.15) and good["worst_scene"] == "b"
+    assert not verdicts["baseline+harmful"]["qualifies"] and "b loses 0.50 dB" in verdicts["baseline+harmful"]["why"]
+    assert verdicts["baseline+harmful"]["time_ratio"] == pytest.approx(2.0)
+    assert not verdicts["baseline+flat"]["qualifies"] and "does not rise" in verdicts["baseline+flat"]["why"]
+    assert not verdicts["baseline+broken"]["qualifies"] and "not measured on a, b" in verdicts["baseline+broken"]["why"]
+    # the markdown the README quotes: median [min, max] per scene, the gains, the verdict, machine and date
+    path = tmp_path / "results.json"
+    path.write_text(json.dumps(data))
+    table = tmp_path / "table.md"
+    assert switch_table.main([str(path), "--out", str(table)]) == 0
+    text = table.read_text()
+    assert text == capsys.readouterr().out
+    assert "| switch | a | b | median gain (dB) | worst scene (dB) | time vs default | default? |" in text
+    assert "| baseline | 20.00 [19.80, 20.40] | 15.00 [14.90, 15.10] | (default) |" in text
+    assert "| baseline+good | 20.50 [20.30, 20.90] | 14.80 [14.70, 14.90] | +0.15 | -0.20 (b) | 1.00x | yes |" in text
+    assert "| baseline+harmful |" in text and "| 2.00x | no |" in text
+    assert "| baseline+broken | failed | failed | - | - | - | no |" in text
+    assert "seeds 0, 1, 2; NVIDIA H200 (cuda); 2026-12-01" in text
+    assert "- baseline+good: qualifies as the baseline default" in text
+    # written beside the suite's outputs too
+    paths = switch_table.write(data["records"], data["info"], tmp_path)
+    assert [p.name for p in paths] == ["switches.md", "switches.json"]
+    assert json.loads(paths[1].read_text())["verdicts"][0]["switch"] == "baseline+good"
+    bad = tmp_path / "bad.json"
+    bad.write_text("{}")
+    assert switch_table.main([str(bad)]) == 2

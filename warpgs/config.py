@@ -108,6 +108,12 @@ class TrainConfig:
     background: list | None = None  # [r, g, b]; None: white if the scene says so, else black
     drop_rate: float = 0.0  # DropGaussian (Park et al., CVPR 2025): each training render drops Gaussians at a rate
     #   rising linearly from 0 to this at the last step, the rest's opacity x 1 / (1 - rate); 0: off. The paper: 0.2
+    opacity_noise: float = 0.0  # Co-Adaptation (Chen et al., NeurIPS 2025): each training render's opacities x
+    #   (1 + eps), eps ~ N(0, this^2) clipped to [-this, this] as in their code; composes with drop_rate; 0: off.
+    #   Their scripts name 0.8, 0.4, 0.2 and 0.05, and find it less robust than dropout
+    scale_reg: float = 0.0  # weight of PhysGaussian's anisotropy regulariser (Xie et al., CVPR 2024): mean over the
+    #   Gaussians of max(max(s)/min(s), r) - r with r = scale_reg_ratio; 0: off
+    scale_reg_ratio: float = 10.0  # r: the largest axis ratio a Gaussian keeps without penalty
     random_background: bool = False  # views with an alpha channel: a random background each step (no floaters
                                      # that mimic the background colour); evaluation keeps ``background``
     far_field: str = "none"  # none | elevation: behind the Gaussians, a colour per elevation band fitted on the
@@ -148,7 +154,8 @@ class TrainConfig:
     progress: bool = True
 
     LIMITS = {"iterations": ">= 1", "seed": ">= 0", "sh_degree_interval": ">= 0", "checkpoint_every": ">= 0",
-              "eval_every": ">= 0", "background": "[0, 1]", "drop_rate": "[0, 1)", "max_nan_steps": ">= 1",
+              "eval_every": ">= 0", "background": "[0, 1]", "drop_rate": "[0, 1)", "opacity_noise": "[0, 1]",
+              "scale_reg": ">= 0", "scale_reg_ratio": ">= 1", "max_nan_steps": ">= 1",
               "explode_factor": ">= 0", "explode_window": ">= 1", "explode_patience": ">= 1", "snapshot_every": ">= 0",
               "max_recoveries": ">= 0", "recovery_lr_factor": "(0, 1]", "cpu_threads": ">= 0", "sync_every": ">= 1",
               "far_field": FAR_FIELD_RULE, "far_field_bins": ">= 1", "co_prune_every": ">= 0", "co_prune_dist": "> 0",
@@ -190,6 +197,8 @@ class FullConfig:
     #   reliable (U < the sampler's delta: where guidance was fused)
     growth_budget: float = 0.0  # > 0: at most this x the baseline phase's Gaussians during the cycles (0: no cap)
     drop_rate: float | None = None  # DropGaussian's final rate for this method (train.drop_rate); None: train's
+    pseudo_depth_smooth: float = 0.0  # weight of an edge-aware smoothness of the pseudo views' rendered depth
+    #   (Monodepth's, Godard et al. CVPR 2017, on depth / its mean; edges from the pseudo view's image); 0: off
     far_field: str | None = None  # the far field for this method (train.far_field: none | elevation); None: train's
     flythrough_frames: int = 24  # frames per trajectory in flythrough.gif
 
@@ -197,7 +206,8 @@ class FullConfig:
               "ssim_weight": ">= 0", "depth_weight": ">= 0", "input_depth_weight": ">= 0",
               "pseudo_loss": "{lpips, l1}", "guidance": "{warped, render}", "stereo_sources": "{inputs, all}",
               "init_opacity": "(0, 1)", "max_new": ">= 0", "pseudo_mask": "{seen, reliable}", "growth_budget": ">= 0",
-              "drop_rate": "[0, 1)", "far_field": FAR_FIELD_RULE, "flythrough_frames": ">= 0"}
+              "drop_rate": "[0, 1)", "pseudo_depth_smooth": ">= 0", "far_field": FAR_FIELD_RULE,
+              "flythrough_frames": ">= 0"}
 
 
 IMPORTANCE_VIEWS = ("train", "virtual", "pseudo")

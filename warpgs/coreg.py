@@ -117,10 +117,11 @@ class CoRegPair:
         tr, s = self.trainer, self.settings
         self.model.active_sh_degree = tr.model.active_sh_degree
         out = self.model.render(cam.viewmat, cam.K, cam.width, cam.height, background=background,
-                                opacity_scale=tr.dropout_scale(step, self.model, self.drop_gen), check_finite=False)
+                                opacity_scale=tr.opacity_scale(step, self.model, self.drop_gen), check_finite=False)
         self._out = out
         loss, own = tr.input_loss(out, cam)
         parts["partner"] = own["inputs"]
+        loss = tr.parameter_priors(self.model, loss, {})
         if s.co_reg_weight > 0 and step >= s.co_reg_start and self.views:
             pc = self.views[self.next_view()]
             bg = tr.background_for(pc)

@@ -1,4 +1,6 @@
-"""Training losses: L1, D-SSIM (kornia), Pearson depth correlation, LPIPS (``lpips`` package, local weights).
+"""Training losses: L1, D-SSIM (kornia), Pearson depth correlation, LPIPS (``lpips`` package, local weights),
+and two weight-free priors: the Gaussians' anisotropy (``scale_anisotropy_loss``) and edge-aware depth
+smoothness (``edge_aware_smoothness``).
 
 Images are [H, W, 3] (or [B, 3, H, W]) in [0, 1]. ``dssim`` is 1 - SSIM, the form 3D-GS and gsplat train
 with (weights 0.8 L1 + 0.2 D-SSIM). ``pearson_depth_loss`` is 1 - corr(rendered depth, prior) over the
@@ -68,6 +70,38 @@ def pearson_depth_loss(depth: torch.Tensor, prior: torch.Tensor, mask: torch.Ten
     x, y = x - x.mean(), y - y.mean()
     corr = (x * y).sum() / (x.norm() * y.norm() + eps)
     return 1.0 - corr
+
+
+def scale_anisotropy_loss(log_scales: torch.Tensor, max_ratio: float) -> torch.Tensor:
+    """PhysGaussian's anisotropy regulariser (Xie et al., CVPR 2024): the mean over the Gaussians of
+    max(max(s) / min(s), r) - r, where s are a Gaussian's three standard deviations and r = ``max_ratio``;
+    0 for Gaussians no more elongated than r, growing with the axis ratio of needles and flat discs beyond
+    it. ``log_scales`` [N, 3] are the model's parameters (log standard deviations): the ratio is
+    exp(max - min) of them, exact without dividing by a tiny scale. 0 (with a gradient) for N = 0."""
+    if log_scales.dim() != 2 or log_scales.shape[1] != 3:
+        raise ValueError(f"scale_anisotropy_loss: expected log-scales [N, 3], got shape {list(log_scales.shape)}")
+    if max_ratio < 1:
+        raise ValueError(f"scale_anisotropy_loss: max_ratio must be >= 1 (an axis ratio), got {max_ratio}")
+    if log_scales.shape[0] == 0:
+        return log_scales.sum() * 0
+    ratio = torch.exp(log_scales.max(dim=1).values - log_scales.min(dim=1).values)
+    return torch.relu(ratio - max_ratio).mean()
+
+
+def edge_aware_smoothness(depth: torch.Tensor, image: torch.Tensor, eps: float = 1e-7) -> torch.Tensor:
+    """Edge-aware smoothness of a depth map (Monodepth, Godard et al. CVPR 2017; on the mean-normalised map as
+    Monodepth2): mean |d/dx D| exp(-|d/dx I|) + mean |d/dy D| exp(-|d/dy I|), with D = depth / mean(depth),
+    neighbouring-pixel differences, and the image gradient averaged over its channels. Depth may change
+    freely across the image's edges and is pushed to be flat inside its smooth regions; 0 on a constant
+    depth, and blind to the depth's scale. ``depth`` [H, W], ``image`` [H, W, C]."""
+    if depth.dim() != 2 or image.dim() != 3 or image.shape[:2] != depth.shape:
+        raise ValueError(f"edge_aware_smoothness: depth [H, W] and image [H, W, C] of one size expected, got "
+                         f"{list(depth.shape)} and {list(image.shape)}")
+    d = depth / (depth.mean() + eps)
+    img = image.to(d.dtype)
+    wx = torch.exp(-(img[:, 1:] - img[:, :-1]).abs().mean(-1))
+    wy = torch.exp(-(img[1:] - img[:-1]).abs().mean(-1))
+    return ((d[:, 1:] - d[:, :-1]).abs() * wx).mean() + ((d[1:] - d[:-1]).abs() * wy).mean()
 
 
 # ----------------------------------------------------------------------------------------------

@@ -268,7 +268,8 @@ class GaussianModel(nn.Module):
     def render(self, viewmat, K, width: int, height: int, *, background=None, sh_degree: int | None = None,
                opacity_scale=None, **kwargs):
         """``warpgs.render.rasterize`` of this model (activations applied) -> ``RenderOutput``.
-        ``opacity_scale``: (N,) factors on the opacities (DropGaussian's mask, ``Trainer.dropout_scale``)."""
+        ``opacity_scale``: (N,) factors on the opacities (DropGaussian's mask and opacity noise,
+        ``Trainer.opacity_scale``)."""
         from warpgs.render import rasterize
 
         deg = self.active_sh_degree if sh_degree is None else min(sh_degree, self.max_sh_degree)

@@ -16,7 +16,10 @@ snapshot of a divergence rollback ``model`` and ``progress``, compact mode's sea
 
 One input view per iteration (3D-GS's shuffled order); loss = 0.8 L1 + 0.2 D-SSIM (+ a Pearson depth term
 when ``loss.depth_weight`` > 0 and the view has a depth prior); Adam with 3D-GS's learning rates and an
-exponentially decaying position rate; densification by ``DefaultStrategy``.
+exponentially decaying position rate; densification by ``DefaultStrategy``. Weight-free regularisers, each
+off by default: DropGaussian (``train.drop_rate``) and opacity noise (``train.opacity_noise``) on the
+training renders' opacities (``Trainer.opacity_scale``; evaluation renders all Gaussians as they are), and
+an anisotropy prior on the scales (``train.scale_reg``).
 
 With ``train.co_reg`` (CoR-GS, ``warpgs.coreg``) a second model trains beside the first on the same views, with
 its own optimiser, strategy and random streams; the two are co-pruned and co-regularised on poses between the
@@ -495,6 +498,8 @@ class Trainer:
         self.drop_rate = cfg.train.drop_rate  # the full method may set its own (full.drop_rate)
         if not 0.0 <= self.drop_rate < 1.0:
             raise ValueError(f"train.drop_rate must be in [0, 1), got {self.drop_rate}")
+        if not 0.0 <= cfg.train.opacity_noise <= 1.0:  # a factor 1 + eps with |eps| <= sigma stays >= 0
+            raise ValueError(f"train.opacity_noise must be in [0, 1], got {cfg.train.opacity_noise}")
         self.view_rng = np.random.default_rng(seed + 2)
         self.order: list[int] = []
         self.optimizer = make_optimizer(self.model, cfg, self.scene_scale)
@@ -579,6 +584,7 @@ class Trainer:
         """The training loss of the render ``out`` of the input view ``cam``: the inputs' (``input_loss``) and
         the method's terms (``Method.loss_terms``); (loss, its parts by name)."""
         loss, parts = self.input_loss(out, cam)
+        loss = self.parameter_priors(self.model, loss, parts)
         return self.method.loss_terms(out, cam, loss, parts), parts
 
     def input_loss(self, out, cam) -> tuple[torch.Tensor, dict]:
@@ -601,9 +607,19 @@ class Trainer:
             loss = loss + lc.depth_weight * dl
             parts["depth"] = dl
         # what the divergence guard judges: the inputs' loss, which the method's terms (extra views, priors
-        # that appear in a later phase) leave out
+        # that appear in a later phase) and the priors on the parameters leave out
         parts["inputs"] = loss
         return loss, parts
+
+    def parameter_priors(self, model: GaussianModel, loss: torch.Tensor, parts: dict) -> torch.Tensor:
+        """``loss`` plus the priors on ``model``'s parameters that are on (``train.scale_reg``: the scale
+        anisotropy term), each recorded in ``parts``; the divergence guard's ``inputs`` part leaves them out."""
+        tc = self.cfg.train
+        if tc.scale_reg > 0:
+            sr = losses.scale_anisotropy_loss(model.params["scales"], tc.scale_reg_ratio)
+            loss = loss + tc.scale_reg * sr
+            parts["scale_reg"] = sr
+        return loss
 
     def background_for(self, cam) -> torch.Tensor:
         """What ``cam`` (anything with viewmat, K, width, height) sees behind the Gaussians: the far field's
@@ -641,7 +657,7 @@ class Trainer:
         # no input checks in the rasterizer (each is a host read): the guard checks the loss, the gradients and
         # the parameters, and a step with non-finite ones makes no update
         out = self.model.render(cam.viewmat, cam.K, cam.width, cam.height, background=bg,
-                                opacity_scale=self.dropout_scale(step), check_finite=False)
+                                opacity_scale=self.opacity_scale(step), check_finite=False)
         loss, parts = self.compute_loss(out, cam)
         if self.pair is not None:  # its partner on the same view, and the two co-regularised (one backward for both)
             loss = loss + self.pair.loss(step, cam, bg, parts)
@@ -716,6 +732,24 @@ class Trainer:
         n = len(model if model is not None else self.model)
         keep = torch.rand(n, device=self.device, generator=generator or self.drop_gen) >= rate
         return keep.float() / (1.0 - rate)
+
+    def opacity_scale(self, step: int, model: GaussianModel | None = None,
+                      generator: torch.Generator | None = None) -> torch.Tensor | None:
+        """The per-Gaussian opacity factors of one training render at ``step`` (evaluation renders use none):
+        DropGaussian's (``dropout_scale``) times Co-Adaptation's opacity noise (``train.opacity_noise`` = sigma:
+        1 + eps, eps ~ N(0, sigma^2) clipped to [-sigma, sigma] as in the authors' code). Both come from
+        ``drop_gen``, the mask first, so a run without noise draws exactly what it drew before. None when
+        both are off. The rasterizer caps alpha at ``alpha_max`` where a factor above 1 would pass it.
+        ``model`` and ``generator`` as in ``dropout_scale`` (the co-regularised pair's second model)."""
+        model = model if model is not None else self.model
+        generator = generator or self.drop_gen
+        scale = self.dropout_scale(step, model, generator)
+        sigma = self.cfg.train.opacity_noise
+        if sigma <= 0:
+            return scale
+        eps = torch.randn(len(model), device=self.device, generator=generator) * sigma
+        noise = 1.0 + eps.clamp(-sigma, sigma)
+        return noise if scale is None else scale * noise
 
     def _skip(self, step: int, why: str) -> dict:
         """A step judged on the host that makes no update."""

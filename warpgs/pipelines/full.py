@@ -11,8 +11,9 @@
 Losses: inputs w1 L1 + w2 D-SSIM (+ w3 Pearson depth when a prior exists, as in the baseline); pseudo
 views w4 LPIPS + w5 D-SSIM + w6 Pearson depth (against the plane-sweep depth of the views the stereo
 used, where it is confident), scaled by ``pseudo_weight`` and restricted to pixels an input sees
-(U < 1). Without LPIPS weights the pseudo views use L1 instead (the paper's own ablation), which is
-said at start and recorded in metrics.json.
+(U < 1); with ``full.pseudo_depth_smooth`` > 0 also an edge-aware smoothness of their whole depth map.
+Without LPIPS weights the pseudo views use L1 instead (the paper's own ablation), which is said at start
+and recorded in metrics.json.
 
 Training iterations are counted as in the baseline (``train.iterations`` in total, the baseline phase
 included), so the two are compared at equal iterations.
@@ -156,10 +157,14 @@ class FullMethod(Method):
         if self.pseudo_cams and self.settings.pseudo_weight > 0:
             pc = self.pseudo_cams[self.next_pseudo()]
             po = tr.model.render(pc.viewmat, pc.K, pc.width, pc.height, background=tr.background_for(pc),
-                                 opacity_scale=tr.dropout_scale(tr.step))
+                                 opacity_scale=tr.opacity_scale(tr.step))
             pl = self.pseudo_loss(po, pc)
             loss = loss + self.settings.pseudo_weight * pl
             parts["pseudo"] = pl
+            if self.settings.pseudo_depth_smooth > 0:  # where no input constrains the depth: flat between edges
+                sm = losses.edge_aware_smoothness(po.depth, pc.image)
+                loss = loss + self.settings.pseudo_depth_smooth * sm
+                parts["pseudo_depth_smooth"] = sm
         return loss
 
     def extra_views(self) -> list:
