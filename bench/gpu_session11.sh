@@ -6,6 +6,10 @@
 #    lego run the viewer's screenshot is taken from, and DropGaussian probes for issue 14 (lego, fern, DTU).
 # b: the timed measurements, nothing else on the GPU: the viewer's frame rate (issue 18), bench/rasterizer.py
 #    against gsplat with its per-kernel profile, and bench/train_speed.py on fern (issue 15).
+# c: issue 14's switch table (bench/suite.py --preset switches), seed 0: the baseline, DropGaussian, opacity noise,
+#    the scale regulariser and the full method on fern, DTU and the captures at 3 and 9 views, all at once.
+# d: the same preset's CoR-GS rows (train.co_reg, 4 renders a step) at 3 views, and lego's opacity noise / scale
+#    regulariser (10,000 iterations).
 set -u
 P=$1; D=$2; R=$3; mkdir -p "$R" "$OUT"
 GPUS=1; source bench/gpu_runs.sh
@@ -53,5 +57,21 @@ b)
   timeout 330 python3 bench/train_speed.py --data-root "$D" --set model.init=frustum \
     --loops warpgs_trainer,plain_warpgs,plain_gsplat,warpgs_trainer_sync1 --out "$OUT/train_speed_cuda.json" \
     > "$OUT/train_speed.log" 2>&1; echo "train_speed rc=$?"; tail -15 "$OUT/train_speed.log"
+  ;;
+c|d)
+  if [ "$P" = c ]; then
+    SC=fern_3v,dtu65_3v,castle_p30_3v,herz_jesus_p25_3v,castle_p30_9v,herz_jesus_p25_9v
+    ONLY=baseline,baseline+drop,baseline+opacity_noise,baseline+scale_reg,full
+  else
+    SC=fern_3v,dtu65_3v,castle_p30_3v,herz_jesus_p25_3v,lego_8v
+    ONLY=baseline+co_reg,baseline+opacity_noise,baseline+scale_reg
+  fi
+  mkdir -p "$OUT/sw"; [ -f "$R/sw_results.json" ] && cp "$R/sw_results.json" "$OUT/sw/results.json"
+  timeout -s INT "${T:-540}" python3 bench/suite.py --device cuda --data-root "$D" --preset switches --scenes "$SC" \
+    --only "$ONLY" --seeds 0 --jobs 30 --out "$OUT/sw" --work "$R/sw" > "$OUT/suite_$P.log" 2>&1
+  echo "suite rc=$?"
+  cp "$OUT/sw/results.json" "$R/sw_results.json" 2>/dev/null
+  python3 bench/suite.py --summary-only --preset switches --out "$OUT/sw" >> "$OUT/suite_$P.log" 2>&1
+  grep -E "PSNR|suite:" "$OUT/suite_$P.log" | tail -45
   ;;
 esac
