@@ -2,6 +2,7 @@
 
     python bench/switch_table.py                                   # bench/results/suite_cuda_switches/results.json
     python bench/switch_table.py RESULTS.json --out TABLE.md        # also write the markdown to a file
+    python bench/switch_table.py --readme README.md                 # replace the README's table with it
 
 The table (markdown, what the README quotes): one row per switch (run label), one column per scene (run
 case), each cell the test PSNR's median over seeds with its [min, max]; then each switch's gain against
@@ -172,6 +173,8 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("results", nargs="?", type=Path, default=DEFAULT_RESULTS, help="a suite's results.json")
     ap.add_argument("--out", type=Path, default=None, help="also write the table to this file")
+    ap.add_argument("--readme", type=Path, default=None,
+                    help=f"replace the text between {README_START!r} and {README_END!r} in this file with the table")
     a = ap.parse_args(argv)
     try:
         data = json.loads(a.results.read_text())
@@ -182,8 +185,26 @@ def main(argv=None) -> int:
     text = markdown(records, info)
     if a.out:
         a.out.write_text(text)
+    if a.readme:
+        try:
+            a.readme.write_text(replace_between_markers(a.readme.read_text(), text))
+        except (OSError, ValueError) as e:
+            print(f"error: {a.readme}: {e}", file=sys.stderr)
+            return 2
     print(text, end="")
     return 0
+
+
+README_START, README_END = "<!-- switch_table: start -->", "<!-- switch_table: end -->"
+
+
+def replace_between_markers(doc: str, table: str) -> str:
+    """``doc`` with the text between the README markers (kept) replaced by ``table``; a ValueError when the
+    markers are missing or out of order."""
+    i, j = doc.find(README_START), doc.find(README_END)
+    if i < 0 or j < i:
+        raise ValueError(f"no {README_START} ... {README_END} pair to put the table between")
+    return doc[:i + len(README_START)] + "\n" + table.rstrip("\n") + "\n" + doc[j:]
 
 
 if __name__ == "__main__":

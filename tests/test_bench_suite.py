@@ -158,3 +158,16 @@ def test_switch_table_and_the_default_selection_rule(tmp_path, capsys):
     bad = tmp_path / "bad.json"
     bad.write_text("{}")
     assert switch_table.main([str(bad)]) == 2
+
+
+def test_switch_table_replaces_only_the_text_between_the_readme_markers():
+    from bench.switch_table import README_END, README_START, replace_between_markers
+
+    doc = f"intro\n{README_START}\nold table\n{README_END}\noutro\n"
+    new = replace_between_markers(doc, "| a | b |\n")
+    assert new == f"intro\n{README_START}\n| a | b |\n{README_END}\noutro\n"
+    assert replace_between_markers(new, "| a | b |\n") == new  # idempotent
+    with pytest.raises(ValueError, match="no"):
+        replace_between_markers("no markers here", "x")
+    with pytest.raises(ValueError):
+        replace_between_markers(f"{README_END} {README_START}", "x")
