@@ -94,6 +94,10 @@ def make_config(args):
         argv += ["--scene", args.scene]
     if args.data_root:
         argv += ["--data-root", args.data_root]
+    # the plain loops train plain 3D-GS: the trainer gets none of the regularisers a dataset config may turn on
+    # (DropGaussian is the captures' and LLFF's default since issue 14); --set can still ask for them
+    argv += ["--set", "train.drop_rate=0", "--set", "train.opacity_noise=0", "--set", "train.scale_reg=0",
+             "--set", "train.co_reg=false"]
     for s in args.set:
         argv += ["--set", s]
     cfg, _ = cli_config(build_parser().parse_args(argv))
