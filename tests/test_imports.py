@@ -16,7 +16,8 @@ LAYERS = [
     ["pseudo", "densify"],
     ["points"],
     ["config"],
-    ["evaluation", "train"],
+    ["optim"],
+    ["evaluation", "train", "coreg"],
     ["compact"],
     ["pipelines", "view"],
 ]

@@ -166,8 +166,8 @@ def test_nonfinite_parameters_between_reads_are_rolled_back(scene, monkeypatch):
     tr = Trainer(tiny_config(60, snapshot_every=20, sync_every=5), scene)
     real = tr._after_update
 
-    def after_step_45_a_scale_is_infinite(step, out, cam):  # finite as stored, infinite as rendered (exp(200))
-        info = real(step, out, cam)
+    def after_step_45_a_scale_is_infinite(step, out, cam, apply=None):  # finite as stored, infinite as rendered
+        info = real(step, out, cam, apply)
         if step == 45 and not tr.recoveries:
             with torch.no_grad():
                 tr.model.params["scales"][3] = 200.0

@@ -45,34 +45,17 @@ size of the 3D-GS PLY that ``GaussianModel.save_ply`` writes (it also stores thr
 from __future__ import annotations
 
 import copy
-from types import SimpleNamespace
 
 import numpy as np
 import torch
 
 from warpgs.config import CompactConfig, check_compact_config as check_config
 from warpgs.model import GaussianModel, num_sh_coeffs, param_bytes, ply_bytes, size_report  # sizes: re-exported
+from warpgs.pseudo.trajectory import virtual_cameras  # noqa: F401  (re-exported: compact mode's "virtual" views)
 from warpgs.strategy import contribution, remove, update_params
 
 # ----------------------------------------------------------------------------------------------
 # importance and pruning
-
-
-def virtual_cameras(cams, frames: int) -> list:
-    """``frames`` poses strictly between each pair of neighbouring cameras along their nearest-neighbour
-    path (warpgs.pseudo.trajectory), each with the intrinsics and size of the pair's first camera."""
-    from warpgs.pseudo.trajectory import path_trajectories
-
-    if len(cams) < 2 or frames <= 0:
-        return []
-    V = np.stack([c.viewmat.detach().cpu().double().numpy() for c in cams])
-    out = []
-    for traj in path_trajectories(V, frames + 2):
-        ref = cams[traj.start]
-        for M in traj.viewmats[1:-1]:
-            out.append(SimpleNamespace(viewmat=torch.tensor(M, dtype=torch.float32, device=ref.viewmat.device),
-                                       K=ref.K, width=ref.width, height=ref.height))
-    return out
 
 
 def importance_cameras(trainer, cfg: CompactConfig) -> list:

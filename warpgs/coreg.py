@@ -14,7 +14,7 @@ Two models are trained side by side, and where they disagree is taken as where n
   ``warpgs.densify.within_radius``). A model is never emptied.
 - **Co-regularisation on pseudo views** (Sec. 4.3): from step ``train.co_reg_start`` on, each step also
   renders both models at a pose between two neighbouring training views (``train.co_reg_frames`` poses
-  per pair along the path of ``warpgs.compact.virtual_cameras``, drawn in a shuffled order; never a test
+  per pair along the path of ``warpgs.pseudo.trajectory.virtual_cameras``, drawn in a shuffled order; never a test
   view) and adds ``train.co_reg_weight`` x (l1_weight L1 + ssim_weight D-SSIM) of each render against the
   other's detached render to that model's loss (``co_reg_loss``). These renders use no dropout: they
   compare the models as they render at test time.
@@ -37,7 +37,8 @@ from warpgs.config import check_limits
 from warpgs.densify import within_radius
 from warpgs.model import PARAM_NAMES, GaussianModel
 from warpgs.strategy import remove
-from warpgs.train import STATE_PARTS, load_model_state, make_optimizer, model_state
+from warpgs.optim import STATE_PARTS, load_model_state, make_optimizer, model_state
+from warpgs.pseudo.trajectory import virtual_cameras
 
 SEED_OFFSETS = {"split": 11, "drop": 12, "views": 13}  # the partner's random streams: train.seed + these
 
@@ -75,8 +76,6 @@ class CoRegPair:
     calls ``loss`` in each step before the backward and ``after_update`` after the optimisers' step."""
 
     def __init__(self, trainer):
-        from warpgs.compact import virtual_cameras
-
         tc = trainer.cfg.train
         check_limits(tc, "the training options", "train.")
         self.trainer = trainer

@@ -90,6 +90,8 @@ from warpgs.farfield import make_far_field
 from warpgs.guard import DivergenceGuard, LossWindow
 from warpgs.metrics import render_fps
 from warpgs.model import PARAM_NAMES, GaussianModel, read_point_cloud
+from warpgs.optim import (STATE_PARTS, adam_options, base_learning_rates, finite_flags,  # noqa: F401
+                          load_model_state, make_optimizer, masked_step, model_state, with_adam_options)
 
 CHECKPOINT = "checkpoint.pt"
 SYNC_EVERY_CUDA = 10  # train.sync_every's default on CUDA: host reads of the verdicts every this many steps
@@ -270,111 +272,6 @@ def init_model(cfg: Config, scene, generator: torch.Generator) -> GaussianModel:
     raise ValueError(f"model.init={m.init!r}: expected sfm, stereo, sfm+stereo, box, hull, frustum, points or ply")
 
 
-def base_learning_rates(cfg: Config, scene_scale: float) -> dict[str, float]:
-    """Each parameter group's learning rate at the start (the means' then decays; see ``Trainer.means_lr``)."""
-    o = cfg.optim
-    return {"means": o.means_lr * scene_scale, "quats": o.quats_lr, "scales": o.scales_lr,
-            "opacities": o.opacities_lr, "sh0": o.sh0_lr, "shN": o.shN_lr}
-
-
-def make_optimizer(model: GaussianModel, cfg: Config, scene_scale: float) -> torch.optim.Adam:
-    """Adam, one group per parameter, with ``adam_options`` for the model's device."""
-    o = cfg.optim
-    lrs = base_learning_rates(cfg, scene_scale)
-    groups = [{"params": [model.params[k]], "lr": lrs[k], "name": k} for k in model.params.keys()]
-    return torch.optim.Adam(groups, eps=o.eps, **adam_options(model.device))
-
-
-def adam_options(device) -> dict:
-    """Adam's implementation on ``device``: fused on CUDA (one kernel per group instead of a dozen, and a
-    step skipped on the device when ``found_inf`` is set: ``masked_step``). The CPU keeps torch's default:
-    its fused kernel is faster (2.5x on the update of 50k Gaussians) but not bit-identical to it, and the
-    CPU runs are the ones whose numbers must stay the same across refactors (bench/fingerprint.py)."""
-    return {"fused": True} if torch.device(device).type == "cuda" else {}
-
-
-def with_adam_options(saved: dict, optimizer: torch.optim.Optimizer) -> dict:
-    """An optimiser state dict (``saved``, changed in place) with ``optimizer``'s implementation options, so
-    that a checkpoint of a CUDA run (fused Adam) resumes on the CPU and the other way round (torch's
-    ``load_state_dict`` would take the saved ones)."""
-    for g_saved, g in zip(saved["param_groups"], optimizer.param_groups):
-        for k in ("fused", "foreach", "capturable"):
-            if k in g:
-                g_saved[k] = g[k]
-    return saved
-
-
-def finite_flags(tensors: list[torch.Tensor]) -> torch.Tensor:
-    """Whether each tensor is all finite, as a bool tensor on the device (no host read): their largest
-    absolute values in one fused reduction, which keeps NaN and inf (``torch._foreach_norm``'s infinity
-    norm, as ``clip_grad_norm_`` relies on), or one check each where a tensor is empty."""
-    if all(t.numel() for t in tensors):
-        return torch.isfinite(torch.stack(torch._foreach_norm(tensors, float("inf"))))
-    return torch.stack([torch.isfinite(t).all() for t in tensors])
-
-
-def masked_step(optimizer: torch.optim.Optimizer, apply: torch.Tensor) -> None:
-    """``optimizer.step()`` where the 0-dim bool tensor ``apply`` is true, and no change at all (parameters,
-    moments, step counts) where it is false, without reading ``apply`` on the host. Fused Adam skips on the
-    device (its ``found_inf``, as torch's GradScaler sets it); other optimisers step and put back what the
-    step changed (their step counts must then be on ``apply``'s device; where they are not, ``apply`` is
-    read)."""
-    groups = optimizer.param_groups
-    if all(g.get("fused") for g in groups):
-        optimizer.grad_scale, optimizer.found_inf = None, (~apply).to(torch.float32)
-        try:
-            optimizer.step()
-        finally:
-            del optimizer.grad_scale, optimizer.found_inf
-        return
-    if apply.device.type != "cpu" and not all(g.get("capturable") for g in groups):  # step counts on the CPU
-        if bool(apply):
-            optimizer.step()
-        return
-    params = [p for g in groups for p in g["params"] if p.grad is not None]
-    before = [(p.detach().clone(), {k: v.clone() for k, v in optimizer.state.get(p, {}).items()
-                                    if isinstance(v, torch.Tensor)}) for p in params]
-    optimizer.step()
-    with torch.no_grad():
-        for p, (old, old_state) in zip(params, before):
-            p.copy_(torch.where(apply, p, old))
-            for k, v in optimizer.state[p].items():
-                if isinstance(v, torch.Tensor):  # a state the step created: as it starts (zeros, step 0)
-                    v.copy_(torch.where(apply, v, old_state.get(k, torch.zeros_like(v))))
-
-
-def _cpu_copy(obj):
-    """A deep copy of a (nested) state with every tensor copied to the CPU (snapshots keep no GPU memory)."""
-    if isinstance(obj, torch.Tensor):
-        return obj.detach().to("cpu", copy=True)
-    if isinstance(obj, dict):
-        return {k: _cpu_copy(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return type(obj)(_cpu_copy(v) for v in obj)
-    return copy.deepcopy(obj)
-
-
-def model_state(model: GaussianModel, optimizer: torch.optim.Optimizer, state: dict) -> dict:
-    """A CPU copy of one model's training state: its parameters and SH degrees, Adam's moments, the
-    densification statistics (``Trainer.state_dict``'s ``model`` part; the co-regularised pair's second model's)."""
-    return dict(params=_cpu_copy(dict(model.params)), max_sh_degree=model.max_sh_degree,
-                active_sh_degree=model.active_sh_degree, optimizer=_cpu_copy(optimizer.state_dict()),
-                strategy_state=_cpu_copy(state))
-
-
-def load_model_state(st: dict, model: GaussianModel, cfg: Config, scene_scale: float, device
-                     ) -> tuple[torch.optim.Adam, dict]:
-    """Puts ``model_state``'s copy ``st`` back into ``model`` (on ``device``; ``st`` stays usable); returns the
-    new optimiser, with the saved moments, and the densification statistics."""
-    for k, v in st["params"].items():
-        model.params[k] = torch.nn.Parameter(v.to(device, copy=True))
-    model.max_sh_degree = st["max_sh_degree"]
-    model.active_sh_degree = st["active_sh_degree"]
-    optimizer = make_optimizer(model, cfg, scene_scale)
-    optimizer.load_state_dict(with_adam_options(copy.deepcopy(st["optimizer"]), optimizer))
-    return optimizer, {k: v.to(device, copy=True) for k, v in st["strategy_state"].items()}
-
-
 def _all_finite(tensors) -> bool:
     """Whether every tensor is finite, with one device sync."""
     checks = [torch.isfinite(t).all() for t in tensors if isinstance(t, torch.Tensor) and t.is_floating_point()]
@@ -408,8 +305,6 @@ def _atomic_torch_save(obj, path: Path, keep_previous: bool = True) -> None:
             os.replace(path, prev)
     os.replace(tmp, path)
 
-
-STATE_PARTS = ("model", "progress", "history")
 
 
 class Method:

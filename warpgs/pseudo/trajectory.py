@@ -15,9 +15,11 @@ Poses are world-to-camera 4x4 matrices in OpenCV axes (``warpgs/__init__.py``); 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from types import SimpleNamespace
 from typing import Callable
 
 import numpy as np
+import torch
 
 from warpgs.geometry import (  # noqa: F401  (pose helpers: re-exported for this module's readers)
     axis_angle_to_rotmat, camera_centres, pose, quat_to_rotmat, rotmat_to_quat, slerp)
@@ -207,3 +209,18 @@ def guidance_sources(traj: Trajectory, input_centers: np.ndarray, mode: str = "n
         raise ValueError(f"guidance_source must be 'nearest' or 'halves', got {mode!r}")
     d = np.linalg.norm(traj.centers[:, None] - np.asarray(input_centers, np.float64)[None], axis=-1)
     return np.argmin(d, axis=1).astype(np.int64)
+
+
+def virtual_cameras(cams, frames: int) -> list:
+    """``frames`` poses strictly between each pair of neighbouring cameras along their nearest-neighbour
+    path (warpgs.pseudo.trajectory), each with the intrinsics and size of the pair's first camera."""
+    if len(cams) < 2 or frames <= 0:
+        return []
+    V = np.stack([c.viewmat.detach().cpu().double().numpy() for c in cams])
+    out = []
+    for traj in path_trajectories(V, frames + 2):
+        ref = cams[traj.start]
+        for M in traj.viewmats[1:-1]:
+            out.append(SimpleNamespace(viewmat=torch.tensor(M, dtype=torch.float32, device=ref.viewmat.device),
+                                       K=ref.K, width=ref.width, height=ref.height))
+    return out
