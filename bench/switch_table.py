@@ -26,6 +26,10 @@ import sys
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from warpgs.pipelines.batch_report import med_range, spread  # noqa: E402  (the batch runner's table's cells)
+
 DEFAULT_RESULTS = ROOT / "bench" / "results" / "suite_cuda_switches" / "results.json"
 MAX_LOSS_DB = 0.3  # the most a default may cost any scene
 
@@ -49,9 +53,8 @@ def seed_stats(records: list[dict]) -> dict:
 
 
 def cell(xs: list[float], fmt: str = ".2f") -> str:
-    """median [min, max] of ``xs`` (the median alone for one value)."""
-    med = format(statistics.median(xs), fmt)
-    return med if len(xs) == 1 else f"{med} [{format(min(xs), fmt)}, {format(max(xs), fmt)}]"
+    """median [min, max] of ``xs`` (the median alone for one value), as the batch runner's table writes it."""
+    return med_range(spread(xs), fmt)
 
 
 def _order(records: list[dict]):

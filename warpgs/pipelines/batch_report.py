@@ -56,7 +56,8 @@ def _f(v, fmt: str) -> str:
     return "n/a" if v is None else format(v, fmt)
 
 
-def _med_range(s: dict | None, fmt: str) -> str:
+def med_range(s: dict | None, fmt: str) -> str:
+    """A ``spread``'s "median [min, max]" (the median alone for one value; "n/a" for None)."""
     if s is None:
         return "n/a"
     if s["n"] == 1:
@@ -79,7 +80,7 @@ def markdown(records: list[dict], info: dict) -> str:
              "|---|---|---|---|---|---|---|---|---|---|"]
     for g in rows:
         lines.append(f"| {g['scene']} | {g['views']} | {g['method']} | {g['finished']}/{g['runs']} | "
-                     f"{_med_range(g['psnr'], '.2f')} | {_med_range(g['ssim'], '.3f')} | {_med_range(g['lpips'], '.3f')} | "
+                     f"{med_range(g['psnr'], '.2f')} | {med_range(g['ssim'], '.3f')} | {med_range(g['lpips'], '.3f')} | "
                      f"{_f((g['num_gaussians'] or {}).get('median'), '.0f')} | "
                      f"{_f((g['train_time_s'] or {}).get('median'), '.1f')} | {_f((g['wall_s'] or {}).get('median'), '.1f')} |")
     lines += ["", "## Runs: stage times (s)", "",

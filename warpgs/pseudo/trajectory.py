@@ -213,7 +213,7 @@ def guidance_sources(traj: Trajectory, input_centers: np.ndarray, mode: str = "n
 
 def virtual_cameras(cams, frames: int) -> list:
     """``frames`` poses strictly between each pair of neighbouring cameras along their nearest-neighbour
-    path (warpgs.pseudo.trajectory), each with the intrinsics and size of the pair's first camera."""
+    path (``path_trajectories``), each with the intrinsics and size of the pair's first camera."""
     if len(cams) < 2 or frames <= 0:
         return []
     V = np.stack([c.viewmat.detach().cpu().double().numpy() for c in cams])
