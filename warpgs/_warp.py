@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import functools
+import os
 
 import torch
 import warp as wp
@@ -11,6 +12,10 @@ try:  # the ctypes descriptor Warp passes to kernels; private, so fall back to t
     from warp._src.types import array_t
 except ImportError:  # pragma: no cover - other Warp versions
     array_t = None
+try:  # the class of @wp.struct types (private; the fast launch path needs it to walk a struct's fields)
+    from warp._src.codegen import Struct as _WarpStruct
+except ImportError:  # pragma: no cover - other Warp versions
+    from warp.codegen import Struct as _WarpStruct
 
 from warpgs.console import filtered_stderr
 
@@ -31,6 +36,16 @@ def _init() -> None:
         return
     with filtered_stderr([NO_DRIVER_WARNING]):
         wp.init()
+
+
+def native_function(name: str):
+    """A function of Warp's native library by name (private API), or None where this Warp has none."""
+    _init()
+    try:
+        from warp._src.context import runtime
+    except ImportError:  # pragma: no cover - other Warp versions
+        return None
+    return getattr(getattr(runtime, "core", None), name, None)
 
 
 def init() -> None:
@@ -120,3 +135,183 @@ def launch(kernel, dim, inputs, device: str, stream=None) -> None:
     if (isinstance(dim, int) and dim == 0) or (not isinstance(dim, int) and 0 in dim):
         return
     wp.launch(kernel, dim=dim, inputs=inputs, device=device, stream=stream)
+
+
+# ----------------------------------------------------------------------------------------------------
+# the fast launch path: one recorded ``wp.Launch`` per (kernel, device), its packed parameters
+# rewritten in place from torch tensors and Python numbers on every call
+
+_TORCH_OF_WARP = {wp.float32: torch.float32, wp.int32: torch.int32, wp.int64: torch.int64,
+                  wp.uint32: torch.int32, wp.uint64: torch.int64, wp.float64: torch.float64,
+                  wp.int8: torch.int8, wp.uint8: torch.uint8, wp.float16: torch.float16,
+                  float: torch.float32, int: torch.int32}
+
+
+def _array_setter(label: str, atype, c):
+    """Writes a torch tensor into the array descriptor ``c`` (in place) for a kernel argument of Warp
+    array type ``atype``: its data pointer, shape and byte strides, after checking that the tensor
+    has the argument's scalar type and number of dimensions (trailing ones grouped by a vector or
+    matrix dtype) and is contiguous. A wrong tensor raises a ValueError naming the argument."""
+    dtype = atype.dtype
+    inner = tuple(getattr(dtype, "_shape_", ()))
+    scalar = getattr(dtype, "_wp_scalar_type_", dtype)
+    want = _TORCH_OF_WARP.get(scalar)
+    nd = atype.ndim
+    full = nd + len(inner)
+    es = torch.empty((), dtype=want).element_size() if want is not None else 0
+    c.ndim = nd
+    shape, strides = c.shape, c.strides
+
+    def fail(t):
+        raise ValueError(f"kernel argument {label!r} takes a contiguous {want} tensor of "
+                         f"{nd} dimension(s)" + (f" followed by {list(inner)}" if inner else "")
+                         + f", got {t.dtype} {list(t.shape)}" + ("" if t.is_contiguous() else " (not contiguous)"))
+
+    if nd == 1:
+        def set_array(t):
+            shp = t.shape
+            if t.dtype is not want or len(shp) != full or shp[1:] != inner or not t.is_contiguous():
+                fail(t)
+            c.data = t.data_ptr()
+            shape[0] = shp[0]
+            strides[0] = t.stride(0) * es
+        return set_array
+
+    def set_array(t):
+        shp = t.shape
+        if t.dtype is not want or len(shp) != full or shp[nd:] != inner or not t.is_contiguous():
+            fail(t)
+        c.data = t.data_ptr()
+        st = t.stride()
+        for j in range(nd):
+            shape[j] = shp[j]
+            strides[j] = st[j] * es
+    return set_array
+
+
+def _scalar_setter(c):
+    def set_scalar(v):
+        c.value = v
+    return set_scalar
+
+
+def _struct_setter(label: str, stype, c):
+    """Writes a tuple of field values (torch tensors for array fields), in the struct's field order,
+    into the struct's packed value ``c`` in place."""
+    fields = []
+    for name, var in stype.vars.items():
+        sub = getattr(c, name)  # a view into ``c``'s memory for arrays and nested structs
+        if wp.types.is_array(var.type):
+            fields.append(_array_setter(f"{label}.{name}", var.type, sub))
+        elif isinstance(var.type, _WarpStruct):
+            fields.append(_struct_setter(f"{label}.{name}", var.type, sub))
+        else:
+            fields.append(functools.partial(setattr, c, name))
+    n_fields = len(fields)
+
+    def set_struct(values):
+        if len(values) != n_fields:
+            raise ValueError(f"kernel argument {label!r} takes {n_fields} fields "
+                             f"({', '.join(stype.vars)}), got {len(values)}")
+        for f, v in zip(fields, values):
+            f(v)
+    return set_struct
+
+
+class Launcher:
+    """A kernel's launch on one device with its parameters packed once and rewritten in place.
+
+    ``Launcher.of(kernel, device)(dim, stream, *args)`` launches ``kernel`` like ``launch`` does, but
+    takes torch tensors directly for array arguments (their Warp dtype and dimensions come from the
+    kernel's signature) and a tuple of field values for a struct argument; Python numbers for scalars.
+    wp.launch packs every argument anew (type checks, a new descriptor per array); here each call
+    only writes pointers, shapes and numbers into the recorded ``wp.Launch``'s parameter block, several
+    times cheaper per launch, which is what a training step's dozen launches cost on the host.
+    The tensors must stay alive until the call returns (they do: they are its arguments); torch's
+    allocator orders later reuse of their memory after the launch on the stream."""
+
+    _cache: dict = {}
+
+    @classmethod
+    def of(cls, kernel, device: str, slot: int = 0) -> "Launcher":
+        """The launcher of ``kernel`` on ``device``; ``slot``: a separate one (its own parameter block) for
+        each thread that launches the kernel at the same time (``launch_parts``)."""
+        key = (kernel, device, slot)
+        got = cls._cache.get(key)
+        if got is None:
+            _init()
+            got = cls._cache[key] = cls(kernel, device)
+        return got
+
+    def __init__(self, kernel, device: str):
+        self.kernel = kernel
+        self.device = device
+        self.cmd = wp.Launch(kernel, wp.get_device(device))
+        self.dim = None
+        setters = []
+        for i, a in enumerate(kernel.adj.args):
+            c = self.cmd.params[i + 1]
+            if wp.types.is_array(a.type):
+                setters.append(_array_setter(a.label, a.type, c))
+            elif isinstance(a.type, _WarpStruct):
+                setters.append(_struct_setter(a.label, a.type, c))
+            elif hasattr(c, "value"):
+                setters.append(_scalar_setter(c))
+            else:  # vectors and matrices passed by value: Warp's own packing
+                setters.append(functools.partial(self.cmd.set_param_at_index, i))
+        self.setters = setters
+
+    def __call__(self, dim, stream, *args) -> None:
+        if len(args) != len(self.setters):
+            raise TypeError(f"kernel {self.kernel.key!r} takes {len(self.setters)} arguments, got {len(args)}")
+        if dim == 0 or (not isinstance(dim, int) and 0 in dim):
+            return
+        for set_arg, a in zip(self.setters, args):
+            set_arg(a)
+        if dim != self.dim:
+            self.cmd.set_dim(dim)
+            self.dim = dim
+        self.cmd.launch(stream)
+
+
+def fast_launch(kernel, dim, device: str, stream, *args) -> None:
+    """``Launcher.of(kernel, device)(dim, stream, *args)``."""
+    Launcher.of(kernel, device)(dim, stream, *args)
+
+
+@functools.cache
+def _part_pool(workers: int):
+    from concurrent.futures import ThreadPoolExecutor
+
+    return ThreadPoolExecutor(max_workers=workers, thread_name_prefix="warpgs-cpu")
+
+
+def cpu_cores() -> int:
+    """The CPU cores this process may run on."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except (AttributeError, OSError):  # pragma: no cover - not Linux
+        return os.cpu_count() or 1
+
+
+def launch_parts(kernel, dim: int, device: str, n_parts: int, args_of_part) -> None:
+    """Runs the CPU kernel ``kernel`` (taking ``part, n_parts`` as its last two arguments; ``dim``: the whole
+    launch's threads) as ``n_parts`` launches of every n_parts-th thread, ``args_of_part(p)`` giving part p's
+    other arguments. The parts run at the same time on threads of a pool where this process may use more
+    than one core (a Warp CPU kernel runs on one thread and lets go of the GIL), else one after the other;
+    either way each part computes the same thing."""
+    if dim == 0:
+        return
+    per_part = (dim + n_parts - 1) // n_parts
+    if n_parts == 1 or cpu_cores() < 2:
+        for p in range(n_parts):
+            Launcher.of(kernel, device)(per_part, None, *args_of_part(p), p, n_parts)
+        return
+    pool = _part_pool(n_parts - 1)
+    futures = [pool.submit(Launcher.of(kernel, device, p), per_part, None, *args_of_part(p), p, n_parts)
+               for p in range(1, n_parts)]
+    try:
+        Launcher.of(kernel, device)(per_part, None, *args_of_part(0), 0, n_parts)
+    finally:
+        for f in futures:
+            f.result()

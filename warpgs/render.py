@@ -23,11 +23,17 @@ from typing import NamedTuple
 import torch
 import warp as wp
 
-from warpgs._warp import arg, device_of, launch, stream_of, struct_arg, to_wp
+from warpgs._warp import device_of, fast_launch, launch_parts, native_function, stream_of, to_wp
 from warpgs.kernels import binning as kb
 from warpgs.kernels import projection as kp
 from warpgs.kernels import rasterize as kr
 from warpgs.kernels import sh as ksh
+
+
+# The CPU composites in two interleaved halves of the image's tile rows, on two threads where the process
+# may use two cores (``warpgs._warp.launch_parts``; kernels: PARTS_NOTE in warpgs/kernels/rasterize.py).
+# Fixed at 2 whatever the machine, so a CPU run gives the same numbers on one core or two.
+CPU_PARTS = 2
 
 
 def _tile_grid(dev: str, width: int, height: int) -> tuple[int, int, int]:
@@ -48,18 +54,28 @@ class RenderOutput(NamedTuple):
 
 
 def _zeros_like_or(g: torch.Tensor | None, like: torch.Tensor) -> torch.Tensor:
-    return torch.zeros_like(like) if g is None else g.contiguous()
+    """``g`` (an output's gradient), or zeros shaped as ``like`` where the loss did not use that output."""
+    return _zero_input(like.shape, like.device) if g is None else g.contiguous()
 
 
-def _gaussians(means, quats, scales, opacities):
-    """``kp.Gaussians`` viewing the tensors (no copies); also used for the backward's gradient outputs."""
-    return struct_arg(kp.Gaussians, means=means, quats=quats, scales=scales, opacities=opacities)
+_ZERO_INPUTS: dict = {}
+
+
+def _zero_input(shape, device) -> torch.Tensor:
+    """A float32 zero tensor of ``shape`` for a kernel to read (never to write): a view of a per-device buffer
+    that only grows, so a backward pass whose loss leaves out the depth or alpha allocates and clears nothing
+    for their gradients."""
+    n = math.prod(shape)
+    buf = _ZERO_INPUTS.get(device)
+    if buf is None or buf.numel() < n:
+        buf = _ZERO_INPUTS[device] = torch.zeros(n, device=device)
+    return buf[:n].view(shape)
 
 
 def _camera(viewmat, K, width, height, eps2d, antialiased):
-    """``kp.Camera`` of one view: viewmat [4, 4] and K [3, 3] stay on their device as one-element arrays."""
-    return struct_arg(kp.Camera, viewmat=viewmat.reshape(1, 4, 4), intrinsics=K.reshape(1, 3, 3),
-                      width=width, height=height, eps2d=eps2d, antialiased=int(antialiased))
+    """The fields of ``kp.Camera`` for one view: viewmat [4, 4] and K [3, 3] stay on their device as
+    one-element arrays. (A ``kp.Gaussians`` argument is the tuple (means, quats, scales, opacities).)"""
+    return (viewmat.reshape(1, 4, 4), K.reshape(1, 3, 3), width, height, eps2d, int(antialiased))
 
 
 class _Project(torch.autograd.Function):
@@ -76,13 +92,10 @@ class _Project(torch.autograd.Function):
         opac_eff = torch.empty(n, **f)
         radii = torch.empty(n, 2, device=means.device, dtype=torch.int32)
         tiles_touched = torch.empty(n, device=means.device, dtype=torch.int32)
-        launch(
-            kp.project_gaussians_fwd, n,
-            [_gaussians(means, quats, scales, opacities), _camera(viewmat, K, width, height, eps2d, antialiased),
-             near, far, ts, tiles_x, tiles_y,
-             arg(means2d, wp.vec2), arg(conics, wp.vec3), arg(depths), arg(radii, wp.vec2i),
-             arg(opac_eff), arg(tiles_touched)],
-            dev, stream,
+        fast_launch(
+            kp.project_gaussians_fwd, n, dev, stream,
+            (means, quats, scales, opacities), _camera(viewmat, K, width, height, eps2d, antialiased),
+            near, far, ts, tiles_x, tiles_y, means2d, conics, depths, radii, opac_eff, tiles_touched,
         )
         ctx.save_for_backward(means, quats, scales, opacities, viewmat, K, radii, conics)
         ctx.cfg = (width, height, eps2d, antialiased)
@@ -101,15 +114,12 @@ class _Project(torch.autograd.Function):
         v_opacities = torch.empty_like(opacities)
         # the structs are rebuilt from the saved tensors rather than kept on ctx, so that autograd's
         # checks of saved tensors (in-place changes since the forward) cover everything the kernel reads
-        launch(
-            kp.project_gaussians_bwd, n,
-            [_gaussians(means, quats, scales, opacities), _camera(viewmat, K, width, height, eps2d, antialiased),
-             arg(radii, wp.vec2i), arg(conics, wp.vec3),
-             arg(_zeros_like_or(v_means2d, means[:, :2]), wp.vec2),
-             arg(_zeros_like_or(v_conics, conics), wp.vec3),
-             arg(_zeros_like_or(v_depths, opacities)), arg(_zeros_like_or(v_opac_eff, opacities)),
-             _gaussians(v_means, v_quats, v_scales, v_opacities)],
-            dev, stream_of(dev),
+        fast_launch(
+            kp.project_gaussians_bwd, n, dev, stream_of(dev),
+            (means, quats, scales, opacities), _camera(viewmat, K, width, height, eps2d, antialiased),
+            radii, conics, _zeros_like_or(v_means2d, means[:, :2]), _zeros_like_or(v_conics, conics),
+            _zeros_like_or(v_depths, opacities), _zeros_like_or(v_opac_eff, opacities),
+            (v_means, v_quats, v_scales, v_opacities),
         )
         return v_means, v_quats, v_scales, v_opacities, None, None, None, None, None, None, None, None
 
@@ -119,12 +129,8 @@ class _SHColors(torch.autograd.Function):
     def forward(ctx, coeffs, means, campos, radii, degree):
         dev = device_of(means)
         colors = torch.empty(means.shape[0], 3, device=means.device, dtype=torch.float32)
-        launch(
-            ksh.sh_to_color_fwd, means.shape[0],
-            [arg(means, wp.vec3), arg(campos.reshape(1, 3), wp.vec3), arg(coeffs, wp.vec3), degree,
-             arg(radii, wp.vec2i), arg(colors, wp.vec3)],
-            dev, stream_of(dev),
-        )
+        fast_launch(ksh.sh_to_color_fwd, means.shape[0], dev, stream_of(dev),
+                    means, campos.reshape(1, 3), coeffs, degree, radii, colors)
         ctx.save_for_backward(coeffs, means, campos, radii)
         ctx.degree = degree
         return colors
@@ -135,13 +141,9 @@ class _SHColors(torch.autograd.Function):
         dev = device_of(means)
         v_coeffs = torch.empty_like(coeffs)
         v_means = torch.empty_like(means)
-        launch(
-            ksh.sh_to_color_bwd, means.shape[0],
-            [arg(means, wp.vec3), arg(campos.reshape(1, 3), wp.vec3), arg(coeffs, wp.vec3), ctx.degree,
-             arg(radii, wp.vec2i), arg(v_colors.contiguous(), wp.vec3), arg(v_coeffs, wp.vec3),
-             arg(v_means, wp.vec3)],
-            dev, stream_of(dev),
-        )
+        fast_launch(ksh.sh_to_color_bwd, means.shape[0], dev, stream_of(dev),
+                    means, campos.reshape(1, 3), coeffs, ctx.degree, radii, v_colors.contiguous(), v_coeffs,
+                    v_means)
         return v_coeffs, v_means, None, None, None
 
 
@@ -158,25 +160,31 @@ def _bin_gaussians(means2d, radii, depths, tiles_touched, tiles_x, tiles_y):
         return ranges, torch.empty(0, device=means2d.device, dtype=torch.int32), 0
     keys = torch.empty(2 * total, device=means2d.device, dtype=torch.int64)
     values = torch.empty(2 * total, device=means2d.device, dtype=torch.int32)
-    launch(
-        kb.emit_intersections, n,
-        [arg(means2d, wp.vec2), arg(radii, wp.vec2i), arg(depths.view(torch.int32)), arg(offsets),
-         kr.tile_size_for(dev), tiles_x, tiles_y, arg(keys), arg(values)],
-        dev, stream,
-    )
+    fast_launch(kb.emit_intersections, n, dev, stream,
+                means2d, radii, depths.view(torch.int32), offsets, kr.tile_size_for(dev), tiles_x, tiles_y,
+                keys, values)
     tile_bits = int(math.floor(math.log2(n_tiles))) + 1
-    with wp.ScopedStream(stream) if stream is not None else _nullcontext():
-        wp.utils.radix_sort_pairs(to_wp(keys), to_wp(values), total, 0, 32 + tile_bits)
-    launch(kb.tile_ranges_from_keys, total, [arg(keys), total, arg(ranges)], dev, stream)
+    _sort_pairs(keys, values, total, 32 + tile_bits, stream)
+    fast_launch(kb.tile_ranges_from_keys, total, dev, stream, keys, total, ranges)
     return ranges, values[:total], total
 
 
-class _nullcontext:
-    def __enter__(self):
-        return None
-
-    def __exit__(self, *exc):
-        return False
+def _sort_pairs(keys: torch.Tensor, values: torch.Tensor, count: int, end_bit: int, stream) -> None:
+    """Warp's radix sort of the first ``count`` (int64 key, int32 value) pairs by the key bits below ``end_bit``
+    (both buffers hold 2 x count: the sort's double buffer), on ``stream`` (None: the CPU). On CUDA the
+    native sort is called directly on the torch tensors' memory, under a stream scope that does not make the
+    stream wait for Warp's previous one (torch's stream already orders it): ``wp.utils.radix_sort_pairs``'s
+    checks, its two array wrappers and the scope's event cost more host time than the sort's launches."""
+    native = native_function("wp_radix_sort_pairs_int64_device") if stream is not None else None
+    if native is None:
+        if stream is None:
+            wp.utils.radix_sort_pairs(to_wp(keys), to_wp(values), count, 0, end_bit)
+            return
+        with wp.ScopedStream(stream, sync_enter=False):
+            wp.utils.radix_sort_pairs(to_wp(keys), to_wp(values), count, 0, end_bit)
+        return
+    with wp.ScopedStream(stream, sync_enter=False):
+        native(keys.data_ptr(), values.data_ptr(), count, 0, end_bit, 4)
 
 
 class _Composite(torch.autograd.Function):
@@ -189,20 +197,18 @@ class _Composite(torch.autograd.Function):
         n_threads = kr.compositing_threads(dev, ranges.shape[0])
         f = dict(device=means2d.device, dtype=torch.float32)
         splats = torch.empty(means2d.shape[0], 10, **f)
-        launch(kr.pack_splats, means2d.shape[0],
-               [arg(means2d, wp.vec2), arg(conics, wp.vec3), arg(opac_eff), arg(colors, wp.vec3), arg(depths),
-                arg(splats, kr.splat)], dev, stream)
+        fast_launch(kr.pack_splats, means2d.shape[0], dev, stream,
+                    means2d, conics, opac_eff, colors, depths, splats)
         color = torch.empty(height, width, 3, **f)
         depth = torch.empty(height, width, **f)
         alpha = torch.empty(height, width, **f)
         last = torch.empty(height, width, device=means2d.device, dtype=torch.int32)
-        launch(
-            kr.rasterize_fwd_cpu if dev == "cpu" else kr.rasterize_fwd_cuda, n_threads,
-            [arg(ranges), arg(gauss_ids), arg(splats, kr.splat), arg(background.reshape(1, 3), wp.vec3),
-             width, height, tiles_x, alpha_max,
-             arg(color.view(-1, 3), wp.vec3), arg(depth.view(-1)), arg(alpha.view(-1)), arg(last.view(-1))],
-            dev, stream,
-        )
+        args = (ranges, gauss_ids, splats, background.reshape(1, 3), width, height, tiles_x, alpha_max,
+                color.view(-1, 3), depth.view(-1), alpha.view(-1), last.view(-1))
+        if dev == "cpu":  # the parts write disjoint pixels
+            launch_parts(kr.rasterize_fwd_cpu, n_threads, dev, CPU_PARTS, lambda p: args)
+        else:
+            fast_launch(kr.rasterize_fwd_cuda, n_threads, dev, stream, *args, 0, 1)
         ctx.save_for_backward(splats, background, ranges, gauss_ids, depth, alpha, last)
         ctx.cfg = (width, height, alpha_max, deterministic)
         return color, depth, alpha
@@ -217,24 +223,30 @@ class _Composite(torch.autograd.Function):
         # the CPU backend runs one thread, so its float sums are deterministic already
         fixed = bool(deterministic) and (dev != "cpu" or deterministic == "fixed")
         z = dict(device=splats.device, dtype=torch.float32)
-        make = torch.empty if fixed else torch.zeros
-        v_means2d, v_conics, v_colors = make(n, 2, **z), make(n, 3, **z), make(n, 3, **z)
-        v_opac, v_depths = make(n, **z), make(n, **z)
-        v_fixed = torch.zeros(n if fixed else 0, 10, device=splats.device, dtype=torch.int64)
-        launch(
-            kr.rasterize_bwd_cpu if dev == "cpu" else kr.rasterize_bwd_cuda,
-            kr.compositing_threads(dev, ranges.shape[0]),
-            [arg(ranges), arg(gauss_ids), arg(splats, kr.splat), arg(background.reshape(1, 3), wp.vec3),
-             width, height, tiles_x, alpha_max, arg(depth.view(-1)), arg(alpha.view(-1)), arg(last.view(-1)),
-             arg(_zeros_like_or(v_color, alpha.new_empty(height, width, 3)).view(-1, 3), wp.vec3),
-             arg(_zeros_like_or(v_depth, alpha).view(-1)), arg(_zeros_like_or(v_alpha, alpha).view(-1)),
-             int(fixed), arg(v_fixed),
-             arg(v_means2d, wp.vec2), arg(v_conics, wp.vec3), arg(v_opac), arg(v_colors, wp.vec3), arg(v_depths)],
-            dev, stream_of(dev),
-        )
+
+        def grad_buffers(make):  # (v_fixed, v_means2d, v_conics, v_opac, v_colors, v_depths)
+            return (torch.zeros(n if fixed else 0, 10, device=splats.device, dtype=torch.int64),
+                    make(n, 2, **z), make(n, 3, **z), make(n, **z), make(n, 3, **z), make(n, **z))
+
+        grads = grad_buffers(torch.empty if fixed else torch.zeros)
+        v_fixed, v_means2d, v_conics, v_opac, v_colors, v_depths = grads
+        stream = stream_of(dev)
+        args = (ranges, gauss_ids, splats, background.reshape(1, 3), width, height, tiles_x, alpha_max,
+                depth.view(-1), alpha.view(-1), last.view(-1),
+                (_zero_input((height, width, 3), alpha.device) if v_color is None else v_color.contiguous()).view(-1, 3),
+                _zeros_like_or(v_depth, alpha).view(-1), _zeros_like_or(v_alpha, alpha).view(-1), int(fixed))
+        n_threads = kr.compositing_threads(dev, ranges.shape[0])
+        if dev == "cpu":
+            # each part adds into buffers of its own (a CPU "atomic" add is a plain one), summed in part order
+            parts = [grads] + [grad_buffers(torch.zeros) for _ in range(CPU_PARTS - 1)]
+            launch_parts(kr.rasterize_bwd_cpu, n_threads, dev, CPU_PARTS, lambda p: args + parts[p])
+            for extra in parts[1:]:
+                for total, t in zip(grads, extra):
+                    total += t
+        else:
+            fast_launch(kr.rasterize_bwd_cuda, n_threads, dev, stream, *args, *grads, 0, 1)
         if fixed and n:
-            launch(kr.fixed_to_grads, n, [arg(v_fixed), arg(v_means2d, wp.vec2), arg(v_conics, wp.vec3), arg(v_opac),
-                                          arg(v_colors, wp.vec3), arg(v_depths)], dev, stream_of(dev))
+            fast_launch(kr.fixed_to_grads, n, dev, stream, v_fixed, v_means2d, v_conics, v_opac, v_colors, v_depths)
         return v_means2d, v_conics, v_opac, v_colors, v_depths, None, None, None, None, None, None, None
 
 

@@ -368,8 +368,14 @@ def _compositing_kernels(cuda: bool):
         out_depth: wp.array(dtype=float),
         out_alpha: wp.array(dtype=float),
         last_count: wp.array(dtype=wp.int32),
+        part: int,
+        n_parts: int,
     ):
         tid = wp.tid()
+        if not wp.static(cuda):  # the CPU's interleaved parts (see PARTS_NOTE)
+            tid = tid * n_parts + part
+            if tid >= ranges.shape[0] * wp.static(tile_size * tile_size):
+                return
         tile, x, y = pixel_of_thread(tid, tiles_x, wp.static(tile_size))
         inside = x < width and y < height
         px = float(x) + 0.5
@@ -437,9 +443,15 @@ def _compositing_kernels(cuda: bool):
         v_opacities: wp.array(dtype=float),
         v_colors: wp.array(dtype=wp.vec3),
         v_depths: wp.array(dtype=float),
+        part: int,
+        n_parts: int,
     ):
-        # No early return: every lane of a warp must reach the shuffles below.
+        # No early return on CUDA: every lane of a warp must reach the shuffles below.
         tid = wp.tid()
+        if not wp.static(cuda):  # the CPU's interleaved parts (see PARTS_NOTE)
+            tid = tid * n_parts + part
+            if tid >= ranges.shape[0] * wp.static(tile_size * tile_size):
+                return
         tile, x, y = pixel_of_thread(tid, tiles_x, wp.static(tile_size))
         inside = x < width and y < height
         start = ranges[tile, 0]
@@ -548,8 +560,12 @@ def rasterize_fwd_cpu(
     out_depth: wp.array(dtype=float),
     out_alpha: wp.array(dtype=float),
     last_count: wp.array(dtype=wp.int32),
+    part: int,
+    n_parts: int,
 ):
-    tid = wp.tid()
+    tid = wp.tid() * n_parts + part  # see PARTS_NOTE
+    if tid >= ranges.shape[0] * TILE_SIZE_CPU:
+        return
     tile, x0, y = row_of_thread(tid, tiles_x)
     if y >= height or x0 >= width:
         return
@@ -617,8 +633,12 @@ def rasterize_bwd_cpu(
     v_opacities: wp.array(dtype=float),
     v_colors: wp.array(dtype=wp.vec3),
     v_depths: wp.array(dtype=float),
+    part: int,
+    n_parts: int,
 ):
-    tid = wp.tid()
+    tid = wp.tid() * n_parts + part  # see PARTS_NOTE
+    if tid >= ranges.shape[0] * TILE_SIZE_CPU:
+        return
     tile, x0, y = row_of_thread(tid, tiles_x)
     if y >= height or x0 >= width:
         return
@@ -673,6 +693,15 @@ def rasterize_bwd_cpu(
         accumulate_grad(any_valid, g, total, fixed, v_fixed, v_means2d, v_conics, v_opacities, v_colors, v_depths)
 
 
+# PARTS_NOTE: Warp's CPU backend runs a kernel on one thread. The compositing kernels take (part, n_parts):
+# on the CPU, launch ``part`` of ``n_parts`` runs every n_parts-th thread of the whole launch (tile rows,
+# interleaved, so the parts cost about the same), and the caller runs the parts on threads of its own
+# (ctypes lets go of the GIL while a kernel runs). Each part's backward adds its gradients into buffers of
+# its own, summed in part order afterwards, so the result does not depend on how many cores ran them.
+# CUDA ignores both (one launch, part 0 of 1).
+
+
 def compositing_threads(device: str, n_tiles: int) -> int:
-    """The launch size of ``device``'s compositing kernels: a thread per pixel on CUDA, per tile row on the CPU."""
+    """The launch size of ``device``'s compositing kernels: a thread per pixel on CUDA, per tile row on the CPU
+    (all parts together)."""
     return n_tiles * (TILE_SIZE_CPU if device == "cpu" else BLOCK)

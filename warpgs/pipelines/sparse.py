@@ -33,6 +33,7 @@ import argparse
 import copy
 import json
 import sys
+import time
 from pathlib import Path
 
 from warpgs import losses
@@ -322,6 +323,7 @@ def main(argv=None) -> int:
     from warpgs.train import CheckpointError, prepare_geometry
 
     args = build_parser().parse_args(argv)
+    started = time.perf_counter()
     folder = None
     try:
         try:
@@ -341,7 +343,9 @@ def main(argv=None) -> int:
             print(f"error: {e}", file=sys.stderr)
             return 2
         if cfg.method != "compare":
-            return 1 if run_method(cfg.method, cfg, scene, out, resume).get("stopped_early") else 0
+            stopped = run_method(cfg.method, cfg, scene, out, resume).get("stopped_early")
+            print_total_time(started)
+            return 1 if stopped else 0
         out.mkdir(parents=True, exist_ok=True)
         save_config(cfg, out / "config.yaml")
         hint = f"--resume {out}"
@@ -351,12 +355,19 @@ def main(argv=None) -> int:
             base = run_method("baseline", cfg, scene, out / "baseline", resume, resume_hint=hint)
             full = run_method("full", cfg, scene, out / "full", resume, baseline_metrics=base, resume_hint=hint)
         print_side_by_side(base, full, out)
+        print_total_time(started)
         return 1 if base.get("stopped_early") or full.get("stopped_early") else 0
     except RunStopped as e:
         return e.code
     finally:
         if folder is not None:
             folder.release()
+
+
+def print_total_time(started: float) -> None:
+    """The run's wall-clock time from the command's start (loading, geometry, training, evaluation, writing)."""
+    m, sec = divmod(time.perf_counter() - started, 60)
+    print(f"warpgs: finished in {int(m)}m{sec:04.1f}s (wall clock, the whole command)")
 
 
 def compare_in_parallel(args, cfg) -> bool:
