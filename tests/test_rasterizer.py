@@ -423,3 +423,22 @@ def test_cpu_row_kernels_match_the_per_pixel_kernels(monkeypatch):
         assert torch.equal(getattr(rows, name), getattr(pixels, name)), name
     for k in g_rows:
         assert_close(g_rows[k], g_pixels[k], atol=1e-6, rtol=1e-4, what=f"d/d{k}")
+
+
+@pytest.mark.parametrize("deterministic", [True, "fixed"])
+def test_backward_without_the_depth_equals_a_zero_depth_weight(deterministic):
+    """A loss that leaves the depth out gets None for its gradient and the backward kernel skips the depth
+    terms (``with_depth`` = 0); the gradients must be those of the same loss plus 0 x depth (which runs the
+    depth terms with dL/ddepth = 0), bit for bit, through the float and the fixed-point sums."""
+    scene = make_scene(n=300, width=37, height=21, seed=3, scale_range=(0.05, 0.3), spread=0.9)
+    w = torch.rand(21, 37, 3, generator=torch.Generator().manual_seed(4))
+    grads = []
+    for depth_weight in (None, 0.0):
+        out, ins = run_warp(scene, "cpu", grad=True, deterministic=deterministic)
+        loss = (out.image * w).sum() + 0.3 * out.alpha.sum()
+        if depth_weight is not None:
+            loss = loss + depth_weight * out.depth.sum()
+        loss.backward()
+        grads.append({k: v.grad.clone() for k, v in ins.items()})
+    assert all(torch.equal(grads[0][k], grads[1][k]) for k in grads[0])
+    assert all(float(g.abs().sum()) > 0 for g in grads[0].values())

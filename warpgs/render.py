@@ -211,6 +211,9 @@ class _Composite(torch.autograd.Function):
             fast_launch(kr.rasterize_fwd_cuda, n_threads, dev, stream, *args, 0, 1)
         ctx.save_for_backward(splats, background, ranges, gauss_ids, depth, alpha, last)
         ctx.cfg = (width, height, alpha_max, deterministic)
+        # an output the loss does not use gets None in backward, not a zero tensor: no allocation, and a
+        # loss without the depth skips its terms in the kernel
+        ctx.set_materialize_grads(False)
         return color, depth, alpha
 
     @staticmethod
@@ -234,7 +237,8 @@ class _Composite(torch.autograd.Function):
         args = (ranges, gauss_ids, splats, background.reshape(1, 3), width, height, tiles_x, alpha_max,
                 depth.view(-1), alpha.view(-1), last.view(-1),
                 (_zero_input((height, width, 3), alpha.device) if v_color is None else v_color.contiguous()).view(-1, 3),
-                _zeros_like_or(v_depth, alpha).view(-1), _zeros_like_or(v_alpha, alpha).view(-1), int(fixed))
+                _zeros_like_or(v_depth, alpha).view(-1), _zeros_like_or(v_alpha, alpha).view(-1), int(fixed),
+                int(v_depth is not None))  # with_depth: a loss without the depth skips its (zero) terms
         n_threads = kr.compositing_threads(dev, ranges.shape[0])
         if dev == "cpu":
             # each part adds into buffers of its own (a CPU "atomic" add is a plain one), summed in part order

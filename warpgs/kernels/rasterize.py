@@ -182,9 +182,11 @@ def pixel_grad_inputs(inside: bool, pix: int, start: int, last_count: wp.array(d
 
 @wp.func
 def splat_backward(s: splat, px: float, py: float, alpha_max: float, T: float, S_c: wp.vec3, S_d: float,
-                   vC: wp.vec3, vD: float, vA_bg: float, T_final: float):
+                   vC: wp.vec3, vD: float, vA_bg: float, T_final: float, with_depth: int):
     """One Gaussian of a pixel, back to front: -> (valid, T in front of it, S_c, S_d, its gradient).
-    S_c, S_d: sums over the Gaussians behind of w_j c_j and w_j z_j; vA_bg = dL/dA - background . dL/dC."""
+    S_c, S_d: sums over the Gaussians behind of w_j c_j and w_j z_j; vA_bg = dL/dA - background . dL/dC.
+    ``with_depth`` = 0 (the loss does not use the depth, vD = 0): the depth terms, all zero, are skipped; the
+    other sums are the same floats in the same order."""
     g = grad10()
     dx = s[0] - px
     dy = s[1] - py
@@ -201,9 +203,13 @@ def splat_backward(s: splat, px: float, py: float, alpha_max: float, T: float, S
     fac = alpha * T
     c = wp.vec3(s[6], s[7], s[8])
     z = s[9]
-    v_alpha = (wp.dot(c, vC) * T - wp.dot(S_c, vC) * ra) + (z * T - S_d * ra) * vD + T_final * ra * vA_bg
+    v_alpha = float(0.0)
+    if with_depth != 0:
+        v_alpha = (wp.dot(c, vC) * T - wp.dot(S_c, vC) * ra) + (z * T - S_d * ra) * vD + T_final * ra * vA_bg
+        S_d = S_d + fac * z
+    else:
+        v_alpha = (wp.dot(c, vC) * T - wp.dot(S_c, vC) * ra) + T_final * ra * vA_bg
     S_c = S_c + fac * c
-    S_d = S_d + fac * z
     v_sigma = float(0.0)
     vop = float(0.0)
     if o * vis <= alpha_max:  # the alpha clamp passes no gradient
@@ -229,25 +235,31 @@ def to_fixed(v: float) -> wp.int64:
 
 
 @wp.func
-def accumulate_grad(valid: int, gid: int, g: grad10, fixed: int, v_fixed: wp.array2d(dtype=wp.int64),
+def accumulate_grad(valid: int, gid: int, g: grad10, fixed: int, with_depth: int, v_fixed: wp.array2d(dtype=wp.int64),
                     v_means2d: wp.array(dtype=wp.vec2), v_conics: wp.array(dtype=wp.vec3),
                     v_opacities: wp.array(dtype=float), v_colors: wp.array(dtype=wp.vec3),
                     v_depths: wp.array(dtype=float)):
     """Sums a Gaussian's gradient over the warp (CUDA) and adds it once, as floats or (``fixed``) as
     fixed-point integers into ``v_fixed`` [N, 10]; every lane must call this."""
     if warp_any(valid) != 0:
+        d = float(0.0)
+        if with_depth != 0:  # else every lane's depth term is 0
+            d = warp_sum(g[9])
         r = grad10(warp_sum(g[0]), warp_sum(g[1]), warp_sum(g[2]), warp_sum(g[3]), warp_sum(g[4]),
-                   warp_sum(g[5]), warp_sum(g[6]), warp_sum(g[7]), warp_sum(g[8]), warp_sum(g[9]))
+                   warp_sum(g[5]), warp_sum(g[6]), warp_sum(g[7]), warp_sum(g[8]), d)
         if warp_leader() != 0:
             if fixed != 0:
-                for c in range(10):
+                for c in range(9):
                     wp.atomic_add(v_fixed, gid, c, to_fixed(r[c]))
+                if with_depth != 0:
+                    wp.atomic_add(v_fixed, gid, 9, to_fixed(r[9]))
             else:
                 wp.atomic_add(v_means2d, gid, wp.vec2(r[0], r[1]))
                 wp.atomic_add(v_conics, gid, wp.vec3(r[2], r[3], r[4]))
                 wp.atomic_add(v_opacities, gid, r[5])
                 wp.atomic_add(v_colors, gid, wp.vec3(r[6], r[7], r[8]))
-                wp.atomic_add(v_depths, gid, r[9])
+                if with_depth != 0:
+                    wp.atomic_add(v_depths, gid, r[9])
 
 
 @wp.kernel
@@ -437,6 +449,7 @@ def _compositing_kernels(cuda: bool):
         # gradients, accumulated with atomics (zero-initialised by the caller): floats, or with ``fixed``
         # fixed-point integers in v_fixed [N, 10] (see accumulate_grad)
         fixed: int,
+        with_depth: int,  # 0: the loss does not use the depth (see splat_backward)
         v_fixed: wp.array2d(dtype=wp.int64),
         v_means2d: wp.array(dtype=wp.vec2),
         v_conics: wp.array(dtype=wp.vec3),
@@ -489,8 +502,8 @@ def _compositing_kernels(cuda: bool):
                     grad = grad10()
                     if inside and k < last:
                         valid, T, S_c, S_d, grad = splat_backward(s, px, py, alpha_max, T, S_c, S_d, vC, vD, vA_bg,
-                                                                  T_final)
-                    accumulate_grad(valid, g, grad, fixed, v_fixed, v_means2d, v_conics, v_opacities, v_colors,
+                                                                  T_final, with_depth)
+                    accumulate_grad(valid, g, grad, fixed, with_depth, v_fixed, v_means2d, v_conics, v_opacities, v_colors,
                                     v_depths)
         else:
             g_nxt = int(0)
@@ -508,8 +521,10 @@ def _compositing_kernels(cuda: bool):
                 valid = int(0)
                 grad = grad10()
                 if inside and k < last:
-                    valid, T, S_c, S_d, grad = splat_backward(s, px, py, alpha_max, T, S_c, S_d, vC, vD, vA_bg, T_final)
-                accumulate_grad(valid, g, grad, fixed, v_fixed, v_means2d, v_conics, v_opacities, v_colors, v_depths)
+                    valid, T, S_c, S_d, grad = splat_backward(s, px, py, alpha_max, T, S_c, S_d, vC, vD, vA_bg, T_final,
+                                                              with_depth)
+                accumulate_grad(valid, g, grad, fixed, with_depth, v_fixed, v_means2d, v_conics, v_opacities, v_colors,
+                                v_depths)
 
     suffix = "_cuda" if cuda else ""
     return (wp.kernel(rasterize_fwd, name="rasterize_fwd" + suffix),
@@ -627,6 +642,7 @@ def rasterize_bwd_cpu(
     v_out_depth: wp.array(dtype=float),
     v_out_alpha: wp.array(dtype=float),
     fixed: int,
+    with_depth: int,
     v_fixed: wp.array2d(dtype=wp.int64),
     v_means2d: wp.array(dtype=wp.vec2),
     v_conics: wp.array(dtype=wp.vec3),
@@ -681,7 +697,8 @@ def rasterize_bwd_cpu(
             if k < last[i]:
                 valid, t, sc, sd, gi = splat_backward(s, float(x0 + i) + 0.5, py, alpha_max, T[i],
                                                       wp.vec3(SR[i], SG[i], SB[i]), SD[i],
-                                                      wp.vec3(vR[i], vG[i], vB[i]), vD[i], vA_bg[i], T_final[i])
+                                                      wp.vec3(vR[i], vG[i], vB[i]), vD[i], vA_bg[i], T_final[i],
+                                                      with_depth)
                 if valid != 0:
                     T[i] = t
                     SR[i] = sc[0]
@@ -690,7 +707,8 @@ def rasterize_bwd_cpu(
                     SD[i] = sd
                     total = total + gi
                     any_valid = 1
-        accumulate_grad(any_valid, g, total, fixed, v_fixed, v_means2d, v_conics, v_opacities, v_colors, v_depths)
+        accumulate_grad(any_valid, g, total, fixed, with_depth, v_fixed, v_means2d, v_conics, v_opacities, v_colors,
+                        v_depths)
 
 
 # PARTS_NOTE: Warp's CPU backend runs a kernel on one thread. The compositing kernels take (part, n_parts):
