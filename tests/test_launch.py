@@ -100,3 +100,31 @@ def test_cpu_compositing_gives_the_same_numbers_on_one_core_and_two(monkeypatch)
         assert torch.equal(getattr(o1, name), getattr(o2, name)), name
     assert g1.keys() == g2.keys() and all(torch.equal(g1[k], g2[k]) for k in g1)
     assert all(float(g.abs().sum()) > 0 for g in g1.values())
+
+
+def test_launch_parts_work_in_a_forked_child_after_the_parent_used_its_threads(monkeypatch):
+    """A process forked after the parent ran parts on its thread pool has none of those threads: the child
+    must make its own pool rather than wait forever on the parent's."""
+    import multiprocessing as mp
+
+    monkeypatch.setattr(W, "cpu_cores", lambda: 2)
+    x = torch.rand(301)
+    got = torch.zeros(301)
+    launch_parts(_strided, 301, "cpu", 2, lambda p: (x, got))  # the parent's pool now exists
+    ctx = mp.get_context("fork")
+    q = ctx.Queue()
+    proc = ctx.Process(target=_child_parts, args=(x, q))
+    proc.start()
+    proc.join(timeout=60)
+    alive = proc.is_alive()
+    if alive:
+        proc.kill()
+    assert not alive, "the forked child hung on its parent's thread pool"
+    assert q.get(timeout=5) == got.tolist()
+
+
+def _child_parts(x, q):
+    W.cpu_cores = lambda: 2
+    out = torch.zeros(301)
+    launch_parts(_strided, 301, "cpu", 2, lambda p: (x, out))
+    q.put(out.tolist())

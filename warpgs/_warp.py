@@ -280,7 +280,9 @@ def fast_launch(kernel, dim, device: str, stream, *args) -> None:
 
 
 @functools.cache
-def _part_pool(workers: int):
+def _part_pool(workers: int, pid: int):
+    """The threads of ``launch_parts``, one pool per process (``pid``: a forked child has none of its
+    parent's threads, so it makes its own)."""
     from concurrent.futures import ThreadPoolExecutor
 
     return ThreadPoolExecutor(max_workers=workers, thread_name_prefix="warpgs-cpu")
@@ -307,7 +309,7 @@ def launch_parts(kernel, dim: int, device: str, n_parts: int, args_of_part) -> N
         for p in range(n_parts):
             Launcher.of(kernel, device)(per_part, None, *args_of_part(p), p, n_parts)
         return
-    pool = _part_pool(n_parts - 1)
+    pool = _part_pool(n_parts - 1, os.getpid())
     futures = [pool.submit(Launcher.of(kernel, device, p), per_part, None, *args_of_part(p), p, n_parts)
                for p in range(1, n_parts)]
     try:
