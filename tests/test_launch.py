@@ -128,3 +128,37 @@ def _child_parts(x, q):
     out = torch.zeros(301)
     launch_parts(_strided, 301, "cpu", 2, lambda p: (x, out))
     q.put(out.tolist())
+
+
+def test_threads_launching_one_kernel_at_once_each_get_their_own_arguments():
+    """Launchers are per thread: two threads launching the same kernel with different tensors and numbers at
+    the same time (a viewer serving two clients) must each get exactly their own result."""
+    import threading
+
+    g = torch.Generator().manual_seed(5)
+    inputs = [(torch.rand(6, 3, generator=g), torch.rand(6, 3, generator=g), float(k), k) for k in range(2)]
+    wrong = []
+
+    def work(a, x, scale, shift):
+        want = scale * x + a + shift
+        for _ in range(300):
+            out = torch.zeros(6, 3)
+            fast_launch(_axpy, (6, 3), "cpu", None, (a, scale), x, shift, out)
+            if not torch.equal(out, want):
+                wrong.append(shift)
+                return
+
+    import sys
+
+    interval = sys.getswitchinterval()
+    sys.setswitchinterval(1e-6)  # switch threads between almost any two bytecodes: races show up
+    try:
+        threads = [threading.Thread(target=work, args=args) for args in inputs]
+        for t in threads:
+            t.start()
+        for t in threads:
+            t.join()
+    finally:
+        sys.setswitchinterval(interval)
+    assert not wrong
+    assert Launcher.of(_axpy, "cpu") is Launcher.of(_axpy, "cpu")  # one per thread, reused

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import functools
 import os
+import threading
 
 import torch
 import warp as wp
@@ -230,17 +231,20 @@ class Launcher:
     The tensors must stay alive until the call returns (they do: they are its arguments); torch's
     allocator orders later reuse of their memory after the launch on the stream."""
 
-    _cache: dict = {}
+    _local = threading.local()  # launchers per thread: two threads never share a parameter block
 
     @classmethod
-    def of(cls, kernel, device: str, slot: int = 0) -> "Launcher":
-        """The launcher of ``kernel`` on ``device``; ``slot``: a separate one (its own parameter block) for
-        each thread that launches the kernel at the same time (``launch_parts``)."""
-        key = (kernel, device, slot)
-        got = cls._cache.get(key)
+    def of(cls, kernel, device: str) -> "Launcher":
+        """This thread's launcher of ``kernel`` on ``device`` (a viewer serving two clients, or the parts of
+        ``launch_parts``, launch from several threads at once)."""
+        cache = getattr(cls._local, "cache", None)
+        if cache is None:
+            cache = cls._local.cache = {}
+        key = (kernel, device)
+        got = cache.get(key)
         if got is None:
             _init()
-            got = cls._cache[key] = cls(kernel, device)
+            got = cache[key] = cls(kernel, device)
         return got
 
     def __init__(self, kernel, device: str):
@@ -252,6 +256,10 @@ class Launcher:
         for i, a in enumerate(kernel.adj.args):
             c = self.cmd.params[i + 1]
             if wp.types.is_array(a.type):
+                # a descriptor of this launcher's own: wp.Launch's default is the annotation's cached one, which
+                # every launcher of the kernel (and Warp itself, for a None argument) would share
+                c = type(c)()
+                self.cmd.set_param_at_index_from_ctype(i, c)
                 setters.append(_array_setter(a.label, a.type, c))
             elif isinstance(a.type, _WarpStruct):
                 setters.append(_struct_setter(a.label, a.type, c))
@@ -296,6 +304,11 @@ def cpu_cores() -> int:
         return os.cpu_count() or 1
 
 
+def _launch_here(kernel, device: str, dim, *args) -> None:
+    """A CPU launch with the calling thread's launcher (a pool thread's own)."""
+    Launcher.of(kernel, device)(dim, None, *args)
+
+
 def launch_parts(kernel, dim: int, device: str, n_parts: int, args_of_part) -> None:
     """Runs the CPU kernel ``kernel`` (taking ``part, n_parts`` as its last two arguments; ``dim``: the whole
     launch's threads) as ``n_parts`` launches of every n_parts-th thread, ``args_of_part(p)`` giving part p's
@@ -310,7 +323,7 @@ def launch_parts(kernel, dim: int, device: str, n_parts: int, args_of_part) -> N
             Launcher.of(kernel, device)(per_part, None, *args_of_part(p), p, n_parts)
         return
     pool = _part_pool(n_parts - 1, os.getpid())
-    futures = [pool.submit(Launcher.of(kernel, device, p), per_part, None, *args_of_part(p), p, n_parts)
+    futures = [pool.submit(_launch_here, kernel, device, per_part, *args_of_part(p), p, n_parts)
                for p in range(1, n_parts)]
     try:
         Launcher.of(kernel, device)(per_part, None, *args_of_part(0), 0, n_parts)
