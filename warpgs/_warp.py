@@ -39,8 +39,10 @@ def _init() -> None:
         wp.init()
 
 
+@functools.cache
 def native_function(name: str):
-    """A function of Warp's native library by name (private API), or None where this Warp has none."""
+    """A function of Warp's native library by name (private API), or None where this Warp has none; looked up
+    once per name."""
     _init()
     try:
         from warp._src.context import runtime
@@ -102,38 +104,14 @@ def arg(t: torch.Tensor, dtype=None):
     return d
 
 
-def struct_arg(struct, **fields):
-    """An instance of the ``@wp.struct`` class ``struct`` with ``fields`` set, for a kernel argument.
-
-    A torch tensor given for an array field becomes the same zero-copy descriptor as ``arg`` (the field's
-    dtype groups trailing dims), written straight into the instance's native struct: Warp's own field
-    setter accepts only a ``wp.array``, and wrapping each tensor in one (``to_wp``) costs several times
-    more per launch. Reading such a field back in Python gives None; kernels see the tensor. Other
-    values are set as Warp sets them. The instance holds references to its tensors, as ``arg``'s
-    descriptors do."""
-    inst = struct()
-    tensors = []
-    for name, value in fields.items():
-        if not isinstance(value, torch.Tensor):
-            setattr(inst, name, value)
-            continue
-        field = struct.vars[name].type
-        if array_t is None:  # pragma: no cover - other Warp versions
-            setattr(inst, name, to_wp(value, field.dtype))
-        else:
-            d = arg(value, field.dtype)
-            if d.ndim != field.ndim:
-                raise ValueError(f"struct field {name!r} takes a {field.ndim}-d array of {field.dtype.__name__}, "
-                                 f"got a tensor of shape {tuple(value.shape)}")
-            setattr(inst._ctype, name, d)
-        tensors.append(value)
-    inst.__dict__["_tensors"] = tensors  # StructInstance.__setattr__ admits only the struct's fields
-    return inst
+def no_threads(dim) -> bool:
+    """Whether a launch of ``dim`` (an int or a tuple of them) runs no thread at all."""
+    return dim == 0 if isinstance(dim, int) else 0 in dim
 
 
 def launch(kernel, dim, inputs, device: str, stream=None) -> None:
     _init()
-    if (isinstance(dim, int) and dim == 0) or (not isinstance(dim, int) and 0 in dim):
+    if no_threads(dim):
         return
     wp.launch(kernel, dim=dim, inputs=inputs, device=device, stream=stream)
 
@@ -272,7 +250,7 @@ class Launcher:
     def __call__(self, dim, stream, *args) -> None:
         if len(args) != len(self.setters):
             raise TypeError(f"kernel {self.kernel.key!r} takes {len(self.setters)} arguments, got {len(args)}")
-        if dim == 0 or (not isinstance(dim, int) and 0 in dim):
+        if no_threads(dim):
             return
         for set_arg, a in zip(self.setters, args):
             set_arg(a)
@@ -305,7 +283,7 @@ def cpu_cores() -> int:
 
 
 def _launch_here(kernel, device: str, dim, *args) -> None:
-    """A CPU launch with the calling thread's launcher (a pool thread's own)."""
+    """A CPU launch with the calling thread's launcher (in a pool thread, that thread's own)."""
     Launcher.of(kernel, device)(dim, None, *args)
 
 
@@ -320,13 +298,13 @@ def launch_parts(kernel, dim: int, device: str, n_parts: int, args_of_part) -> N
     per_part = (dim + n_parts - 1) // n_parts
     if n_parts == 1 or cpu_cores() < 2:
         for p in range(n_parts):
-            Launcher.of(kernel, device)(per_part, None, *args_of_part(p), p, n_parts)
+            _launch_here(kernel, device, per_part, *args_of_part(p), p, n_parts)
         return
     pool = _part_pool(n_parts - 1, os.getpid())
     futures = [pool.submit(_launch_here, kernel, device, per_part, *args_of_part(p), p, n_parts)
                for p in range(1, n_parts)]
     try:
-        Launcher.of(kernel, device)(per_part, None, *args_of_part(0), 0, n_parts)
+        _launch_here(kernel, device, per_part, *args_of_part(0), 0, n_parts)
     finally:
         for f in futures:
             f.result()

@@ -53,9 +53,10 @@ class RenderOutput(NamedTuple):
     n_intersections: int
 
 
-def _zeros_like_or(g: torch.Tensor | None, like: torch.Tensor) -> torch.Tensor:
-    """``g`` (an output's gradient), or zeros shaped as ``like`` where the loss did not use that output."""
-    return _zero_input(like.shape, like.device) if g is None else g.contiguous()
+def _grad_or_zeros(g: torch.Tensor | None, shape, device) -> torch.Tensor:
+    """``g`` (an output's gradient), or zeros of ``shape`` (``_zero_input``) where the loss did not use that
+    output."""
+    return _zero_input(shape, device) if g is None else g.contiguous()
 
 
 _ZERO_INPUTS: dict = {}
@@ -117,8 +118,9 @@ class _Project(torch.autograd.Function):
         fast_launch(
             kp.project_gaussians_bwd, n, dev, stream_of(dev),
             (means, quats, scales, opacities), _camera(viewmat, K, width, height, eps2d, antialiased),
-            radii, conics, _zeros_like_or(v_means2d, means[:, :2]), _zeros_like_or(v_conics, conics),
-            _zeros_like_or(v_depths, opacities), _zeros_like_or(v_opac_eff, opacities),
+            radii, conics, _grad_or_zeros(v_means2d, (n, 2), means.device),
+            _grad_or_zeros(v_conics, conics.shape, means.device), _grad_or_zeros(v_depths, (n,), means.device),
+            _grad_or_zeros(v_opac_eff, (n,), means.device),
             (v_means, v_quats, v_scales, v_opacities),
         )
         return v_means, v_quats, v_scales, v_opacities, None, None, None, None, None, None, None, None
@@ -175,16 +177,15 @@ def _sort_pairs(keys: torch.Tensor, values: torch.Tensor, count: int, end_bit: i
     native sort is called directly on the torch tensors' memory, under a stream scope that does not make the
     stream wait for Warp's previous one (torch's stream already orders it): ``wp.utils.radix_sort_pairs``'s
     checks, its two array wrappers and the scope's event cost more host time than the sort's launches."""
-    native = native_function("wp_radix_sort_pairs_int64_device") if stream is not None else None
-    if native is None:
-        if stream is None:
-            wp.utils.radix_sort_pairs(to_wp(keys), to_wp(values), count, 0, end_bit)
-            return
-        with wp.ScopedStream(stream, sync_enter=False):
-            wp.utils.radix_sort_pairs(to_wp(keys), to_wp(values), count, 0, end_bit)
+    if stream is None:
+        wp.utils.radix_sort_pairs(to_wp(keys), to_wp(values), count, 0, end_bit)
         return
+    native = native_function("wp_radix_sort_pairs_int64_device")
     with wp.ScopedStream(stream, sync_enter=False):
-        native(keys.data_ptr(), values.data_ptr(), count, 0, end_bit, 4)
+        if native is None:  # pragma: no cover - other Warp versions
+            wp.utils.radix_sort_pairs(to_wp(keys), to_wp(values), count, 0, end_bit)
+        else:
+            native(keys.data_ptr(), values.data_ptr(), count, 0, end_bit, 4)
 
 
 class _Composite(torch.autograd.Function):
@@ -236,8 +237,9 @@ class _Composite(torch.autograd.Function):
         stream = stream_of(dev)
         args = (ranges, gauss_ids, splats, background.reshape(1, 3), width, height, tiles_x, alpha_max,
                 depth.view(-1), alpha.view(-1), last.view(-1),
-                (_zero_input((height, width, 3), alpha.device) if v_color is None else v_color.contiguous()).view(-1, 3),
-                _zeros_like_or(v_depth, alpha).view(-1), _zeros_like_or(v_alpha, alpha).view(-1), int(fixed),
+                _grad_or_zeros(v_color, (height, width, 3), alpha.device).view(-1, 3),
+                _grad_or_zeros(v_depth, alpha.shape, alpha.device).view(-1),
+                _grad_or_zeros(v_alpha, alpha.shape, alpha.device).view(-1), int(fixed),
                 int(v_depth is not None))  # with_depth: a loss without the depth skips its (zero) terms
         n_threads = kr.compositing_threads(dev, ranges.shape[0])
         if dev == "cpu":
