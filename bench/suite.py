@@ -26,8 +26,8 @@ a run made with --jobs 1.
 
 The ``switches`` preset (issue 14) runs each weight-free regulariser (``SWITCHES``: the baseline and the
 full method, each alone and with one switch on) on every case of ``SWITCH_CASES`` (the synthetic room,
-fern 3 views, lego 8 views, DTU 65 3 views, castle_p30 and herz_jesus_p25 at 3 and 9 views) over seeds 0, 1
-and 2: 8 x 11 x 3 = 264 runs. --scenes, --seeds and --only (switch labels) select a part of it. Runs
+fern 3 views, lego 8 views, DTU 65 3 views, castle_p30 and herz_jesus_p25 at 3, 6 and 9 views) over seeds
+0, 1 and 2: 10 x 12 x 3 = 360 runs. --scenes, --seeds and --only (switch labels) select a part of it. Runs
 repeated over seeds are one point per (scene, switch) in the charts and tables: the median, with the
 spread (min, max) as error bars and brackets. It also writes switches.md / switches.json
 (bench/switch_table.py: the table the README quotes, and issue 14's rule for which switch may become a
@@ -106,7 +106,7 @@ SWITCH_CASES = {  # case: (dataset, iterations, arguments)
     "lego_8v": ("blender", 10000, ["--scene", "lego", "--views", "8"]),
     "dtu65_3v": ("dtu", 3000, ["--scene", "scan65", "--views", "3"]),
     **{f"{scene}_{v}v": ("dl3dv", 3000, ["--scene", scene, "--views", str(v), "--downscale", "8"])
-       for scene in ("castle_p30", "herz_jesus_p25") for v in (3, 9)},
+       for scene in ("castle_p30", "herz_jesus_p25") for v in (3, 6, 9)},
 }
 SWITCH_SEEDS = (0, 1, 2)
 SWITCHES = {  # label: (method, --set overrides); the label named after its method is that method's default
@@ -115,6 +115,8 @@ SWITCHES = {  # label: (method, --set overrides); the label named after its meth
     "baseline": ("baseline", ["train.drop_rate=0"]),
     "baseline+drop": ("baseline", ["train.drop_rate=0.2"]),  # DropGaussian's rate
     "baseline+opacity_noise": ("baseline", ["train.drop_rate=0", "train.opacity_noise=0.8"]),  # Co-Adaptation's sigma
+    # Co-Adaptation's combination: dropout and opacity noise together (the default's dropout, plus the noise)
+    "baseline+drop+opacity_noise": ("baseline", ["train.drop_rate=0.2", "train.opacity_noise=0.8"]),
     "baseline+scale_reg": ("baseline", ["train.drop_rate=0", "train.scale_reg=0.01"]),  # r = train.scale_reg_ratio
     "baseline+co_reg": ("baseline", ["train.drop_rate=0", "train.co_reg=true"]),  # CoR-GS
     "full": ("full", []),
@@ -175,10 +177,19 @@ def not_started(run: Run, device: str, work: Path, error: str) -> dict:
             "returncode": None, "log_tail": error}
 
 
-def command(run: Run, device: str, work: Path, data_root: str | None) -> list[str]:
-    # --overwrite: the suite decides what to reuse (execute); a run it starts replaces what its folder holds
+def command(run: Run, device: str, work: Path, data_root: str | None, resume: bool = False) -> list[str]:
+    """--overwrite: the suite decides what to reuse (execute); a run it starts replaces what its folder holds.
+    ``resume``: continue the run interrupted in its folder from its checkpoint (same arguments: the
+    checkpoint's config is the base, and the run's own arguments set the same values again)."""
+    mode = ["--resume"] if resume else ["--overwrite"]
     return [sys.executable, "-m", "warpgs.pipelines.sparse", *sparse_args(run, device, data_root),
-            "--out", str(work / run.name), "--overwrite"]
+            "--out", str(work / run.name), *mode]
+
+
+def resumable(out: Path) -> bool:
+    """A folder holding an interrupted run of the suite: a checkpoint and no metrics."""
+    return not (out / "metrics.json").is_file() and any((out / n).is_file()
+                                                        for n in ("checkpoint.pt", "checkpoint.prev.pt"))
 
 
 def execute(run: Run, device: str, work: Path, data_root: str | None, fresh: bool) -> dict:
@@ -192,12 +203,15 @@ def execute(run: Run, device: str, work: Path, data_root: str | None, fresh: boo
     error = config_error(run)
     if error:
         return not_started(run, device, work, error)
+    resume = not fresh and resumable(out)  # an earlier call stopped it (a time limit): go on from its checkpoint
+    if resume:
+        rec["resumed"] = True
     out.mkdir(parents=True, exist_ok=True)
     log = out.parent / f"{run.name}.log"
     t0 = time.perf_counter()
-    with open(log, "w") as f:
-        proc = subprocess.run(command(run, device, work, data_root), cwd=ROOT, stdout=f, stderr=subprocess.STDOUT,
-                              env={**os.environ, "PYTHONUNBUFFERED": "1"})
+    with open(log, "a" if resume else "w") as f:
+        proc = subprocess.run(command(run, device, work, data_root, resume), cwd=ROOT, stdout=f,
+                              stderr=subprocess.STDOUT, env={**os.environ, "PYTHONUNBUFFERED": "1"})
     rec["wall_s"] = round(time.perf_counter() - t0, 2)
     if proc.returncode == 0 and metrics_path.is_file():
         rec.update(status="finished", metrics=_slim(json.loads(metrics_path.read_text())))

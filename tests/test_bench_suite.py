@@ -48,6 +48,13 @@ def test_suite_runs_records_and_charts(tmp_path, monkeypatch):
         again = suite.run_suite("cpu", "tiny", out, work, jobs=1, only=["syn_base_20"], log=lambda *a: None, ray=True)
         assert again[0].get("reused") and again[0]["metrics"] == by["syn_base_20"]["metrics"]
         assert not ray.is_initialized()
+    # a run stopped after its checkpoint (a call's time limit) goes on from it instead of starting again
+    assert (work / "syn_base_20" / "checkpoint.pt").is_file()
+    (work / "syn_base_20" / "metrics.json").unlink()
+    again = suite.run_suite("cpu", "tiny", out, work, jobs=1, only=["syn_base_20"], log=lambda *a: None)
+    assert again[0]["status"] == "finished" and again[0].get("resumed") and not again[0].get("reused")
+    assert again[0]["metrics"]["psnr"] == by["syn_base_20"]["metrics"]["psnr"]
+    assert "resum" in (work / "syn_base_20.log").read_text().lower()
 
 
 # ----------------------------------------------------------------------------------------------
@@ -58,7 +65,7 @@ def test_switches_preset_covers_every_case_switch_and_seed():
     from warpgs.pipelines.sparse import build_parser
 
     runs = suite.PRESETS["switches"]
-    assert len(runs) == len(suite.SWITCH_CASES) * len(suite.SWITCHES) * len(suite.SWITCH_SEEDS) == 264
+    assert len(runs) == len(suite.SWITCH_CASES) * len(suite.SWITCHES) * len(suite.SWITCH_SEEDS) == 360
     assert {(r.case, r.label, r.seed) for r in runs} == {(c, s, k) for c in suite.SWITCH_CASES
                                                           for s in suite.SWITCHES for k in suite.SWITCH_SEEDS}
     assert len({r.name for r in runs}) == len(runs)

@@ -134,14 +134,21 @@ def test_growth_budget_caps_the_cycles_and_bad_settings_are_named(tmp_path):
 
     _, tr = small_full_trainer(tmp_path, "--set", "full.growth_budget=1.5")
     configured = tr.cfg.strategy.max_gaussians
+    settled = min(tr.cfg.strategy.reset_every, tr.cfg.strategy.refine_stop_iter)
     assert tr.strategy.max_gaussians == configured > 300  # the baseline phase runs under the configured budget
-    tr.method.history = [{"cycle": 0, "num_gaussians": 10 * configured}]
+    tr.method.history = [{"cycle": 0, "step": settled, "num_gaussians": 10 * configured}]
     tr.method.apply_growth_budget()
     assert tr.strategy.max_gaussians == configured  # the growth budget never raises the configured one
-    tr.method.history = [{"cycle": 0, "num_gaussians": 200}]
+    tr.method.history = [{"cycle": 0, "step": settled, "num_gaussians": 200}]
     tr.method.apply_growth_budget()
-    assert tr.strategy.max_gaussians == 300  # 1.5 x the baseline phase's 200
-    tr.method.history = [{"cycle": 0, "num_gaussians": 100}]
+    assert tr.strategy.max_gaussians == 300  # 1.5 x the 200 the model had when its first growth period ended
+    tr.method.history = [{"cycle": 0, "step": settled - 1, "num_gaussians": 200}]
+    tr.method.apply_growth_budget()
+    assert tr.strategy.max_gaussians == configured  # growth not settled yet (a short baseline phase): no cap
+    tr.method.history.append({"cycle": 1, "step": settled + 5, "num_gaussians": 250})
+    tr.method.apply_growth_budget()
+    assert tr.strategy.max_gaussians == 375  # the first record after the growth period is the reference
+    tr.method.history = [{"cycle": 0, "step": settled, "num_gaussians": 100}]
     tr.method.apply_growth_budget()
     assert tr.strategy.max_gaussians == len(tr.model)  # never below what the model has
     assert tr.cfg.strategy.max_gaussians == configured  # the config itself is left as it was

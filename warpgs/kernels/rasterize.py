@@ -305,13 +305,21 @@ splat_id = wp.types.vector(length=11, dtype=wp.float32)  # a splat and its Gauss
 @wp.func_native(
     """
 #if defined(__CUDA_ARCH__)
-    __shared__ float warpgs_batch[256 * 11];
+    // 12 floats a slot (splat, id bits, padding) as three float4: a read is three 128-bit shared loads
+    // (broadcast: every lane of a warp reads one slot) instead of eleven 32-bit ones
+    __shared__ float4 warpgs_batch[256 * 3];
     wp::vec_t<11, wp::float32> out;
     if (store) {
-        for (int c = 0; c < 10; ++c) warpgs_batch[slot * 11 + c] = s.c[c];
-        warpgs_batch[slot * 11 + 10] = __int_as_float(g);
+        warpgs_batch[slot * 3] = make_float4(s.c[0], s.c[1], s.c[2], s.c[3]);
+        warpgs_batch[slot * 3 + 1] = make_float4(s.c[4], s.c[5], s.c[6], s.c[7]);
+        warpgs_batch[slot * 3 + 2] = make_float4(s.c[8], s.c[9], __int_as_float(g), 0.0f);
     } else {
-        for (int c = 0; c < 11; ++c) out.c[c] = warpgs_batch[slot * 11 + c];
+        const float4 a = warpgs_batch[slot * 3];
+        const float4 b = warpgs_batch[slot * 3 + 1];
+        const float4 c = warpgs_batch[slot * 3 + 2];
+        out.c[0] = a.x; out.c[1] = a.y; out.c[2] = a.z; out.c[3] = a.w;
+        out.c[4] = b.x; out.c[5] = b.y; out.c[6] = b.z; out.c[7] = b.w;
+        out.c[8] = c.x; out.c[9] = c.y; out.c[10] = c.z;
     }
     return out;
 #else
