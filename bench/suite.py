@@ -125,6 +125,7 @@ SWITCHES = {  # label: (method, --set overrides); the label named after its meth
     "full+scale_reg": ("full", ["train.scale_reg=0.01"]),
     "full+pseudo_depth_smooth": ("full", ["full.pseudo_depth_smooth=0.1"]),  # Monodepth's weight
     "full+co_reg": ("full", ["train.co_reg=true"]),
+    "full+far_field": ("full", ["full.far_field=elevation"]),  # a backdrop per elevation band (warpgs/farfield.py)
 }
 
 
