@@ -9,6 +9,10 @@
 #    default baseline at 6 views. A call stopped by its time limit is continued by the next (--resume).
 # c: issue 14: dropout and opacity noise together (Co-Adaptation) on fern, DTU, lego and the captures at 3 and
 #    9 views, and the full method with dropout on DTU, seeds 0-2.
+# d: issue 15 again, nothing else on the GPU, after the backward compiled per (fixed, with_depth) with launch
+#    bounds (64 registers, 4 blocks an SM; the forward 48, 5 blocks), snapshots kept on the GPU and one
+#    found_inf for every optimiser: the CUDA rasterizer tests, bench/rasterizer.py, the Nsight Compute
+#    summary of the compositing kernels, bench/train_speed.py over 3 interleaved repeats, the host profile.
 # Results go to $RUNS/<part>/results.json (kept between calls) and back as one tar in $OUT.
 set -u
 P=$1; D=$2; R=$3; mkdir -p "$R" "$OUT"
@@ -53,5 +57,20 @@ c)
   tar cf "$OUT/suite_c.tar" -C "$R" s13c/results.json s13c/suite.log s13d/results.json s13d/suite.log \
     s13l/results.json s13l/suite.log
   grep -h "PSNR\|failed" "$R/s13c/suite.log" "$R/s13d/suite.log" "$R/s13l/suite.log" | tail -30
+  ;;
+d)
+  python3 -m pip install -q --no-index --no-deps --target /tmp/site .device/gsplat/*.whl 2>/dev/null
+  export MAX_JOBS=16 TORCH_CUDA_ARCH_LIST=9.0
+  WARPGS_TEST_DEVICES=cuda timeout 200 python3 -m pytest -q -p no:cacheprovider tests/test_rasterizer.py \
+    > "$OUT/tests_cuda.log" 2>&1; echo "tests rc=$?"; tail -1 "$OUT/tests_cuda.log"
+  timeout 240 python3 bench/rasterizer.py --out "$OUT/rasterizer_cuda.json" --profile > "$OUT/rasterizer.log" 2>&1
+  echo "rasterizer rc=$?"; grep -E "Gaussians|warpgs |gsplat |ratio" "$OUT/rasterizer.log"
+  timeout 150 /usr/local/cuda/bin/ncu --kernel-name regex:"rasterize_(fwd|bwd)_cuda|rasterize_to_pixels" \
+    --launch-skip 8 --launch-count 8 --section SpeedOfLight --section Occupancy --section LaunchStats \
+    python3 bench/rasterizer.py --configs 138766x648x420 --iters 2 --warmup 2 --out /tmp/ncu_r.json > "$OUT/ncu.txt" 2>&1
+  grep -E "^  [a-z_]+.*\(|Duration|Registers Per|Achieved Occupancy|Local Memory" "$OUT/ncu.txt" | head -40
+  timeout 300 python3 bench/train_speed.py --data-root "$D" --set model.init=frustum --repeats 3 \
+    --out "$OUT/train_speed_cuda.json" > "$OUT/train_speed.log" 2>&1; echo "train_speed rc=$?"
+  tail -8 "$OUT/train_speed.log"
   ;;
 esac

@@ -7,7 +7,8 @@
 On CUDA a training step is bound by the host when its kernels are short: the wall time is what Python, torch's
 dispatcher, autograd and the launches cost. Each loop of bench/train_speed.py (``--loops``, default the trainer
 and the plain warpgs loop) runs ``--warmup`` steps, then ``--iterations`` steps under cProfile, and the functions
-with the most time of their own are printed (``--top``), with the wall time per step. The text goes to stdout
+with the most time of their own (``--sort cumulative``: with what they call) are printed (``--top``), with the
+wall time per step. The text goes to stdout
 (and ``--out``); nothing here is a benchmark figure.
 """
 
@@ -42,6 +43,7 @@ def main(argv=None) -> int:
     ap.add_argument("--loops", default="warpgs_trainer,plain_warpgs")
     ap.add_argument("--shrink", type=int, default=1)
     ap.add_argument("--top", type=int, default=30)
+    ap.add_argument("--sort", default="tottime", help="pstats order: tottime (own time) or cumulative (with callees)")
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
     ap.add_argument("--out", type=Path, default=None)
     args = ap.parse_args(argv)
@@ -64,7 +66,7 @@ def main(argv=None) -> int:
         dt = time.perf_counter() - t0
         text.write(f"\n=== {name}: {args.iterations} steps, {dt / args.iterations * 1e3:.2f} ms a step under "
                    f"cProfile ({args.device})\n")
-        pstats.Stats(prof, stream=text).sort_stats("tottime").print_stats(args.top)
+        pstats.Stats(prof, stream=text).sort_stats(args.sort).print_stats(args.top)
     print(text.getvalue())
     if args.out:
         args.out.parent.mkdir(parents=True, exist_ok=True)

@@ -89,11 +89,11 @@ def test_a_nonfinite_gradient_never_reaches_the_parameters_between_reads(scene, 
 
     seen = {}
 
-    def watched(optimizer, apply):  # the state around step 12's (deferred) update
+    def watched(optimizer, apply, found_inf=None):  # the state around step 12's (deferred) update
         if tr.step == 12:
             seen["before"] = (param_copy(tr), [{k: v.clone() for k, v in st.items()} for st in optimizer.state.values()])
             seen["pending"] = len(tr._pending)
-        masked_step(optimizer, apply)
+        masked_step(optimizer, apply, found_inf)
         if tr.step == 12:
             seen["after"] = (param_copy(tr), [{k: v.clone() for k, v in st.items()} for st in optimizer.state.values()])
 
@@ -282,3 +282,23 @@ def test_finite_flags_find_nan_and_inf_and_take_empty_tensors():
     ts = [torch.tensor(1.0), torch.tensor([1.0, nan]), torch.tensor([[-inf, 0.0]]), torch.tensor([2.0, -3.0])]
     assert finite_flags(ts).tolist() == [True, False, False, True]
     assert finite_flags(ts + [torch.zeros(0, 3)]).tolist() == [True, False, False, True, True]
+
+
+def test_state_copies_are_independent_and_go_where_asked():
+    """``state_copy`` (checkpoints, snapshots): every tensor of a nested state is a new tensor on the device
+    asked for, with the same values, and changing the original afterwards leaves the copy as it was."""
+    from warpgs.optim import state_copy
+
+    a = torch.arange(6.0).reshape(2, 3).requires_grad_()
+    st = {"params": {"means": a}, "moments": [torch.ones(3), (torch.zeros(2), 7)], "step": 5, "name": "x"}
+    cp = state_copy(st, "cpu")
+    assert cp["step"] == 5 and cp["name"] == "x" and cp["moments"][1][1] == 7
+    assert isinstance(cp["moments"][1], tuple) and not cp["params"]["means"].requires_grad
+    with torch.no_grad():
+        a += 1
+        st["moments"][0].mul_(3)
+    assert torch.equal(cp["params"]["means"], torch.arange(6.0).reshape(2, 3))
+    assert torch.equal(cp["moments"][0], torch.ones(3))
+    if torch.cuda.is_available():  # the trainer's snapshots on CUDA stay on the GPU
+        g = state_copy(st, "cuda")
+        assert g["params"]["means"].is_cuda and torch.equal(g["params"]["means"].cpu(), a.detach())

@@ -144,6 +144,8 @@ class TrainConfig:
     explode_window: int = 100  # recent finite losses (of this phase) in the running median
     explode_patience: int = 3  # consecutive exploding steps that count as a divergence (fewer are only skipped)
     snapshot_every: int = 100  # steps between snapshots of the last good state (and one at each train() call)
+    snapshot_on_device: bool = True  # CUDA: the snapshot stays in GPU memory (one more copy of the training
+    #   state there) instead of a copy to the CPU that stops the host; false: on the CPU
     max_recoveries: int = 3  # rollbacks before the run stops; 0 = stop at the first divergence
     recovery_lr_factor: float = 0.5  # learning-rate scale applied at each rollback (recorded in metrics.json)
     cpu_threads: int = 1  # torch threads on the CPU (0: torch's default); Warp's CPU kernels use one anyway

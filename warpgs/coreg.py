@@ -171,12 +171,12 @@ class CoRegPair:
     # ------------------------------------------------------------------------------------------
     # the partner's share of the training state, and its record
 
-    def state_dict(self, parts=STATE_PARTS) -> dict:
-        """``model``: the partner's parameters, Adam's moments and densification statistics; ``progress``: its
-        random streams and pseudo-view order; ``history``: the co-pruning record."""
+    def state_dict(self, parts=STATE_PARTS, device="cpu") -> dict:
+        """``model``: the partner's parameters, Adam's moments and densification statistics (on ``device``);
+        ``progress``: its random streams and pseudo-view order; ``history``: the co-pruning record."""
         st: dict = {}
         if "model" in parts:
-            st.update(model_state(self.model, self.optimizer, self.state))
+            st.update(model_state(self.model, self.optimizer, self.state, device))
         if "progress" in parts:
             st.update(split_gen=self.split_gen.get_state(), drop_gen=self.drop_gen.get_state(),
                       view_rng=copy.deepcopy(self.view_rng.bit_generator.state), order=list(self.order))

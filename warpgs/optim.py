@@ -59,15 +59,16 @@ def finite_flags(tensors: list[torch.Tensor]) -> torch.Tensor:
     return torch.stack([torch.isfinite(t).all() for t in tensors])
 
 
-def masked_step(optimizer: torch.optim.Optimizer, apply: torch.Tensor) -> None:
+def masked_step(optimizer: torch.optim.Optimizer, apply: torch.Tensor, found_inf: torch.Tensor | None = None) -> None:
     """``optimizer.step()`` where the 0-dim bool tensor ``apply`` is true, and no change at all (parameters,
     moments, step counts) where it is false, without reading ``apply`` on the host. Fused Adam skips on the
     device (its ``found_inf``, as torch's GradScaler sets it); other optimisers step and put back what the
     step changed (their step counts must then be on ``apply``'s device; where they are not, ``apply`` is
-    read)."""
+    read). ``found_inf``: ``apply`` negated as float32, made once for several optimisers (default: here)."""
     groups = optimizer.param_groups
     if all(g.get("fused") for g in groups):
-        optimizer.grad_scale, optimizer.found_inf = None, (~apply).to(torch.float32)
+        optimizer.grad_scale = None
+        optimizer.found_inf = (~apply).to(torch.float32) if found_inf is None else found_inf
         try:
             optimizer.step()
         finally:
@@ -89,23 +90,25 @@ def masked_step(optimizer: torch.optim.Optimizer, apply: torch.Tensor) -> None:
                     v.copy_(torch.where(apply, v, old_state.get(k, torch.zeros_like(v))))
 
 
-def cpu_copy(obj):
-    """A deep copy of a (nested) state with every tensor copied to the CPU (snapshots keep no GPU memory)."""
+def state_copy(obj, device="cpu"):
+    """A deep copy of a (nested) state with every tensor copied to ``device`` (checkpoints and, by default,
+    snapshots: the CPU, which keeps no GPU memory; the trainer's snapshots on CUDA: the GPU itself, a copy
+    within its memory instead of a transfer that stops the host)."""
     if isinstance(obj, torch.Tensor):
-        return obj.detach().to("cpu", copy=True)
+        return obj.detach().to(device, copy=True)
     if isinstance(obj, dict):
-        return {k: cpu_copy(v) for k, v in obj.items()}
+        return {k: state_copy(v, device) for k, v in obj.items()}
     if isinstance(obj, (list, tuple)):
-        return type(obj)(cpu_copy(v) for v in obj)
+        return type(obj)(state_copy(v, device) for v in obj)
     return copy.deepcopy(obj)
 
 
-def model_state(model: GaussianModel, optimizer: torch.optim.Optimizer, state: dict) -> dict:
-    """A CPU copy of one model's training state: its parameters and SH degrees, Adam's moments, the
+def model_state(model: GaussianModel, optimizer: torch.optim.Optimizer, state: dict, device="cpu") -> dict:
+    """A copy (on ``device``) of one model's training state: its parameters and SH degrees, Adam's moments, the
     densification statistics (``Trainer.state_dict``'s ``model`` part; the co-regularised pair's second model's)."""
-    return dict(params=cpu_copy(dict(model.params)), max_sh_degree=model.max_sh_degree,
-                active_sh_degree=model.active_sh_degree, optimizer=cpu_copy(optimizer.state_dict()),
-                strategy_state=cpu_copy(state))
+    return dict(params=state_copy(dict(model.params), device), max_sh_degree=model.max_sh_degree,
+                active_sh_degree=model.active_sh_degree, optimizer=state_copy(optimizer.state_dict(), device),
+                strategy_state=state_copy(state, device))
 
 
 def load_model_state(st: dict, model: GaussianModel, cfg: Config, scene_scale: float, device

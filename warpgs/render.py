@@ -250,7 +250,8 @@ class _Composite(torch.autograd.Function):
                 for total, t in zip(grads, extra):
                     total += t
         else:
-            fast_launch(kr.rasterize_bwd_cuda, n_threads, dev, stream, *args, *grads, 0, 1)
+            kernel = kr.rasterize_bwd_cuda[int(fixed)][int(v_depth is not None)]  # compiled for these two flags
+            fast_launch(kernel, n_threads, dev, stream, *args, *grads, 0, 1)
         if fixed and n:
             fast_launch(kr.fixed_to_grads, n, dev, stream, v_fixed, v_means2d, v_conics, v_opac, v_colors, v_depths)
         return v_means2d, v_conics, v_opac, v_colors, v_depths, None, None, None, None, None, None, None

@@ -715,8 +715,9 @@ class Trainer:
         exploding = finite & self.guard.exploding_on_device(value, self._loss_window(step))
         apply = finite & ~exploding
         record[_EXPLODING] = exploding
+        found_inf = (~apply).to(torch.float32)  # one flag for every optimiser (fused Adam's skip)
         for opt in self.optimizers:
-            masked_step(opt, apply)
+            masked_step(opt, apply, found_inf)
             opt.zero_grad(set_to_none=True)
         self._window.push(step, torch.where(apply, value, float("inf")))
         self._pending.append((step, self.guard.stat_start, record))
@@ -832,8 +833,9 @@ class Trainer:
     # ------------------------------------------------------------------------------------------
     # the training state: one serialisation for checkpoints, rollback snapshots and compact mode
 
-    def state_dict(self, parts=STATE_PARTS) -> dict:
-        """A CPU copy of the training state, in ``parts`` (module docstring):
+    def state_dict(self, parts=STATE_PARTS, device="cpu") -> dict:
+        """A copy of the training state (its tensors on ``device``: the CPU but for the snapshots of
+        ``take_snapshot``), in ``parts`` (module docstring):
 
         - ``model``: the parameters (and SH degrees), Adam's moments, the densification statistics;
         - ``progress``: the step, the RNGs, the view order, where the guard's statistic starts, whether this is
@@ -845,7 +847,7 @@ class Trainer:
         model's (``train.co_reg``; ``warpgs.coreg.CoRegPair.state_dict``) under ``pair``."""
         st: dict = {"parts": list(parts)}
         if "model" in parts:
-            st.update(model_state(self.model, self.optimizer, self.state))
+            st.update(model_state(self.model, self.optimizer, self.state, device))
         if "progress" in parts:
             st.update(step=self.step, split_gen=self.split_gen.get_state(), drop_gen=self.drop_gen.get_state(),
                       view_rng=copy.deepcopy(self.view_rng.bit_generator.state), order=list(self.order),
@@ -857,7 +859,7 @@ class Trainer:
                       phase=(self.phase_start, self.phase_len), max_loss_ratio=self.guard.max_loss_ratio)
         st["method"] = self.method.state_dict(parts)
         if self.pair is not None:
-            st["pair"] = self.pair.state_dict(parts)
+            st["pair"] = self.pair.state_dict(parts, device)
         return st
 
     def load_state_dict(self, st: dict) -> None:
@@ -896,11 +898,18 @@ class Trainer:
         self.method.load_state_dict(st.get("method", {}))
 
     def take_snapshot(self, step: int | None = None) -> bool:
-        """Keeps the current ``model`` and ``progress`` in memory (on the CPU) as the last good state, if it
-        is all finite; returns whether it did."""
+        """Keeps the current ``model`` and ``progress`` in memory as the last good state, if it is all finite;
+        returns whether it did. On CUDA with ``train.snapshot_on_device`` (default) the copy stays in GPU memory
+        (the training state once more; a copy there takes microseconds, where one to the CPU stops the host
+        for each transfer: about 160 MB every 100 steps for 225,000 Gaussians), else it goes to the CPU."""
         if not self.state_is_finite():
             return False
-        self._snapshot = self.state_dict(("model", "progress"))
+        on_device = self.device.type == "cuda" and self.cfg.train.snapshot_on_device
+        self._snapshot = None  # the old copy goes first: at most one extra copy of the state at a time
+        try:
+            self._snapshot = self.state_dict(("model", "progress"), device=self.device if on_device else "cpu")
+        except torch.cuda.OutOfMemoryError:  # no room for a second copy on the GPU: this one goes to the CPU
+            self._snapshot = self.state_dict(("model", "progress"))
         if step is not None:
             self._snapshot["step"] = step
         return True
