@@ -373,11 +373,11 @@ def stored_splat(sg: splat_id) -> splat:
 # Registers (Nsight Compute on an H100, 138,766 Gaussians at 648x420): the CUDA backward took 80 a thread, so
 # 3 blocks of 256 fit an SM (37.5% occupancy), the forward 56 (50%). Each backward is compiled for one
 # (fixed, with_depth) pair, the two known when the code is generated, which takes the branches and their live
-# values out (64 registers without the depth, 70 with it, in a local NVRTC build), and both kernels carry
-# launch bounds: at most 64 registers for the backward (4 blocks an SM), 48 for the forward (5 blocks), with
-# no spills in that build (tests/test_rasterizer.py checks the variants against the oracle on CUDA).
+# values out (64 registers without the depth, 70 with it, in a local NVRTC build), and carries launch bounds
+# of at most 64 registers (4 blocks an SM; no spills): 864-874 us became 809-828 us on the H100. Bounding the
+# forward to 48 (5 blocks) made it slower there (377-395 -> 405-420 us), so it has none.
+# (tests/test_rasterizer.py checks the variants against the oracle on CUDA.)
 BWD_LAUNCH_BOUNDS = (BLOCK, 4)
-FWD_LAUNCH_BOUNDS = (BLOCK, 5)
 
 
 def _compositing_kernels(cuda: bool, fixed_variant: int = -1, depth_variant: int = -1):
@@ -555,7 +555,7 @@ def _compositing_kernels(cuda: bool, fixed_variant: int = -1, depth_variant: int
     if static_flags:  # one backward variant (the forward is made once, without them)
         return None, wp.kernel(rasterize_bwd, name=f"rasterize_bwd_cuda_f{fixed_variant}d{depth_variant}",
                                launch_bounds=BWD_LAUNCH_BOUNDS)
-    return wp.kernel(rasterize_fwd, name="rasterize_fwd_cuda", launch_bounds=FWD_LAUNCH_BOUNDS), None
+    return wp.kernel(rasterize_fwd, name="rasterize_fwd_cuda"), None
 
 
 rasterize_fwd, rasterize_bwd = _compositing_kernels(cuda=False)
