@@ -27,7 +27,7 @@ a run made with --jobs 1.
 The ``switches`` preset (issue 14) runs each weight-free regulariser (``SWITCHES``: the baseline and the
 full method, each alone and with one switch on) on every case of ``SWITCH_CASES`` (the synthetic room,
 fern 3 views, lego 8 views, DTU 65 3 views, castle_p30 and herz_jesus_p25 at 3, 6 and 9 views) over seeds
-0, 1 and 2: 10 x 12 x 3 = 360 runs. --scenes, --seeds and --only (switch labels) select a part of it. Runs
+0, 1 and 2: 10 x 13 x 3 = 390 runs. --scenes, --seeds and --only (switch labels) select a part of it. Runs
 repeated over seeds are one point per (scene, switch) in the charts and tables: the median, with the
 spread (min, max) as error bars and brackets. It also writes switches.md / switches.json
 (bench/switch_table.py: the table the README quotes, and issue 14's rule for which switch may become a
