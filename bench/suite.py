@@ -53,6 +53,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from bench import switch_table  # noqa: E402
+from warpgs.runfolder import checkpoint_file  # noqa: E402
 
 
 @dataclass
@@ -187,11 +188,6 @@ def command(run: Run, device: str, work: Path, data_root: str | None, resume: bo
             "--out", str(work / run.name), *mode]
 
 
-def resumable(out: Path) -> bool:
-    """A folder holding an interrupted run of the suite: a checkpoint and no metrics."""
-    return not (out / "metrics.json").is_file() and any((out / n).is_file()
-                                                        for n in ("checkpoint.pt", "checkpoint.prev.pt"))
-
 
 def execute(run: Run, device: str, work: Path, data_root: str | None, fresh: bool) -> dict:
     """Runs (or reuses) one entry -> its record."""
@@ -204,7 +200,8 @@ def execute(run: Run, device: str, work: Path, data_root: str | None, fresh: boo
     error = config_error(run)
     if error:
         return not_started(run, device, work, error)
-    resume = not fresh and resumable(out)  # an earlier call stopped it (a time limit): go on from its checkpoint
+    # no metrics (see above) but a checkpoint: an earlier call stopped it (a time limit); go on from there
+    resume = not fresh and checkpoint_file(out) is not None
     if resume:
         rec["resumed"] = True
     out.mkdir(parents=True, exist_ok=True)

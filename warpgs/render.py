@@ -235,12 +235,12 @@ class _Composite(torch.autograd.Function):
         grads = grad_buffers(torch.empty if fixed else torch.zeros)
         v_fixed, v_means2d, v_conics, v_opac, v_colors, v_depths = grads
         stream = stream_of(dev)
+        with_depth = int(v_depth is not None)  # a loss without the depth skips its (zero) terms
         args = (ranges, gauss_ids, splats, background.reshape(1, 3), width, height, tiles_x, alpha_max,
                 depth.view(-1), alpha.view(-1), last.view(-1),
                 _grad_or_zeros(v_color, (height, width, 3), alpha.device).view(-1, 3),
                 _grad_or_zeros(v_depth, alpha.shape, alpha.device).view(-1),
-                _grad_or_zeros(v_alpha, alpha.shape, alpha.device).view(-1), int(fixed),
-                int(v_depth is not None))  # with_depth: a loss without the depth skips its (zero) terms
+                _grad_or_zeros(v_alpha, alpha.shape, alpha.device).view(-1), int(fixed), with_depth)
         n_threads = kr.compositing_threads(dev, ranges.shape[0])
         if dev == "cpu":
             # each part adds into buffers of its own (a CPU "atomic" add is a plain one), summed in part order
@@ -250,7 +250,7 @@ class _Composite(torch.autograd.Function):
                 for total, t in zip(grads, extra):
                     total += t
         else:
-            kernel = kr.rasterize_bwd_cuda[int(fixed)][int(v_depth is not None)]  # compiled for these two flags
+            kernel = kr.rasterize_bwd_cuda[int(fixed)][with_depth]  # compiled for these two flags
             fast_launch(kernel, n_threads, dev, stream, *args, *grads, 0, 1)
         if fixed and n:
             fast_launch(kr.fixed_to_grads, n, dev, stream, v_fixed, v_means2d, v_conics, v_opac, v_colors, v_depths)

@@ -33,8 +33,10 @@ import time
 from pathlib import Path
 
 LOCK = ".warpgs.lock"
+# a run's checkpoint and the one it replaced (warpgs.train's CHECKPOINT and PREVIOUS_CHECKPOINT), newest first
+CHECKPOINT_FILES = ("checkpoint.pt", "checkpoint.prev.pt")
 # what a run writes into its folder (a compare run: these, and the same in baseline/ and full/)
-RUN_OUTPUTS = ("checkpoint.pt", "checkpoint.prev.pt", "metrics.json", "comparison.json", "config.yaml",
+RUN_OUTPUTS = (*CHECKPOINT_FILES, "metrics.json", "comparison.json", "config.yaml",
                "point_cloud.ply", "init_points.ply", "report.md", "flythrough.gif", "baseline.log", "test", "charts",
                "cycle_*")
 METHOD_DIRS = ("baseline", "full")
@@ -110,6 +112,11 @@ def read_lock(folder: str | Path) -> dict | None:
     return info if isinstance(info, dict) else {}
 
 
+def checkpoint_file(folder: str | Path) -> Path | None:
+    """The newest checkpoint file in ``folder`` (``CHECKPOINT_FILES``), or None."""
+    return next((Path(folder) / n for n in CHECKPOINT_FILES if (Path(folder) / n).is_file()), None)
+
+
 def earlier_run(folder: str | Path) -> str | None:
     """What earlier run ``folder`` holds ("a finished run (metrics.json)", ...), or None."""
     folder = Path(folder)
@@ -117,9 +124,9 @@ def earlier_run(folder: str | Path) -> str | None:
         if (d / "metrics.json").is_file() or (d / "comparison.json").is_file():
             return f"a finished run ({d / 'metrics.json'})"
     for d in (folder, *(folder / m for m in METHOD_DIRS)):
-        for name in ("checkpoint.pt", "checkpoint.prev.pt"):
-            if (d / name).is_file():
-                return f"an unfinished run ({d / name})"
+        found = checkpoint_file(d)
+        if found is not None:
+            return f"an unfinished run ({found})"
     if (folder / "config.yaml").is_file():
         return f"a run that stopped before its first checkpoint ({folder / 'config.yaml'})"
     return None

@@ -47,6 +47,8 @@ import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
+from warpgs.runfolder import checkpoint_file
+
 INSTALL_HINT = "pip install 'warpgs[ray]'"
 MIN_GPU_SHARE = 1 / 8
 PIXELS_PER_GPU = 2.0e6  # gpu_share: a run of this many pixels per image takes a whole GPU ...
@@ -346,7 +348,7 @@ def execute_run(spec: dict, out: str, logs: str, batch: str, overwrite: bool = F
     done = None if fresh else metrics_complete(out, spec["method"])
     if done is not None:
         return finished_record(spec["name"], out, done, earlier)
-    resume = not fresh and any((out / f).is_file() for f in ("checkpoint.pt", "checkpoint.prev.pt", "config.yaml"))
+    resume = not fresh and (checkpoint_file(out) is not None or (out / "config.yaml").is_file())
     import warpgs
 
     cmd = [sys.executable, "-m", "warpgs.pipelines.sparse"]
