@@ -119,6 +119,12 @@ class TrainConfig:
     far_field: str = "none"  # none | elevation: behind the Gaussians, a colour per elevation band fitted on the
     #   inputs instead of ``background`` (warpgs/farfield.py; captures without alpha)
     far_field_bins: int = 16  # elevation bands of the far field
+    path_clearance: float = 0.0  # > 0: every strategy.refine_every steps, remove the Gaussians whose centre lies
+    #   within this x the scene's near depth of the camera path (warpgs/clearance.py: the photographer's space,
+    #   where floaters in front of novel views sit); 0: off
+    alpha_binary: float = 0.0  # weight of mean(alpha (1 - alpha)) over each input render: every pixel either
+    #   covered by Gaussians or showing what is behind them (with a far field, no translucent cover that a novel
+    #   view sees at another angle); 0: off
     prune_unseen_at_end: bool = False  # at the end, drop Gaussians no training view needs (costs novel-view PSNR)
     # CoR-GS (Zhang et al., ECCV 2024; warpgs/coreg.py): a second model trained beside the first from the same
     # initial Gaussians, on the same views, with its own random streams; twice the training cost. The first model
@@ -160,7 +166,7 @@ class TrainConfig:
               "scale_reg": ">= 0", "scale_reg_ratio": ">= 1", "max_nan_steps": ">= 1",
               "explode_factor": ">= 0", "explode_window": ">= 1", "explode_patience": ">= 1", "snapshot_every": ">= 0",
               "max_recoveries": ">= 0", "recovery_lr_factor": "(0, 1]", "cpu_threads": ">= 0", "sync_every": ">= 1",
-              "far_field": FAR_FIELD_RULE, "far_field_bins": ">= 1", "co_prune_every": ">= 0", "co_prune_dist": "> 0",
+              "far_field": FAR_FIELD_RULE, "far_field_bins": ">= 1", "alpha_binary": ">= 0", "path_clearance": ">= 0", "co_prune_every": ">= 0", "co_prune_dist": "> 0",
               "co_reg_weight": ">= 0", "co_reg_start": ">= 0", "co_reg_frames": ">= 1"}
 
 

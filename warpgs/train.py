@@ -395,6 +395,14 @@ class Trainer:
             raise ValueError(f"train.drop_rate must be in [0, 1), got {self.drop_rate}")
         if not 0.0 <= cfg.train.opacity_noise <= 1.0:  # a factor 1 + eps with |eps| <= sigma stays >= 0
             raise ValueError(f"train.opacity_noise must be in [0, 1], got {cfg.train.opacity_noise}")
+        self.clearance = None  # train.path_clearance: the camera path's free space (warpgs/clearance.py)
+        if cfg.train.path_clearance > 0:
+            from warpgs.clearance import PathClearance
+
+            geo = getattr(scene, "geometry", None)
+            self.clearance = PathClearance.build(
+                np.stack([c.viewmat for c in scene.train]), cfg.train.path_clearance * float(scene.bounds[0]),
+                order=cfg.pseudo.trajectory.order, geometry=None if geo is None else geo.xyz, device=self.device)
         self.view_rng = np.random.default_rng(seed + 2)
         self.order: list[int] = []
         self.optimizer = make_optimizer(self.model, cfg, self.scene_scale)
@@ -504,6 +512,10 @@ class Trainer:
         # what the divergence guard judges: the inputs' loss, which the method's terms (extra views, priors
         # that appear in a later phase) and the priors on the parameters leave out
         parts["inputs"] = loss
+        if self.cfg.train.alpha_binary > 0:
+            ab = (out.alpha * (1 - out.alpha)).mean()
+            loss = loss + self.cfg.train.alpha_binary * ab
+            parts["alpha_binary"] = ab
         return loss, parts
 
     def parameter_priors(self, model: GaussianModel, loss: torch.Tensor, parts: dict) -> torch.Tensor:
@@ -610,6 +622,14 @@ class Trainer:
         info = strategy.step_post_backward(model, optimizer, state, step, out, cam.width, cam.height,
                                            self.scene_scale, generator=generator)
         s = strategy
+        if self.clearance is not None and step % s.refine_every == 0 and model is self.model:
+            on_path = self.clearance.inside(model.means)
+            n = int(on_path.sum())
+            if 0 < n < len(model):
+                from warpgs.strategy import remove
+
+                remove(model, optimizer, state, on_path)
+                info["pruned_on_path"] = n
         if (s.prune_unseen_when_full and s.max_gaussians > 0 and (info["cloned"] or info["split"] or info["pruned"])
                 and len(model) >= s.max_gaussians):
             # the budget is spent: free what the training views do not use, so growth can go on where it helps

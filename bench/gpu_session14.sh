@@ -1,0 +1,78 @@
+#!/usr/bin/env bash
+# GPU runs of session 14, after the packed wheels are installed in /tmp/site and the scenes copied to $D.
+#   bash bench/gpu_session14.sh PHASE D RUNS
+# a: issue 13 diagnosis of the captures' sudden test-PSNR drops (bench/floaters.py on the finished runs:
+#    castle 9 views full seed 1, which fell from 21.2 to 18.8 at step 2100 in session 13; castle 9 views with
+#    the far field, seed 0; castle 6 views baseline seed 2, 16.2 -> 13.8; castle 9 baseline seed 1 as a
+#    reference), and train.alpha_binary with the far field on castle 9 (seeds 0-2), castle 3, herz 3 and 9.
+# b: the same failures again with their models (point_cloud.ply, for bench/floaters.py and the path-clearance
+#    analysis), and train.path_clearance 0.1 / 0.2 on each of them (and on herz 6 views baseline seed 1, which
+#    fell at step 1200 in session 13).
+# c: train.path_clearance 0.2 on the six capture cases (castle_p30 / herz_jesus_p25 at 3, 6, 9 views), seeds
+#    0-2: the baseline and the full method, each without and with the far field (72 runs, 24 at a time; a run
+#    stopped by the call's time limit resumes from its checkpoint in the next call).
+# Each run: python -m warpgs.pipelines.sparse on images_8, 3000 iterations, as bench/suite.py's switch cases.
+set -u
+P=$1; D=$2; R=$3; mkdir -p "$R" "$OUT"
+export PYTHONPATH=/tmp/site:$PWD PYTHONUNBUFFERED=1 OMP_NUM_THREADS=1 MKL_NUM_THREADS=1
+one() {  # one NAME METHOD SCENE VIEWS SEED [--set k=v ...]
+  local name=$1 method=$2 scene=$3 views=$4 seed=$5; shift 5
+  [ -f "$R/$name/metrics.json" ] && return 0
+  local resume=(); [ -f "$R/$name/checkpoint.pt" ] && resume=(--resume)
+  local t=${T:-540}; [ -n "${END:-}" ] && t=$((END - $(date +%s)))
+  [ "$t" -lt 20 ] && { echo "$name: no time left in this call"; return 0; }
+  timeout -s INT "$t" python3 -m warpgs.pipelines.sparse --method "$method" --data dl3dv --scene "$scene" \
+    --views "$views" --downscale 8 --iterations 3000 --device cuda --no-progress --seed "$seed" \
+    --data-root "$D" --set train.eval_every=300 --out "$R/$name" "${resume[@]}" "$@" >> "$R/$name.log" 2>&1
+  echo "$name rc=$? $(grep -h 'test: PSNR' "$R/$name.log" | tail -1)"
+}
+FF=(--set full.far_field=elevation)
+AB=(--set full.far_field=elevation --set train.alpha_binary=0.1)
+case $P in
+a)
+  one d_c9_full_s1 full castle_p30 9 1 &
+  one d_c9_fullff_s0 full castle_p30 9 0 "${FF[@]}" &
+  one d_c6_base_s2 baseline castle_p30 6 2 &
+  one d_c9_base_s1 baseline castle_p30 9 1 &
+  for s in 0 1 2; do one ab_c9_s$s full castle_p30 9 $s "${AB[@]}" & done
+  one ab_c3_s0 full castle_p30 3 0 "${AB[@]}" &
+  one ab_h3_s0 full herz_jesus_p25 3 0 "${AB[@]}" &
+  one ab_h9_s0 full herz_jesus_p25 9 0 "${AB[@]}" &
+  wait
+  ;;
+b)
+  one d_c9_full_s1 full castle_p30 9 1 &
+  one d_c9_fullff_s0 full castle_p30 9 0 "${FF[@]}" &
+  one d_c6_base_s2 baseline castle_p30 6 2 &
+  one d_h6_base_s1 baseline herz_jesus_p25 6 1 &
+  for f in 0.1 0.2; do
+    PC=(--set train.path_clearance=$f)
+    one pc${f}_c9_full_s1 full castle_p30 9 1 "${PC[@]}" &
+    one pc${f}_c9_fullff_s0 full castle_p30 9 0 "${FF[@]}" "${PC[@]}" &
+    one pc${f}_c6_base_s2 baseline castle_p30 6 2 "${PC[@]}" &
+    one pc${f}_h6_base_s1 baseline herz_jesus_p25 6 1 "${PC[@]}" &
+  done
+  wait
+  ;;
+c)
+  export -f one; export R D T END=$(( $(date +%s) + ${T:-540} ))
+  for s in 0 1 2; do for sc in castle_p30 herz_jesus_p25; do for v in 3 6 9; do
+    c=${sc%%_*}$v
+    echo "pcff_${c}_full_s$s full $sc $v $s --set train.path_clearance=0.2 --set full.far_field=elevation"
+    echo "pc_${c}_base_s$s baseline $sc $v $s --set train.path_clearance=0.2"
+    echo "pc_${c}_full_s$s full $sc $v $s --set train.path_clearance=0.2"
+    echo "pcff_${c}_base_s$s baseline $sc $v $s --set train.path_clearance=0.2 --set train.far_field=elevation"
+  done; done; done | xargs -P 24 -L 1 bash -c 'one "$@"' _
+  ;;
+esac
+for d in "$R"/*/; do
+  n=$(basename "$d")
+  [ -f "$d/metrics.json" ] || continue
+  [ "$P" = c ] || [ -f "$d/floaters.json" ] || timeout 90 python3 bench/floaters.py "$d" --device cuda --data-root "$D" > "$d/floaters.txt" 2>&1 &
+done
+wait
+X=(); [ "$P" = c ] && X=(--exclude=test --exclude='cycle_*' --exclude=charts --exclude='*.md')
+tar cf "$OUT/runs_$P.tar" -C "$R" "${X[@]}" --exclude='checkpoint*.pt' --exclude='*.gif' --exclude='point_cloud.ply' \
+  --exclude='pseudo' --exclude='*.ply' .
+for f in $(ls "$R"/d_*/point_cloud.ply 2>/dev/null); do n=$(basename "$(dirname "$f")"); cp "$f" "$OUT/$n.ply"; done
+ls -la "$OUT"
