@@ -11,6 +11,9 @@
 # c: train.path_clearance 0.2 on the six capture cases (castle_p30 / herz_jesus_p25 at 3, 6, 9 views), seeds
 #    0-2: the baseline and the full method, each without and with the far field (72 runs, 24 at a time; a run
 #    stopped by the call's time limit resumes from its checkpoint in the next call).
+# d: issue 13's acceptance setting with the new capture defaults (configs/nerfstudio.yaml: far field and path
+#    clearance for both methods): castle_p30 / herz_jesus_p25 at 3, 6, 9 views, images_4 (768x512), 10,000
+#    iterations, seed 0, baseline and full (12 runs at once, resumed across calls).
 # Each run: python -m warpgs.pipelines.sparse on images_8, 3000 iterations, as bench/suite.py's switch cases.
 set -u
 P=$1; D=$2; R=$3; mkdir -p "$R" "$OUT"
@@ -22,8 +25,8 @@ one() {  # one NAME METHOD SCENE VIEWS SEED [--set k=v ...]
   local t=${T:-540}; [ -n "${END:-}" ] && t=$((END - $(date +%s)))
   [ "$t" -lt 20 ] && { echo "$name: no time left in this call"; return 0; }
   timeout -s INT "$t" python3 -m warpgs.pipelines.sparse --method "$method" --data dl3dv --scene "$scene" \
-    --views "$views" --downscale 8 --iterations 3000 --device cuda --no-progress --seed "$seed" \
-    --data-root "$D" --set train.eval_every=300 --out "$R/$name" "${resume[@]}" "$@" >> "$R/$name.log" 2>&1
+    --views "$views" --downscale "${DS:-8}" --iterations "${IT:-3000}" --device cuda --no-progress --seed "$seed" \
+    --data-root "$D" --set train.eval_every=$(( ${IT:-3000} / 10 )) --out "$R/$name" "${resume[@]}" "$@" >> "$R/$name.log" 2>&1
   echo "$name rc=$? $(grep -h 'test: PSNR' "$R/$name.log" | tail -1)"
 }
 FF=(--set full.far_field=elevation)
@@ -64,14 +67,20 @@ c)
     echo "pcff_${c}_base_s$s baseline $sc $v $s --set train.path_clearance=0.2 --set train.far_field=elevation"
   done; done; done | xargs -P 24 -L 1 bash -c 'one "$@"' _
   ;;
+d)
+  export -f one; export R D T DS=4 IT=10000 END=$(( $(date +%s) + ${T:-540} ))
+  for sc in castle_p30 herz_jesus_p25; do for v in 3 6 9; do for m in baseline full; do
+    echo "i4_${sc%%_*}${v}_${m}_s0 $m $sc $v 0"
+  done; done; done | xargs -P 12 -L 1 bash -c 'one "$@"' _
+  ;;
 esac
 for d in "$R"/*/; do
   n=$(basename "$d")
   [ -f "$d/metrics.json" ] || continue
-  [ "$P" = c ] || [ -f "$d/floaters.json" ] || timeout 90 python3 bench/floaters.py "$d" --device cuda --data-root "$D" > "$d/floaters.txt" 2>&1 &
+  [ "$P" = c ] || [ "$P" = d ] || [ -f "$d/floaters.json" ] || timeout 90 python3 bench/floaters.py "$d" --device cuda --data-root "$D" > "$d/floaters.txt" 2>&1 &
 done
 wait
-X=(); [ "$P" = c ] && X=(--exclude=test --exclude='cycle_*' --exclude=charts --exclude='*.md')
+X=(); [ "$P" = c ] || [ "$P" = d ] && X=(--exclude=test --exclude='cycle_*' --exclude=charts --exclude='*.md')
 tar cf "$OUT/runs_$P.tar" -C "$R" "${X[@]}" --exclude='checkpoint*.pt' --exclude='*.gif' --exclude='point_cloud.ply' \
   --exclude='pseudo' --exclude='*.ply' .
 for f in $(ls "$R"/d_*/point_cloud.ply 2>/dev/null); do n=$(basename "$(dirname "$f")"); cp "$f" "$OUT/$n.ply"; done

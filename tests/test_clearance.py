@@ -1,0 +1,78 @@
+"""The camera path's clearance (warpgs/clearance.py, train.path_clearance): segment distances against a dense
+sampling of the segments, which Gaussians count as on the path, segments that pass the scene's geometry, and
+the trainer removing what lies on the path (and nothing when it is off)."""
+
+import numpy as np
+import pytest
+import torch
+
+from test_rasterizer import DEVICES
+from warpgs.clearance import PathClearance, segment_distance
+
+
+def look_at_viewmat(eye, target=(0.0, 0.0, 10.0)):
+    from tiny_scene import look_at_c2w
+
+    return np.linalg.inv(look_at_c2w(eye, target)).astype(np.float32)
+
+
+def test_segment_distance_matches_dense_sampling():
+    g = torch.Generator().manual_seed(3)
+    a, b = torch.randn(5, 3, generator=g), torch.randn(5, 3, generator=g)
+    a[4] = b[4]  # a degenerate segment: a point
+    p = torch.randn(200, 3, generator=g) * 2
+    t = torch.linspace(0, 1, 20001)
+    samples = (a[:, None] + t[None, :, None] * (b - a)[:, None]).reshape(-1, 3)
+    oracle = torch.cdist(p, samples).min(1).values
+    got = segment_distance(p, a, b, chunk=37)  # several chunks
+    assert torch.allclose(got, oracle, atol=2e-4)
+    assert torch.isinf(segment_distance(p, a[:0], b[:0])).all()
+
+
+def test_gaussians_on_the_path_are_inside_and_the_scene_is_not():
+    # a walk along x at y = 0, every camera looking at a facade 10 m ahead (z = 10)
+    V = np.stack([look_at_viewmat((x, 0.0, 0.0), (x, 0.0, 10.0)) for x in (0.0, 2.0, 4.0, 6.0)])
+    clear = PathClearance.build(V, radius=0.5, order="capture", samples=8)
+    pts = torch.tensor([[1.0, 0.0, 0.0],    # between two cameras, on the path
+                        [5.0, 0.3, 0.1],    # 0.32 m off the path
+                        [3.0, 0.0, 0.6],    # 0.6 m in front of it: outside 0.5
+                        [3.0, 0.0, 10.0],   # the facade
+                        [7.0, 0.0, 0.0]])   # past the last camera: 1 m from it
+    assert clear.inside(pts).tolist() == [True, True, False, False, False]
+    # a point of the scene's geometry right on the path between the 2nd and 3rd cameras: the path there
+    # is not free space (an object-centric path crossing the object), so nothing near it is removed
+    blocked = PathClearance.build(V, radius=0.5, order="capture", samples=8, geometry=np.array([[3.0, 0.0, 0.0]]))
+    assert blocked.dropped > 0
+    near_geo = torch.tensor([[3.0, 0.1, 0.0], [1.0, 0.0, 0.0]])
+    assert blocked.inside(near_geo).tolist() == [False, True]
+
+
+@pytest.mark.skipif("cpu" not in DEVICES, reason="trains on the CPU (the GPU machine's packed Warp has no CPU compiler)")
+def test_trainer_removes_gaussians_on_the_camera_path(tmp_path):
+    from tiny_scene import make_scene, tiny_config
+    from warpgs.pipelines.full import append_gaussians
+    from warpgs.train import Trainer
+
+    scene = make_scene()
+    near = float(scene.bounds[0])
+    planted = None
+    kept = {}
+    for fraction in (0.0, 0.2):
+        cfg = tiny_config(25, str(tmp_path / "none.pth"), path_clearance=fraction)
+        tr = Trainer(cfg, scene)
+        if planted is None:  # Gaussians on the path: the midpoints of the path's pieces, opaque
+            probe = PathClearance.build(np.stack([c.viewmat for c in scene.train]), 0.2 * near, order="nearest")
+            assert probe.radius > 0 and len(probe.a) > 0
+            planted = ((probe.a + probe.b) / 2)[::3]
+        n0 = len(tr.model)
+        append_gaussians(tr, planted, torch.full((len(planted), 3), 0.5), torch.full((len(planted), 3), 0.05), 0.9)
+        assert len(tr.model) == n0 + len(planted)
+        tr.train(21)  # refinement steps at 0 and 20 (tiny_config: refine_every 20)
+        on_path = PathClearance.build(np.stack([c.viewmat for c in scene.train]), 0.2 * near, order="nearest")
+        kept[fraction] = int(on_path.inside(tr.model.means).sum())
+        if fraction > 0:
+            assert tr.clearance is not None and abs(tr.clearance.radius - 0.2 * near) < 1e-6
+        else:
+            assert tr.clearance is None
+    assert kept[0.0] >= len(planted)  # nothing removes them without the clearance
+    assert kept[0.2] == 0
