@@ -37,24 +37,32 @@ def segment_distance(points: torch.Tensor, a: torch.Tensor, b: torch.Tensor, chu
 
 
 class PathClearance:
-    """Free segments of the camera path and a clearance radius (module docstring)."""
+    """Free segments of the camera path and a clearance radius (module docstring); with ``view_depth`` > 0
+    also the space each pose of the path looks into, up to that depth (``in_view``)."""
 
-    def __init__(self, a: torch.Tensor, b: torch.Tensor, radius: float, dropped: int = 0):
+    def __init__(self, a: torch.Tensor, b: torch.Tensor, radius: float, dropped: int = 0,
+                 poses: torch.Tensor | None = None, K: torch.Tensor | None = None, size=(0, 0),
+                 view_depth: float = 0.0):
         self.a, self.b, self.radius, self.dropped = a, b, float(radius), int(dropped)
+        self.poses, self.K, self.size, self.view_depth = poses, K, tuple(size), float(view_depth)
 
     @classmethod
     def build(cls, viewmats, radius: float, order="nearest", samples: int = 16,
-              geometry: np.ndarray | torch.Tensor | None = None, device="cpu") -> "PathClearance":
+              geometry: np.ndarray | torch.Tensor | None = None, device="cpu", K=None, size=(0, 0),
+              view_depth: float = 0.0) -> "PathClearance":
         """From the inputs' world-to-camera matrices [N, 4, 4], the path ``order`` (``path_trajectories``'),
-        ``samples`` poses per pair of neighbours, and the points the initialisation found (``geometry``)."""
+        ``samples`` poses per pair of neighbours, and the points the initialisation found (``geometry``).
+        ``K`` [3, 3] and ``size`` (width, height) of the inputs and ``view_depth`` > 0: the view clearance."""
         from warpgs.pseudo.trajectory import camera_centres, path_trajectories
 
         V = np.asarray(viewmats if not torch.is_tensor(viewmats) else viewmats.detach().cpu().numpy(), np.float64)
         segs = []
+        poses = [V[i] for i in range(len(V))]
         if len(V) >= 2:
             for traj in path_trajectories(V, max(samples, 2), order):
                 c = camera_centres(np.asarray(traj.viewmats, np.float64))
                 segs += [(c[i], c[i + 1]) for i in range(len(c) - 1)]
+                poses += [np.asarray(m, np.float64) for m in traj.viewmats[1:-1]]
         if not segs:  # one input: its centre only
             c = camera_centres(V)
             segs = [(c[0], c[0])]
@@ -72,11 +80,32 @@ class PathClearance:
             free = near >= radius
             dropped = int((~free).sum())
             a, b = a[free], b[free]
-        return cls(a, b, radius, dropped)
+        P = Kt = None
+        if view_depth > 0 and K is not None:
+            P = torch.tensor(np.stack(poses), dtype=torch.float32, device=device)
+            Kt = torch.as_tensor(np.asarray(K, np.float32), device=device)
+        return cls(a, b, radius, dropped, P, Kt, size, view_depth)
 
-    def to(self, device) -> "PathClearance":
-        return PathClearance(self.a.to(device), self.b.to(device), self.radius, self.dropped)
+    def in_view(self, means: torch.Tensor, chunk: int = 1 << 16) -> torch.Tensor:
+        """[N] bool: in front of a pose of the path, nearer than ``view_depth``, inside its image."""
+        hit = torch.zeros(len(means), dtype=torch.bool, device=means.device)
+        if self.poses is None or self.view_depth <= 0:
+            return hit
+        P, K = self.poses.to(means.device), self.K.to(means.device)
+        W, H = self.size
+        x = means.detach().float()
+        for i in range(0, len(x), chunk):
+            cam = torch.einsum("kij,nj->nki", P[:, :3, :3], x[i:i + chunk]) + P[None, :, :3, 3]  # [n, k, 3]
+            z = cam[..., 2]
+            zc = z.clamp_min(1e-6)
+            u = K[0, 0] * cam[..., 0] / zc + K[0, 2]
+            v = K[1, 1] * cam[..., 1] / zc + K[1, 2]
+            near = (z > 0) & (z < self.view_depth) & (u >= 0) & (u < W) & (v >= 0) & (v < H)
+            hit[i:i + chunk] = near.any(dim=1)
+        return hit
 
     def inside(self, means: torch.Tensor) -> torch.Tensor:
-        """[N] bool: centre within ``radius`` of a free segment."""
-        return segment_distance(means.detach().float(), self.a.to(means.device), self.b.to(means.device)) < self.radius
+        """[N] bool: centre within ``radius`` of a free segment, or (``view_depth``) nearer to a pose of the
+        path than that, in its view."""
+        d = segment_distance(means.detach().float(), self.a.to(means.device), self.b.to(means.device))
+        return (d < self.radius) | self.in_view(means)

@@ -122,6 +122,9 @@ class TrainConfig:
     path_clearance: float = 0.0  # > 0: every strategy.refine_every steps, remove the Gaussians whose centre lies
     #   within this x the scene's near depth of the camera path (warpgs/clearance.py: the photographer's space,
     #   where floaters in front of novel views sit); 0: off
+    view_clearance: float = 0.0  # > 0: with the path clearance's schedule, also remove the Gaussians nearer than
+    #   this x the near depth in front of any pose of the camera path (the inputs and the poses between them),
+    #   inside its image (warpgs/clearance.py); 0: off
     alpha_binary: float = 0.0  # weight of mean(alpha (1 - alpha)) over each input render: every pixel either
     #   covered by Gaussians or showing what is behind them (with a far field, no translucent cover that a novel
     #   view sees at another angle); 0: off
@@ -166,7 +169,7 @@ class TrainConfig:
               "scale_reg": ">= 0", "scale_reg_ratio": ">= 1", "max_nan_steps": ">= 1",
               "explode_factor": ">= 0", "explode_window": ">= 1", "explode_patience": ">= 1", "snapshot_every": ">= 0",
               "max_recoveries": ">= 0", "recovery_lr_factor": "(0, 1]", "cpu_threads": ">= 0", "sync_every": ">= 1",
-              "far_field": FAR_FIELD_RULE, "far_field_bins": ">= 1", "alpha_binary": ">= 0", "path_clearance": ">= 0", "co_prune_every": ">= 0", "co_prune_dist": "> 0",
+              "far_field": FAR_FIELD_RULE, "far_field_bins": ">= 1", "alpha_binary": ">= 0", "path_clearance": ">= 0", "view_clearance": ">= 0", "co_prune_every": ">= 0", "co_prune_dist": "> 0",
               "co_reg_weight": ">= 0", "co_reg_start": ">= 0", "co_reg_frames": ">= 1"}
 
 

@@ -396,13 +396,15 @@ class Trainer:
         if not 0.0 <= cfg.train.opacity_noise <= 1.0:  # a factor 1 + eps with |eps| <= sigma stays >= 0
             raise ValueError(f"train.opacity_noise must be in [0, 1], got {cfg.train.opacity_noise}")
         self.clearance = None  # train.path_clearance: the camera path's free space (warpgs/clearance.py)
-        if cfg.train.path_clearance > 0:
+        if cfg.train.path_clearance > 0 or cfg.train.view_clearance > 0:
             from warpgs.clearance import PathClearance
 
             geo = getattr(scene, "geometry", None)
+            c0 = scene.train[0]
             self.clearance = PathClearance.build(
                 np.stack([c.viewmat for c in scene.train]), cfg.train.path_clearance * float(scene.bounds[0]),
-                order=cfg.pseudo.trajectory.order, geometry=None if geo is None else geo.xyz, device=self.device)
+                order=cfg.pseudo.trajectory.order, geometry=None if geo is None else geo.xyz, device=self.device,
+                K=c0.K, size=(c0.width, c0.height), view_depth=cfg.train.view_clearance * float(scene.bounds[0]))
         self.view_rng = np.random.default_rng(seed + 2)
         self.order: list[int] = []
         self.optimizer = make_optimizer(self.model, cfg, self.scene_scale)

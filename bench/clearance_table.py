@@ -1,0 +1,173 @@
+"""The README's path-clearance table: session 14's runs on the captures against the earlier defaults.
+
+    python bench/clearance_table.py                       # the committed records (defaults below)
+    python bench/clearance_table.py --runs RUNS.json --suite RESULTS.json
+
+Prints markdown: one row per capture and view count (castle_p30, herz_jesus_p25 at 3, 6, 9 views; images_8,
+3000 iterations), each PSNR cell the median [min, max] over the seeds present (``-`` with none), for
+  - plain baseline, session-13 baseline and session-13 full: the suite's labels ``baseline`` (3D-GS, no
+    dropout), ``baseline+drop`` and ``full`` (bench/results/suite_cuda_switches/results.json, runs with
+    no metrics skipped);
+  - baseline and full with ``train.path_clearance 0.2`` (session 14's group ``pc``) and with path clearance
+    and far field, the new default for captures (group ``pcff``), from
+    bench/results/real_captures/session14_runs.json (bench/gpu_session14.sh; run names
+    ``<group>_<case>_<method>_s<seed>``, case ``castle3`` .. ``herz9``, method ``base`` or ``full``; the
+    file's other groups (d, ab, pc0.1, pc0.2) are other experiments and are left out);
+then the default's gain (median of the full method's runs minus the baseline's) and its per-seed gains
+(seeds 0, 1, 2 run by both). Below it: the mean and the worst over the cases of five differences of
+medians, and the "collapses" of each column, its runs more than 2 dB below their own case's median.
+Nothing in it is typed by hand.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import re
+import statistics
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+DEFAULT_RUNS = ROOT / "bench" / "results" / "real_captures" / "session14_runs.json"
+DEFAULT_SUITE = ROOT / "bench" / "results" / "suite_cuda_switches" / "results.json"
+
+SCENES = {"castle": "castle_p30", "herz": "herz_jesus_p25"}
+CASES = [f"{scene}_{v}v" for scene in SCENES.values() for v in (3, 6, 9)]  # the table's rows, in order
+GROUPS = ("pc", "pcff")  # session 14: path clearance 0.2; path clearance 0.2 + far field (the default)
+METHODS = ("base", "full")
+LABELS = ("baseline", "baseline+drop", "full", "full+far_field")  # the suite's labels read
+COLLAPSE_DB = 2.0  # a run this far below its case's median (same column) is a collapse
+
+# (column header, config key): config keys are the suite's labels and session 14's ``<group>_<method>``
+COLUMNS = [("plain baseline", "baseline"), ("session-13 baseline", "baseline+drop"), ("session-13 full", "full"),
+           ("baseline (clearance)", "pc_base"), ("full (clearance)", "pc_full"),
+           ("baseline (default: far field + clearance)", "pcff_base"), ("full (default)", "pcff_full")]
+# (what, minuend, subtrahend): the differences of medians summarised below the table
+DIFFS = [("default full - default baseline", "pcff_full", "pcff_base"),
+         ("full (clearance) - baseline (clearance)", "pc_full", "pc_base"),
+         ("default full - session-13 baseline", "pcff_full", "baseline+drop"),
+         ("default baseline - session-13 baseline", "pcff_base", "baseline+drop"),
+         ("session-13 full - session-13 baseline", "full", "baseline+drop")]
+
+_CASE = re.compile(r"^([a-z]+?)(\d+)$")  # castle3, herz9
+_SEED = re.compile(r"^s(\d+)$")
+
+
+def _parse_name(name: str) -> tuple[str, str, str, int] | None:
+    """(group, case, method, seed) of ``<group>_<case>_<method>_s<seed>``, split from the right (groups may
+    hold dots, pc0.1, and underscores); None for a name not of that form."""
+    parts = name.split("_")
+    if len(parts) < 4 or not _SEED.match(parts[-1]):
+        return None
+    return "_".join(parts[:-3]), parts[-3], parts[-2], int(parts[-1][1:])
+
+
+def load_session14(path) -> dict:
+    """{config: {case: {seed: (run name, psnr)}}} of session 14's groups ``pc`` and ``pcff`` (config
+    ``<group>_<method>``, case as the suite names it: ``castle_p30_3v``); other runs are left out."""
+    runs = json.loads(Path(path).read_text())["runs"]
+    out: dict = {}
+    for name, rec in runs.items():
+        parsed = _parse_name(name)
+        if parsed is None:
+            continue
+        group, case, method, seed = parsed
+        m = _CASE.match(case)
+        if group not in GROUPS or method not in METHODS or not m or m.group(1) not in SCENES:
+            continue
+        if not isinstance(rec, dict) or rec.get("psnr") is None:
+            continue
+        key = f"{SCENES[m.group(1)]}_{m.group(2)}v"
+        out.setdefault(f"{group}_{method}", {}).setdefault(key, {})[seed] = (name, float(rec["psnr"]))
+    return out
+
+
+def load_suite(path) -> dict:
+    """{label: {case: {seed: (run name, psnr)}}} of the suite's runs with metrics, for the labels in LABELS
+    and the cases in CASES."""
+    records = json.loads(Path(path).read_text())["records"]
+    out: dict = {}
+    for r in records:
+        run, metrics = r.get("run") or {}, r.get("metrics")
+        label, case = run.get("label"), run.get("case")
+        if label not in LABELS or case not in CASES or not metrics or metrics.get("psnr") is None:
+            continue
+        seed = int(run.get("seed", 0))
+        name = run.get("name") or f"{label}/{case}/s{seed}"
+        out.setdefault(label, {}).setdefault(case, {})[seed] = (name, float(metrics["psnr"]))
+    return out
+
+
+def _psnrs(configs: dict, key: str, case: str) -> dict:
+    """{seed: psnr} of one column and case ({} when not run)."""
+    return {s: p for s, (_, p) in configs.get(key, {}).get(case, {}).items()}
+
+
+def _cell(xs) -> str:
+    """median [min, max] of ``xs``, ``-`` when empty."""
+    if not xs:
+        return "-"
+    return f"{statistics.median(xs):.2f} [{min(xs):.2f}, {max(xs):.2f}]"
+
+
+def _median_diff(configs: dict, a: str, b: str, case: str) -> float | None:
+    pa, pb = _psnrs(configs, a, case), _psnrs(configs, b, case)
+    if not pa or not pb:
+        return None
+    return statistics.median(pa.values()) - statistics.median(pb.values())
+
+
+def _case_label(case: str) -> tuple[str, str]:
+    scene, views = case.rsplit("_", 1)
+    return scene, views.rstrip("v")
+
+
+def table(session14: dict, suite: dict) -> str:
+    """The markdown table and the summary bullets below it, from ``load_session14`` and ``load_suite``."""
+    configs = {**suite, **session14}
+    lines = ["| scene | views | " + " | ".join(h for h, _ in COLUMNS)
+             + " | full - baseline (default) | per-seed gains |",
+             "|---|---|" + "---|" * len(COLUMNS) + "---|---|"]
+    for case in CASES:
+        scene, views = _case_label(case)
+        cells = [_cell(list(_psnrs(configs, key, case).values())) for _, key in COLUMNS]
+        gain = _median_diff(configs, "pcff_full", "pcff_base", case)
+        b, f = _psnrs(configs, "pcff_base", case), _psnrs(configs, "pcff_full", case)
+        per = ", ".join(f"{f[s] - b[s]:+.2f}" for s in (0, 1, 2) if s in b and s in f) or "-"
+        lines.append(f"| {scene} | {views} | " + " | ".join(cells)
+                     + f" | {'-' if gain is None else f'{gain:+.2f}'} | {per} |")
+    lines.append("")
+    for what, a, b in DIFFS:
+        d = [x for x in (_median_diff(configs, a, b, c) for c in CASES) if x is not None]
+        if d:
+            lines.append(f"- {what} (medians): mean {sum(d) / len(d):+.2f} dB, worst {min(d):+.2f} dB "
+                         f"over {len(d)} of {len(CASES)} cases")
+        else:
+            lines.append(f"- {what} (medians): no case with both")
+    for header, key in COLUMNS:
+        low, n = [], 0
+        for case in CASES:
+            runs = configs.get(key, {}).get(case, {})
+            if not runs:
+                continue
+            n += len(runs)
+            med = statistics.median(p for _, p in runs.values())
+            low += [f"{name} ({p:.2f} vs median {med:.2f})" for s, (name, p) in sorted(runs.items())
+                    if p < med - COLLAPSE_DB]
+        lines.append(f"- collapses (more than {COLLAPSE_DB:g} dB below the case's median), {header}: "
+                     f"{len(low)} of {n} runs" + (": " + ", ".join(low) if low else ""))
+    return "\n".join(lines)
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--runs", type=Path, default=DEFAULT_RUNS, help="session 14's run records (gather_runs.py)")
+    ap.add_argument("--suite", type=Path, default=DEFAULT_SUITE, help="the switches suite's results.json")
+    args = ap.parse_args(argv)
+    print(table(load_session14(args.runs), load_suite(args.suite)))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
