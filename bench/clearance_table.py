@@ -160,12 +160,43 @@ def table(session14: dict, suite: dict) -> str:
     return "\n".join(lines)
 
 
+SESSION7_SEED0 = (DEFAULT_RUNS.parent / "session7_runs.json", DEFAULT_RUNS.parent / "session6_runs_y.json")
+
+
+def i4_table(path=DEFAULT_RUNS, session7=SESSION7_SEED0) -> str:
+    """The images_4 (768x512), 10,000-iteration runs of seed 0: the session-14 default (``i4_<case>_<method>_s0``)
+    and with ``train.view_clearance`` 0.5 (``vc_i4_...``), beside session 7's seed 0 (its baseline's seed 0 is
+    session 6's ``<c>_baseline_i4`` run). Per run: PSNR, the four test views' PSNRs, Gaussians, training s."""
+    runs = json.loads(Path(path).read_text())["runs"]
+    old = {}
+    for f in session7:
+        if Path(f).is_file():
+            for k, v in json.loads(Path(f).read_text()).items():
+                old.setdefault(k, (v.get(".") or {}).get("psnr"))
+    lines = ["| scene | views | method | session 7 (seed 0) | default (far field + path clearance) | per test view | "
+             "Gaussians | training s | + view clearance 0.5 | per test view |", "|---|---|---|---|---|---|---|---|---|---|"]
+    for scene in ("castle", "herz"):
+        for v in (3, 6, 9):
+            for m in ("baseline", "full"):
+                r = runs.get(f"i4_{scene}{v}_{m}_s0")
+                if r is None:
+                    continue
+                vc = runs.get(f"vc_i4_{scene}{v}_{m}_s0")
+                o = old.get(f"{scene[0]}{v}_{m}_i4_s0") or old.get(f"{scene[0]}{v}_{m}_i4")
+                views = lambda x: ", ".join(f"{t['psnr']:.2f}" for t in x["test_views"])
+                lines.append(f"| {SCENES.get(scene, scene)} | {v} | {m} | {'-' if o is None else f'{o:.2f}'} | "
+                             f"{r['psnr']:.2f} | {views(r)} | {r['num_gaussians']} | {r['train_time_s']:.0f} | "
+                             f"{'-' if vc is None else format(vc['psnr'], '.2f')} | {'-' if vc is None else views(vc)} |")
+    return "\n".join(lines)
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--runs", type=Path, default=DEFAULT_RUNS, help="session 14's run records (gather_runs.py)")
     ap.add_argument("--suite", type=Path, default=DEFAULT_SUITE, help="the switches suite's results.json")
+    ap.add_argument("--i4", action="store_true", help="the images_4, 10,000-iteration table of seed 0 instead")
     args = ap.parse_args(argv)
-    print(table(load_session14(args.runs), load_suite(args.suite)))
+    print(i4_table(args.runs) if args.i4 else table(load_session14(args.runs), load_suite(args.suite)))
     return 0
 
 

@@ -76,3 +76,20 @@ def test_trainer_removes_gaussians_on_the_camera_path(tmp_path):
             assert tr.clearance is None
     assert kept[0.0] >= len(planted)  # nothing removes them without the clearance
     assert kept[0.2] == 0
+
+
+def test_view_clearance_removes_what_is_close_in_front_of_a_pose_of_the_path():
+    # cameras at x = 0, 2, 4, 6 looking along +z; fx = fy = 100, a 100x80 image centred at (50, 40)
+    V = np.stack([look_at_viewmat((x, 0.0, 0.0), (x, 0.0, 10.0)) for x in (0.0, 2.0, 4.0, 6.0)])
+    K = np.array([[100.0, 0, 50], [0, 100.0, 40], [0, 0, 1]])
+    clear = PathClearance.build(V, 0.0, order="capture", samples=5, K=K, size=(100, 80), view_depth=3.0)
+    assert len(clear.poses) == 4 + 3 * 3  # the inputs and the poses between them
+    pts = torch.tensor([[1.0, 0.0, 2.0],    # 2 m in front of the pose at x = 1 (between two inputs)
+                        [1.0, 0.0, 4.0],    # 4 m: past the view depth
+                        [3.0, 0.0, -1.0],   # behind every pose
+                        [3.0, 1.0, 1.5],    # 1.5 m ahead but 1 m down: v = 40 + 100 / 1.5 > 80, outside
+                        [20.0, 0.0, 1.0]])  # far to the side of every pose
+    assert clear.in_view(pts).tolist() == [True, False, False, False, False]
+    assert clear.inside(pts).tolist() == [True, False, False, False, False]  # radius 0: the view clearance only
+    # off without a depth, and the tube alone then decides
+    assert not PathClearance.build(V, 0.0, order="capture", K=K, size=(100, 80)).inside(pts).any()
