@@ -97,7 +97,8 @@ def make_config(args):
     # the plain loops train plain 3D-GS: the trainer gets none of the regularisers a dataset config may turn on
     # (DropGaussian is the captures' and LLFF's default since issue 14); --set can still ask for them
     argv += ["--set", "train.drop_rate=0", "--set", "train.opacity_noise=0", "--set", "train.scale_reg=0",
-             "--set", "train.co_reg=false"]
+             "--set", "train.co_reg=false", "--set", "train.far_field=none", "--set", "train.path_clearance=0",
+             "--set", "train.view_clearance=0", "--set", "train.alpha_binary=0"]  # the captures' since session 14
     for s in args.set:
         argv += ["--set", s]
     cfg, _ = cli_config(build_parser().parse_args(argv))

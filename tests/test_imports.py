@@ -14,7 +14,7 @@ LAYERS = [
     ["model", "data"],
     ["strategy"],
     ["pseudo", "densify"],
-    ["points"],
+    ["points", "clearance"],
     ["config"],
     ["optim"],
     ["evaluation", "train", "coreg"],

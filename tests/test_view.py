@@ -101,7 +101,7 @@ def test_rgb_frame_is_the_runs_own_test_render(run_dir):
     assert len(pngs) == len(run.test) == 2
     for png, v in zip(pngs, run.test):
         saved = np.asarray(Image.open(png).convert("RGB")).astype(int)
-        img = render_image(run.model, v.viewmat, v.K, v.width, v.height, "rgb", run.background)
+        img = render_image(run.model, v.viewmat, v.K, v.width, v.height, "rgb", run.backdrop)  # the far field where the run had one
         assert img.dtype == np.uint8 and img.shape == (v.height, v.width, 3)
         assert np.abs(saved[:, : v.width] - img).max() == 0
         assert np.abs(saved[:, v.width:] - np.round(v.image * 255)).max() <= 1
@@ -170,7 +170,7 @@ def test_frame_loop_previews_while_moving_then_renders_a_full_frame():
 
     m = GaussianModel.from_points(torch.tensor([[0.0, 0.0, 3.0]]), torch.tensor([[1.0, 0.5, 0.2]]), sh_degree=0)
     viewer = SimpleNamespace(res=64, preview_res=16, mode="rgb", lock=threading.Lock(),
-                             run=SimpleNamespace(model=m, background=(0.0, 0.0, 0.0)))
+                             run=SimpleNamespace(model=m, backdrop=(0.0, 0.0, 0.0)))
     pose = {"vm": np.eye(4), "moves": 0}
     sent = []
 

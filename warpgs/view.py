@@ -97,6 +97,12 @@ class Run:
     cycles: list[Cycle] = field(default_factory=list)
     background: tuple[float, float, float] = (0.0, 0.0, 0.0)
     notes: list[str] = field(default_factory=list)
+    far_field: object = None  # the run's far field (far_field.json, warpgs.farfield), drawn behind the Gaussians
+
+    @property
+    def backdrop(self):
+        """What ``render_image`` draws behind the Gaussians: the far field where the run had one, else the colour."""
+        return self.far_field if self.far_field is not None else self.background
 
     def summary(self) -> str:
         cycles = len(self.cycles)
@@ -137,6 +143,12 @@ def load_run(path: str | Path, device: str | torch.device = "cpu", cameras: bool
         if (d / "densified.ply").is_file():
             cyc.cloud = read_cloud(d / "densified.ply")
         run.cycles.append(cyc)
+    if (path / "far_field.json").is_file():
+        import json
+
+        from warpgs.farfield import ElevationFarField
+
+        run.far_field = ElevationFarField.from_dict(json.loads((path / "far_field.json").read_text()))
     if cameras and (path / "config.yaml").is_file():
         _add_views(run, path / "config.yaml")
     return run
@@ -195,13 +207,17 @@ def _turbo(x: np.ndarray) -> np.ndarray:
 def render_image(model: GaussianModel, viewmat, K, width: int, height: int, mode: str = "rgb",
                  background=(0.0, 0.0, 0.0)) -> np.ndarray:
     """The viewer's frame: [H, W, 3] uint8 of ``model`` seen by (viewmat, K) through warpgs's rasterizer, in
-    ``mode`` (rgb / depth / alpha; see the module's docstring)."""
+    ``mode`` (rgb / depth / alpha; see the module's docstring). ``background``: an RGB colour, or a far field
+    (anything with ``image(viewmat, K, width, height)``, ``Run.backdrop``)."""
     if mode not in MODES:
         raise ValueError(f"mode must be one of {MODES}, got {mode!r}")
     dev = model.device
     vm = torch.as_tensor(np.asarray(viewmat, np.float32), device=dev)
     k = torch.as_tensor(np.asarray(K, np.float32), device=dev)
-    bg = torch.tensor(background if mode == "rgb" else (0.0, 0.0, 0.0), dtype=torch.float32, device=dev)
+    if mode == "rgb" and hasattr(background, "image"):  # a far field: a colour per pixel
+        bg = background.image(vm, k, int(width), int(height)).to(dev)
+    else:
+        bg = torch.tensor(background if mode == "rgb" else (0.0, 0.0, 0.0), dtype=torch.float32, device=dev)
     with torch.no_grad():
         out = model.render(vm, k, int(width), int(height), background=bg, check_finite=False)
         if mode == "rgb":
@@ -279,7 +295,7 @@ class FrameLoop:
         w, h = fit_size(cw, ch, v.res if final else v.preview_res)
         t0 = time.perf_counter()
         with v.lock:
-            img = render_image(v.run.model, viewmat, pinhole(fov_y, w, h), w, h, v.mode, v.run.background)
+            img = render_image(v.run.model, viewmat, pinhole(fov_y, w, h), w, h, v.mode, v.run.backdrop)
         self.last_render_s = time.perf_counter() - t0
         self.send(img, final)
         self.last, self.last_viewmat, self.last_final = img, viewmat, final
@@ -500,7 +516,7 @@ class Viewer:
             K = view.K.copy()
             K[:2] *= np.array([w / view.width, h / view.height])[:, None]
             with self.lock:
-                img = render_image(self.run.model, view.viewmat, K, w, h, "rgb", self.run.background)
+                img = render_image(self.run.model, view.viewmat, K, w, h, "rgb", self.run.backdrop)
             self.compare.image = np.concatenate([img, _thumbnail(view.image, max(w, h))[:h, :w]], axis=1)
             self.compare_caption.content = f"{kind} view `{view.name}`: render | {'ground truth' if kind == 'test' else 'input'}"
 
