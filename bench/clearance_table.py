@@ -29,6 +29,8 @@ import sys
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+from bench.real_captures_table import _cell as median_range  # noqa: E402
 DEFAULT_RUNS = ROOT / "bench" / "results" / "real_captures" / "session14_runs.json"
 DEFAULT_SUITE = ROOT / "bench" / "results" / "suite_cuda_switches" / "results.json"
 
@@ -105,10 +107,8 @@ def _psnrs(configs: dict, key: str, case: str) -> dict:
 
 
 def _cell(xs) -> str:
-    """median [min, max] of ``xs``, ``-`` when empty."""
-    if not xs:
-        return "-"
-    return f"{statistics.median(xs):.2f} [{min(xs):.2f}, {max(xs):.2f}]"
+    """median [min, max] of ``xs`` (the captures table's cell), ``-`` when empty."""
+    return median_range(xs) if xs else "-"
 
 
 def _median_diff(configs: dict, a: str, b: str, case: str) -> float | None:

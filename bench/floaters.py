@@ -9,7 +9,9 @@ against its total over the training views. The Gaussians that carry most of a te
 inputs barely use them (``--ratio``: test weight over input weight) are the suspects: the script prints the
 worst view's top suspects (distance to the test camera, size, opacity, colour, weights) and the PSNR of every
 test view with the suspects of *all* views removed, and with every Gaussian the inputs use less than
-``--min-input`` pixels removed. Writes ``floaters.json`` in each run folder (or ``--out``).
+``--min-input`` pixels removed, and how far the worst view's suspects and every test camera lie from the camera
+path (``warpgs/clearance.py``; ``path_near``: in the run's near depths, as ``train.path_clearance`` counts).
+Writes ``floaters.json`` in each run folder (or ``--out``).
 """
 
 from __future__ import annotations
@@ -20,6 +22,7 @@ import math
 import sys
 from pathlib import Path
 
+import numpy as np
 import torch
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -36,7 +39,8 @@ def diagnose(run: Path, device: str, data_root: str | None, ratio: float, min_in
     from warpgs.farfield import ElevationFarField
     from warpgs.pipelines.sparse import load_scene_for
     from warpgs.strategy import contribution
-    from warpgs.train import load_trained
+    from warpgs.clearance import PathClearance, segment_distance
+    from warpgs.train import background_colour, load_trained
 
     cfg = build_config([(str(run / "config.yaml"), read_yaml(run / "config.yaml"))])
     if data_root:
@@ -45,10 +49,8 @@ def diagnose(run: Path, device: str, data_root: str | None, ratio: float, min_in
     scene = load_scene_for(cfg)
     model = load_trained(run / "point_cloud.ply", device=device)
     model.active_sh_degree = model.max_sh_degree
-    ff = None
-    if (run / "far_field.json").is_file():
-        ff = ElevationFarField.from_dict(json.loads((run / "far_field.json").read_text()))
-    bgc = torch.tensor(cfg.train.background or ([1.0] * 3 if scene.white_background else [0.0] * 3), device=device)
+    ff = ElevationFarField.load(run / "far_field.json") if (run / "far_field.json").is_file() else None
+    bgc = torch.tensor(background_colour(cfg, scene), device=device)
     train = [c.to_torch(device) for c in scene.train]
     test = [c.to_torch(device) for c in scene.test]
 
@@ -102,8 +104,20 @@ def diagnose(run: Path, device: str, data_root: str | None, ratio: float, min_in
     for v in views:
         v.pop("_w", None)
     depths_in = [float((c.viewmat[:3, :3] @ model.means.T + c.viewmat[:3, 3:]).T[:, 2].median()) for c in train]
+    # where they lie against the camera path of train.path_clearance, in metres and in near depths (the run's
+    # measured bounds when metrics.json has them: the loader's are not what the clearance used)
+    metrics = json.loads((run / "metrics.json").read_text()) if (run / "metrics.json").is_file() else {}
+    near = float(((metrics.get("init") or {}).get("bounds") or scene.bounds)[0])
+    path = PathClearance.build(np.stack([c.viewmat for c in scene.train]), 0.0, order=cfg.pseudo.trajectory.order,
+                               device=device)
+    on_path = segment_distance(model.means.detach()[[r["index"] for r in rows]], path.a, path.b).tolist()
+    for r, d in zip(rows, on_path):
+        r["path_m"], r["path_near"] = round(d, 3), round(d / near, 4)
+    centres = torch.tensor(np.stack([c.center for c in scene.test]), dtype=torch.float32, device=device)
+    for v, d in zip(views, segment_distance(centres, path.a, path.b).tolist()):
+        v["camera_path_m"] = round(d, 3)
     return {"run": str(run), "gaussians": len(model), "suspects": int(suspects.sum()), "unseen": int(unseen.sum()),
-            "scene_bounds": list(map(float, scene.bounds)), "median_depth_in_inputs": depths_in,
+            "scene_bounds": list(map(float, scene.bounds)), "near": near, "median_depth_in_inputs": depths_in,
             "views": views, "worst": worst["name"], "worst_top": rows}
 
 
@@ -126,7 +140,9 @@ def main(argv=None) -> int:
             print(f"  {v['name']}: PSNR {v['psnr']:.2f} -> {v['psnr_without_suspects']:.2f} without suspects "
                   f"({v['suspects']}, {v['suspect_share']:.0%} of the view's weight), "
                   f"{v['psnr_without_unseen']:.2f} without the unseen")
-        print(f"  worst {res['worst']}: top Gaussians")
+        print(f"  worst {res['worst']}: top Gaussians (path_m / path_near: from the camera path, near depth "
+              f"{res['near']:.2f}; test cameras from it: "
+              + ", ".join(f"{v['name']} {v['camera_path_m']:.2f} m" for v in res["views"]) + ")")
         for row in res["worst_top"]:
             print("   ", row)
         out = Path(args.out) if args.out else Path(r) / "floaters.json"

@@ -302,3 +302,21 @@ def test_alpha_loss_is_the_mean_absolute_alpha_error():
     tr.cfg = cfg0
     loss0, parts0 = tr.compute_loss(out, cam)
     assert "alpha" not in parts0 and torch.allclose(loss - loss0, 0.7 * expect)
+
+
+def test_alpha_binary_adds_its_weight_times_mean_alpha_one_minus_alpha():
+    """train.alpha_binary: the input loss gains w mean(alpha (1 - alpha)) of the render, recorded apart from
+    ``inputs`` (the divergence guard's part), and nothing when it is 0."""
+    scene = make_scene()
+    off = Trainer(tiny_config(1), scene)
+    on = Trainer(tiny_config(1, alpha_binary=0.5), scene)
+    cam = on.train_cams[0]
+    out = on.model.render(cam.viewmat, cam.K, cam.width, cam.height, background=on.background)
+    loss, parts = on.input_loss(out, cam)
+    expected = (out.alpha.detach().double() * (1 - out.alpha.detach().double())).mean()
+    assert 0 < float(expected) < 0.25  # a render with partly covered pixels
+    assert abs(float(parts["alpha_binary"]) - float(expected)) < 1e-6
+    assert abs(float(loss - parts["inputs"]) - 0.5 * float(expected)) < 1e-6
+    base, parts0 = off.input_loss(out, cam)
+    assert "alpha_binary" not in parts0 and torch.equal(base, parts0["inputs"])
+    assert torch.equal(parts0["inputs"], parts["inputs"])

@@ -21,18 +21,19 @@ import numpy as np
 import torch
 
 
+def _pairwise(points: torch.Tensor, a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
+    """[n, K] distance of each of ``points`` [n, 3] to each segment ``a[k]``-``b[k]`` ([K, 3])."""
+    ab = b - a
+    p = points[:, None, :]
+    t = (((p - a) * ab).sum(-1) / (ab * ab).sum(-1).clamp_min(1e-20)).clamp(0, 1)
+    return (p - (a + t[..., None] * ab)).norm(dim=-1)
+
+
 def segment_distance(points: torch.Tensor, a: torch.Tensor, b: torch.Tensor, chunk: int = 1 << 16) -> torch.Tensor:
     """[N] distance of each of ``points`` [N, 3] to the nearest of the segments ``a[k]``-``b[k]`` ([K, 3])."""
     if len(a) == 0:
         return torch.full((len(points),), float("inf"), device=points.device)
-    ab = b - a  # [K, 3]
-    den = (ab * ab).sum(-1).clamp_min(1e-20)
-    out = []
-    for i in range(0, len(points), chunk):
-        p = points[i:i + chunk, None, :]  # [n, 1, 3]
-        t = (((p - a) * ab).sum(-1) / den).clamp(0, 1)  # [n, K]
-        d = (p - (a + t[..., None] * ab)).norm(dim=-1)
-        out.append(d.min(dim=1).values)
+    out = [_pairwise(points[i:i + chunk], a, b).min(dim=1).values for i in range(0, len(points), chunk)]
     return torch.cat(out) if out else torch.zeros(0, device=points.device)
 
 
@@ -71,13 +72,9 @@ class PathClearance:
         dropped = 0
         if geometry is not None and len(geometry):
             g = torch.as_tensor(np.asarray(geometry, np.float32), device=device)
-            # per segment: the nearest geometry point (segments x points, chunked over the points)
-            near = torch.full((len(a),), float("inf"), device=device)
-            for i in range(0, len(g), 4096):
-                p = g[i:i + 4096]
-                for k in range(len(a)):
-                    near[k] = torch.minimum(near[k], segment_distance(p, a[k:k + 1], b[k:k + 1]).min())
-            free = near >= radius
+            # per segment: the nearest geometry point (points x segments, chunked over the points)
+            near = torch.stack([_pairwise(g[i:i + 4096], a, b).min(dim=0).values for i in range(0, len(g), 4096)])
+            free = near.min(dim=0).values >= radius
             dropped = int((~free).sum())
             a, b = a[free], b[free]
         P = Kt = None

@@ -106,6 +106,11 @@ class ElevationFarField:
         path.write_text(json.dumps(self.to_dict(), indent=1))
         return path
 
+    @classmethod
+    def load(cls, path: str | Path) -> "ElevationFarField":
+        """What ``save`` wrote (a run folder's ``far_field.json``)."""
+        return cls.from_dict(json.loads(Path(path).read_text()))
+
 
 def make_far_field(kind: str, cameras, bins: int, background=None) -> ElevationFarField | None:
     """The far field ``train.far_field`` asks for, fitted on ``cameras`` (the training views); None for none.

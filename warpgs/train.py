@@ -182,6 +182,14 @@ def resolve_device(name: str) -> torch.device:
     return dev
 
 
+def background_colour(cfg: Config, scene) -> list[float]:
+    """The colour behind the Gaussians: ``train.background``, else white for a scene that says so, else black."""
+    bg = cfg.train.background
+    if bg is not None:
+        return list(bg)
+    return [1.0, 1.0, 1.0] if scene.white_background else [0.0, 0.0, 0.0]
+
+
 def scene_scale_of(cameras) -> float:
     """3D-GS's ``cameras_extent``: 1.1 x the largest distance of a camera centre from their mean."""
     centres = np.stack([c.center for c in cameras])
@@ -375,10 +383,7 @@ class Trainer:
             raise ValueError(f"{scene.name}: no training views")
         self.train_cams = [c.to_torch(self.device) for c in scene.train]
         self.test_cams = [c.to_torch(self.device) for c in scene.test]
-        bg = cfg.train.background
-        if bg is None:
-            bg = [1.0, 1.0, 1.0] if scene.white_background else [0.0, 0.0, 0.0]
-        self.background = torch.tensor(bg, dtype=torch.float32, device=self.device)
+        self.background = torch.tensor(background_colour(cfg, scene), dtype=torch.float32, device=self.device)
         # fitted on the training views only, deterministic: a resumed run computes the same one
         self.far_field = make_far_field(cfg.train.far_field, self.train_cams, cfg.train.far_field_bins, self.background)
         self.scene_scale = cfg.optim.scene_scale or scene_scale_of(scene.train)

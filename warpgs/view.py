@@ -144,11 +144,9 @@ def load_run(path: str | Path, device: str | torch.device = "cpu", cameras: bool
             cyc.cloud = read_cloud(d / "densified.ply")
         run.cycles.append(cyc)
     if (path / "far_field.json").is_file():
-        import json
-
         from warpgs.farfield import ElevationFarField
 
-        run.far_field = ElevationFarField.from_dict(json.loads((path / "far_field.json").read_text()))
+        run.far_field = ElevationFarField.load(path / "far_field.json")
     if cameras and (path / "config.yaml").is_file():
         _add_views(run, path / "config.yaml")
     return run
@@ -166,8 +164,9 @@ def _add_views(run: Run, config_path: Path) -> None:
         run.notes.append(f"the run's scene cannot be loaded here, so its cameras are not shown ({e})")
         return
     run.train, run.test = _views(scene.train), _views(scene.test)
-    bg = cfg.train.background
-    run.background = tuple(bg) if bg is not None else ((1.0, 1.0, 1.0) if scene.white_background else (0.0, 0.0, 0.0))
+    from warpgs.train import background_colour
+
+    run.background = tuple(background_colour(cfg, scene))
 
 
 # ----------------------------------------------------------------------------------------------
