@@ -2,6 +2,7 @@
 
     python bench/clearance_table.py                       # the committed records (defaults below)
     python bench/clearance_table.py --runs RUNS.json --suite RESULTS.json
+    python bench/clearance_table.py --variants            # session 15's variants against the default
 
 Prints markdown: one row per capture and view count (castle_p30, herz_jesus_p25 at 3, 6, 9 views; images_8,
 3000 iterations), each PSNR cell the median [min, max] over the seeds present (``-`` with none), for
@@ -17,6 +18,12 @@ then the default's gain (median of the full method's runs minus the baseline's) 
 (seeds 0, 1, 2 run by both). Below it: the mean and the worst over the cases of five differences of
 medians, and the "collapses" of each column, its runs more than 2 dB below their own case's median.
 Nothing in it is typed by hand.
+
+``--variants``: session 15's runs (bench/results/real_captures/session15_runs.json, bench/gpu_session15.sh a, c,
+d; same setting, over the session-14 defaults) beside the default's two columns: view clearance for both
+methods, and five changes of the full method (VARIANTS). Below it, each variant's mean and worst difference of
+medians against the default baseline (what issue 13 asks of the full method: mean >= +0.5, none below -0.2)
+and against its own method's default.
 """
 
 from __future__ import annotations
@@ -65,9 +72,8 @@ def _parse_name(name: str) -> tuple[str, str, str, int] | None:
     return "_".join(parts[:-3]), parts[-3], parts[-2], int(parts[-1][1:])
 
 
-def load_session14(path) -> dict:
-    """{config: {case: {seed: (run name, psnr)}}} of session 14's groups ``pc`` and ``pcff`` (config
-    ``<group>_<method>``, case as the suite names it: ``castle_p30_3v``); other runs are left out."""
+def load_groups(path, groups) -> dict:
+    """{<group>_<method>: {case: {seed: (run name, psnr)}}} of the runs of ``groups`` in a runs file."""
     runs = json.loads(Path(path).read_text())["runs"]
     out: dict = {}
     for name, rec in runs.items():
@@ -76,13 +82,19 @@ def load_session14(path) -> dict:
             continue
         group, case, method, seed = parsed
         m = _CASE.match(case)
-        if group not in GROUPS or method not in METHODS or not m or m.group(1) not in SCENES:
+        if group not in groups or method not in METHODS or not m or m.group(1) not in SCENES:
             continue
         if not isinstance(rec, dict) or rec.get("psnr") is None:
             continue
-        key = f"{SCENES[m.group(1)]}_{m.group(2)}v"
-        out.setdefault(f"{group}_{method}", {}).setdefault(key, {})[seed] = (name, float(rec["psnr"]))
+        out.setdefault(f"{group}_{method}", {}).setdefault(f"{SCENES[m.group(1)]}_{m.group(2)}v", {})[seed] = \
+            (name, float(rec["psnr"]))
     return out
+
+
+def load_session14(path) -> dict:
+    """{config: {case: {seed: (run name, psnr)}}} of session 14's groups ``pc`` and ``pcff`` (config
+    ``<group>_<method>``, case as the suite names it: ``castle_p30_3v``); other runs are left out."""
+    return load_groups(path, GROUPS)
 
 
 def load_suite(path) -> dict:
@@ -160,6 +172,42 @@ def table(session14: dict, suite: dict) -> str:
     return "\n".join(lines)
 
 
+SESSION15_RUNS = DEFAULT_RUNS.parent / "session15_runs.json"
+# (column header, session 15's <group>_<method>, the default it changes): bench/gpu_session15.sh
+VARIANTS = [("baseline + view clearance 0.5", "vc_base", "pcff_base"),
+            ("full + view clearance 0.5", "vc_full", "pcff_full"),
+            ("full, early input depth", "ed_full", "pcff_full"),
+            ("full, no depth terms", "nd_full", "pcff_full"),
+            ("full, no input depth term", "ni_full", "pcff_full"),
+            ("full, pseudo weight 2", "pw_full", "pcff_full"),
+            ("full, pseudo views from step 750", "bf_full", "pcff_full")]
+
+
+def variants_table(session14=DEFAULT_RUNS, session15=SESSION15_RUNS) -> str:
+    """Session 15's variants (VARIANTS) beside the session-14 default, and their mean / worst differences of
+    medians against the default baseline and against their method's default."""
+    configs = {**load_session14(session14), **load_groups(session15, {k.split("_")[0] for _, k, _ in VARIANTS})}
+    cols = [("default baseline", "pcff_base"), ("default full", "pcff_full")] + [(h, k) for h, k, _ in VARIANTS]
+    lines = ["| scene | views | " + " | ".join(h for h, _ in cols) + " |", "|---|---|" + "---|" * len(cols)]
+    for case in CASES:
+        scene, views = _case_label(case)
+        lines.append(f"| {scene} | {views} | "
+                     + " | ".join(_cell(list(_psnrs(configs, k, case).values())) for _, k in cols) + " |")
+    lines.append("")
+    for header, key in cols[1:]:
+        ref = next((r for _, k, r in VARIANTS if k == key), "pcff_full")
+        parts = []
+        against = [("vs the default baseline", "pcff_base")]
+        if ref not in ("pcff_base", key):
+            against.append(("vs the default full", ref))
+        for what, other in against:
+            d = [x for x in (_median_diff(configs, key, other, c) for c in CASES) if x is not None]
+            if d:
+                parts.append(f"{what}: mean {sum(d) / len(d):+.2f} dB, worst {min(d):+.2f} dB ({len(d)} cases)")
+        lines.append(f"- {header}: " + ("; ".join(parts) if parts else "no case with both"))
+    return "\n".join(lines)
+
+
 SESSION7_SEED0 = (DEFAULT_RUNS.parent / "session7_runs.json", DEFAULT_RUNS.parent / "session6_runs_y.json")
 
 
@@ -195,8 +243,13 @@ def main(argv=None) -> int:
     ap.add_argument("--runs", type=Path, default=DEFAULT_RUNS, help="session 14's run records (gather_runs.py)")
     ap.add_argument("--suite", type=Path, default=DEFAULT_SUITE, help="the switches suite's results.json")
     ap.add_argument("--i4", action="store_true", help="the images_4, 10,000-iteration table of seed 0 instead")
+    ap.add_argument("--variants", action="store_true", help="session 15's variants against the default instead")
+    ap.add_argument("--session15", type=Path, default=SESSION15_RUNS, help="session 15's run records")
     args = ap.parse_args(argv)
-    print(i4_table(args.runs) if args.i4 else table(load_session14(args.runs), load_suite(args.suite)))
+    if args.variants:
+        print(variants_table(args.runs, args.session15))
+    else:
+        print(i4_table(args.runs) if args.i4 else table(load_session14(args.runs), load_suite(args.suite)))
     return 0
 
 

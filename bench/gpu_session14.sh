@@ -21,17 +21,7 @@
 set -u
 P=$1; D=$2; R=$3; mkdir -p "$R" "$OUT"
 export PYTHONPATH=/tmp/site:$PWD PYTHONUNBUFFERED=1 OMP_NUM_THREADS=1 MKL_NUM_THREADS=1
-one() {  # one NAME METHOD SCENE VIEWS SEED [--set k=v ...]
-  local name=$1 method=$2 scene=$3 views=$4 seed=$5; shift 5
-  [ -f "$R/$name/metrics.json" ] && return 0
-  local resume=(); [ -f "$R/$name/checkpoint.pt" ] && resume=(--resume)
-  local t=${T:-540}; [ -n "${END:-}" ] && t=$((END - $(date +%s)))
-  [ "$t" -lt 20 ] && { echo "$name: no time left in this call"; return 0; }
-  timeout -s INT "$t" python3 -m warpgs.pipelines.sparse --method "$method" --data dl3dv --scene "$scene" \
-    --views "$views" --downscale "${DS:-8}" --iterations "${IT:-3000}" --device cuda --no-progress --seed "$seed" \
-    --data-root "$D" --set train.eval_every=$(( ${IT:-3000} / 10 )) --out "$R/$name" "${resume[@]}" "$@" >> "$R/$name.log" 2>&1
-  echo "$name rc=$? $(grep -h 'test: PSNR' "$R/$name.log" | tail -1)"
-}
+source "$(dirname "${BASH_SOURCE[0]}")/gpu_one.sh"
 FF=(--set full.far_field=elevation)
 AB=(--set full.far_field=elevation --set train.alpha_binary=0.1)
 case $P in
@@ -61,7 +51,7 @@ b)
   wait
   ;;
 c)
-  export -f one; export R D T END=$(( $(date +%s) + ${T:-540} ))
+  export R D T END=$(( $(date +%s) + ${T:-540} ))
   for s in 0 1 2; do for sc in castle_p30 herz_jesus_p25; do for v in 3 6 9; do
     c=${sc%%_*}$v
     echo "pcff_${c}_full_s$s full $sc $v $s --set train.path_clearance=0.2 --set full.far_field=elevation"
@@ -71,13 +61,13 @@ c)
   done; done; done | xargs -P 24 -L 1 bash -c 'one "$@"' _
   ;;
 d)
-  export -f one; export R D T DS=4 IT=10000 END=$(( $(date +%s) + ${T:-540} ))
+  export R D T DS=4 IT=10000 END=$(( $(date +%s) + ${T:-540} ))
   for sc in castle_p30 herz_jesus_p25; do for v in 3 6 9; do for m in baseline full; do
     echo "i4_${sc%%_*}${v}_${m}_s0 $m $sc $v 0"
   done; done; done | xargs -P 12 -L 1 bash -c 'one "$@"' _
   ;;
 e)
-  export -f one; export R D T END=$(( $(date +%s) + ${T:-540} ))
+  export R D T END=$(( $(date +%s) + ${T:-540} ))
   VC="--set train.view_clearance=0.5"
   { for m in baseline full; do for v in 9 6; do echo "vc_i4_castle${v}_${m}_s0 $m castle_p30 $v 0 $VC"; done; done
     for v in 9 6; do echo "vc_castle${v}_base_s0 baseline castle_p30 $v 0 $VC"; done; } |

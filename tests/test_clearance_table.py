@@ -94,3 +94,41 @@ def test_committed_records(capsys):
         "pcff_castle9_full_s1", runs["pcff_castle9_full_s1"]["psnr"])
     assert sum(line.startswith("| castle_p30 ") or line.startswith("| herz_jesus_p25 ")
                for line in text.splitlines()) == 6
+
+
+def test_variants_against_the_default(tmp_path):
+    """--variants: session 15's columns beside session 14's default, and their mean / worst differences of
+    medians against the default baseline and against their method's default."""
+    s14, _ = _write(tmp_path)
+    psnr = {"vc_castle3_base_s0": 9.0, "vc_castle3_base_s1": 9.2, "vc_castle3_base_s2": 9.4,
+            "ed_castle3_full_s0": 12.0, "ed_castle3_full_s1": 12.0,
+            "ed_herz9_full_s0": 19.0, "ed_herz9_full_s1": 19.5, "ed_herz9_full_s2": 20.0,
+            "pcff_castle3_full_s0": 99.0,  # a group session 15 did not run: left out
+            "zz_castle3_full_s0": 99.0}
+    runs = {n: {"psnr": p} for n, p in psnr.items()}
+    s15 = tmp_path / "s15.json"
+    s15.write_text(json.dumps({"info": {}, "runs": runs}))
+    text = ct.variants_table(s14, s15)
+    c3 = _row(text, "castle_p30", 3)
+    assert c3[2:5] == ["11.00 [10.00, 12.00]", "11.50 [10.50, 13.00]", "9.20 [9.00, 9.40]"]
+    assert c3[6] == "12.00 [12.00, 12.00]" and c3[5] == "-"
+    assert _row(text, "herz_jesus_p25", 9)[6] == "19.50 [19.00, 20.00]"
+    # early depth vs the default baseline: castle 3 12.0 - 11.0, herz 9 19.5 - 20.5; vs the default full:
+    # 12.0 - 11.5, 19.5 - 20.2
+    ed = _bullet(text, "full, early input depth:")
+    assert "vs the default baseline: mean +0.00 dB, worst -1.00 dB (2 cases)" in ed
+    assert "vs the default full: mean -0.10 dB, worst -0.70 dB (2 cases)" in ed
+    vc = _bullet(text, "baseline + view clearance 0.5:")
+    assert "mean -1.80 dB, worst -1.80 dB (1 cases)" in vc and "default full" not in vc
+    assert "no case with both" in _bullet(text, "full, pseudo weight 2:")
+    assert "vs the default full" not in _bullet(text, "default full:")
+
+
+def test_committed_variants(capsys):
+    assert ct.main(["--variants"]) == 0
+    text = capsys.readouterr().out
+    runs = json.loads(ct.SESSION15_RUNS.read_text())["runs"]
+    want = statistics.median(runs[f"vc_castle3_base_s{s}"]["psnr"] for s in range(3))
+    assert _row(text, "castle_p30", 3)[4].split()[0] == f"{want:.2f}"
+    assert all(len(_row(text, s, v)) == 2 + 2 + len(ct.VARIANTS) for s in ("castle_p30", "herz_jesus_p25")
+               for v in (3, 6, 9))

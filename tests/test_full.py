@@ -156,3 +156,37 @@ def test_growth_budget_caps_the_cycles_and_bad_settings_are_named(tmp_path):
                      ({"drop_rate": 1.0}, "drop_rate")):
         with pytest.raises(ValueError, match=msg):
             check_settings(FullConfig(**bad))
+
+
+def test_early_input_depth_is_the_scene_depth_where_confident_and_trains_from_step_0():
+    """full.early_depth: plane-sweep stereo between the inputs gives each a depth prior before the first step;
+    where it is kept (confident) it matches the synthetic scene's ground-truth depth, and the first step's loss
+    has the input depth term. A view with too few confident pixels gets no prior (depth_prior)."""
+    from warpgs.config import build_config
+    from warpgs.data import load_scene
+    from warpgs.pipelines.full import FullMethod, depth_prior
+    from warpgs.train import Trainer
+
+    cfg = build_config([{"method": "full", "train": {"device": "cpu", "progress": False, "iterations": 2},
+                         "model": {"init": "box", "init_num": 50, "init_box": [-1, -1, 2, 1, 1, 4]},
+                         "full": {"pseudo_loss": "l1", "early_depth": True}}])
+    scene = load_scene("synthetic", views=3, downscale=2)
+    tr = Trainer(cfg, scene, None, method=FullMethod())
+    tr.method.early_input_depths()
+    assert set(tr.method.input_depths) == {c.name for c in tr.train_cams}
+    for cam in tr.train_cams:
+        prior = tr.method.input_depths[cam.name]
+        kept = prior > 0
+        assert int(kept.sum()) > 0.02 * kept.numel()
+        rel = (prior[kept] - cam.depth[kept]).abs() / cam.depth[kept]
+        assert float(rel.median()) < 0.03 and float((rel < 0.05).float().mean()) > 0.6
+    cam = tr.train_cams[0]
+    out = tr.model.render(cam.viewmat, cam.K, cam.width, cam.height, background=tr.background)
+    _, parts = tr.compute_loss(out, cam)
+    assert "input_depth" in parts and float(parts["input_depth"].detach()) > 0
+    mask = torch.zeros(4, 5, dtype=torch.bool)
+    mask[0, :4] = True
+    assert depth_prior(mask, torch.ones(4, 5), "cpu", min_pixels=4) is None
+    mask[1, 0] = True
+    p = depth_prior(mask, torch.full((4, 5), 2.0), "cpu", min_pixels=4)
+    assert torch.equal(p > 0, mask) and float(p.max()) == 2.0

@@ -103,6 +103,7 @@ class FullMethod(Method):
         self.cycles_done = 0
         self.history: list[dict] = []  # per cycle: test PSNR/SSIM, Gaussians, stage times
         self.input_depths: dict[str, torch.Tensor] = {}  # plane-sweep depth of the inputs (0: unknown)
+        self.early_depth_s: float | None = None  # time of full.early_depth's stereo
         self.lpips_missing: str | None = None
         self._lpips = None
         if self.settings.pseudo_loss == "lpips" and self.settings.lpips_weight > 0:
@@ -136,10 +137,8 @@ class FullMethod(Method):
             loss = s.lpips_weight * losses.l1(out.image, cam.image, cam.mask)
         if s.ssim_weight > 0:
             loss = loss + s.ssim_weight * losses.dssim(pred, target)
-        if s.depth_weight > 0 and cam.depth is not None:
-            valid = cam.depth > 0
-            if int(valid.sum()) > 16:
-                loss = loss + s.depth_weight * losses.pearson_depth_loss(out.depth, cam.depth, valid)
+        if s.depth_weight > 0 and cam.depth is not None:  # set only with enough confident pixels (depth_prior)
+            loss = loss + s.depth_weight * losses.pearson_depth_loss(out.depth, cam.depth, cam.depth > 0)
         return loss
 
     def loss_terms(self, out, cam, loss, parts):
@@ -149,11 +148,9 @@ class FullMethod(Method):
         tr = self.trainer
         prior = self.input_depths.get(cam.name)
         if prior is not None and self.settings.input_depth_weight > 0:
-            valid = prior > 0
-            if int(valid.sum()) > 16:
-                dl = losses.pearson_depth_loss(out.depth, prior, valid)
-                loss = loss + self.settings.input_depth_weight * dl
-                parts["input_depth"] = dl
+            dl = losses.pearson_depth_loss(out.depth, prior, prior > 0)
+            loss = loss + self.settings.input_depth_weight * dl
+            parts["input_depth"] = dl
         if self.pseudo_cams and self.settings.pseudo_weight > 0:
             pc = self.pseudo_cams[self.next_pseudo()]
             po = tr.model.render(pc.viewmat, pc.K, pc.width, pc.height, background=tr.background_for(pc),
@@ -233,6 +230,30 @@ class FullMethod(Method):
             cap = min(cap, st.max_gaussians)
         tr.strategy = dataclasses.replace(tr.strategy, max_gaussians=max(cap, len(tr.model)))
 
+    def early_input_depths(self) -> None:
+        """``full.early_depth``: the inputs' plane-sweep depth against each other (``densify.stereo``, the
+        scene's bounds), where confident, is their depth prior (w3) from the first step, as the paper's input
+        loss has its depth term throughout; without it the prior appears with the first cycle's stereo."""
+        from warpgs.densify import neighbour_views, stereo_point_cloud
+
+        tr = self.trainer
+        cams = list(tr.train_cams)
+        if len(cams) < 2 or self.settings.input_depth_weight <= 0:
+            return
+        t0 = time.perf_counter()
+        scfg = tr.cfg.densify.stereo
+        viewmats = torch.stack([c.viewmat for c in cams]).float()
+        nb = neighbour_views(viewmats, min(scfg.neighbours, len(cams) - 1), translation_scale=scfg.translation_scale)
+        st = stereo_point_cloud(torch.stack([c.image for c in cams]).float(), torch.stack([c.K for c in cams]).float(),
+                                viewmats, tr.scene.bounds, scfg, neighbours=nb)
+        for v, c in enumerate(cams):
+            depth = depth_prior(st.mask[v], st.depth[v], tr.device)
+            if depth is not None:
+                self.input_depths[c.name] = depth
+        self.early_depth_s = time.perf_counter() - t0
+        tr.log(f"warpgs: input depth prior from plane-sweep stereo between the inputs: "
+               f"{len(self.input_depths)} of {len(cams)} views ({self.early_depth_s:.1f} s)")
+
     def densify(self, cams, cycle_dir: Path | None) -> int:
         from warpgs.densify import densify_gaussians, neighbour_views, select_views
         from warpgs.viz import save_origin_ply
@@ -266,11 +287,12 @@ class FullMethod(Method):
                                  config=dcfg, references=refs, neighbours=neighbours)
         # the plane-sweep depth of the references, where confident, is their depth prior (w3 / w6)
         for v, ref in enumerate(dens.references):
-            depth = torch.where(dens.stereo.mask[v], dens.stereo.depth[v], torch.zeros_like(dens.stereo.depth[v]))
+            depth = depth_prior(dens.stereo.mask[v], dens.stereo.depth[v], tr.device)
             if ref < n_in:
-                self.input_depths[views[ref].name] = depth.to(tr.device)
+                if depth is not None:
+                    self.input_depths[views[ref].name] = depth
             else:
-                views[ref].depth = depth.to(tr.device)
+                views[ref].depth = depth
         ins = dens.insertion
         keep = slice(None) if not s.max_new or len(ins.means) <= s.max_new else slice(0, s.max_new)
         if cycle_dir is not None:
@@ -335,9 +357,12 @@ class FullMethod(Method):
         bounds = phase_boundaries(tr.total_steps, s)
         if tr.phase_len is None:
             tr.phase_start, tr.phase_len = 0, bounds[0] if s.restart_lr else tr.total_steps
+        if s.early_depth and not self.input_depths and not self.history:  # a resumed run has them checkpointed
+            self.early_input_depths()
         tr.train(bounds[0])
         if not self.history:  # the baseline phase, as cycle 0 of the PSNR-per-cycle chart
-            self.history.append(self.record(0, {}))
+            self.history.append(self.record(0, {} if self.early_depth_s is None else
+                                            {"input_depth_s": self.early_depth_s}))
         for c in range(self.cycles_done, s.cycles):
             start, end = bounds[c], bounds[c + 1]
             if tr.step <= start:  # this cycle's pseudo views are not made yet
@@ -386,6 +411,14 @@ class FullMethod(Method):
                              self.pseudo_config().trajectory.order)
             write_report(tr.out, metrics, self.history, baseline)
         return metrics
+
+
+def depth_prior(mask: torch.Tensor, depth: torch.Tensor, device, min_pixels: int = 16) -> torch.Tensor | None:
+    """A view's depth prior: ``depth`` where ``mask`` (0 elsewhere), or None with ``min_pixels`` confident
+    pixels or fewer (too few for a Pearson term). Decided once here, not at every step (a host read)."""
+    if int(mask.sum()) <= min_pixels:
+        return None
+    return torch.where(mask, depth, torch.zeros_like(depth)).to(device)
 
 
 def phase_boundaries(total: int, settings: FullConfig) -> list[int]:
