@@ -9,6 +9,9 @@
 #    full.input_depth_weight=0 (a's ed_* lost 2-4 dB at castle 6 / 9 views), 384x256, seeds 0-2, the six cases.
 # d: more pseudo-view supervision: pw_* full.pseudo_weight=2; bf_* full.baseline_fraction=0.25 (pseudo views from
 #    step 750 instead of 1200), 384x256, seeds 0-2, the six cases.
+# s: issue 15's ratios with this code (no speed change since session 13): bench/rasterizer.py against gsplat 1.5.3
+#    (.device/gsplat) and bench/train_speed.py on fern (3 views, 3000 it, 50,000 frustum Gaussians), 3 repeats
+#    (session 15 gave it 300 s, which ran out during the third repeat: now 450 s).
 # Each run: bench/gpu_one.sh's one (python -m warpgs.pipelines.sparse, resumed when a call's time ran out).
 # The default runs these are compared with: session 14's pcff_* (bench/gpu_session14.sh c).
 set -u
@@ -41,6 +44,16 @@ c)
   ;;
 d)
   variants pw "--set full.pseudo_weight=2" bf "--set full.baseline_fraction=0.25"
+  ;;
+s)
+  python3 -m pip install -q --no-index --no-deps --target /tmp/site .device/gsplat/*.whl 2>/dev/null
+  export MAX_JOBS=16 TORCH_CUDA_ARCH_LIST=9.0
+  timeout 240 python3 bench/rasterizer.py --out "$OUT/rasterizer_cuda.json" > "$OUT/rasterizer.log" 2>&1
+  echo "rasterizer rc=$?"; grep -E "Gaussians|warpgs |gsplat |ratio" "$OUT/rasterizer.log"
+  timeout 450 python3 bench/train_speed.py --data-root "$D" --set model.init=frustum --repeats 3 \
+    --out "$OUT/train_speed_cuda.json" > "$OUT/train_speed.log" 2>&1; echo "train_speed rc=$?"
+  tail -8 "$OUT/train_speed.log"
+  exit 0
   ;;
 esac
 tar cf "$OUT/runs_$P.tar" -C "$R" --exclude=test --exclude='cycle_*' --exclude=charts --exclude='*.md' \

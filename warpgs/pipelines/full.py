@@ -288,8 +288,10 @@ class FullMethod(Method):
         # the plane-sweep depth of the references, where confident, is their depth prior (w3 / w6)
         for v, ref in enumerate(dens.references):
             depth = depth_prior(dens.stereo.mask[v], dens.stereo.depth[v], tr.device)
-            if ref < n_in:
-                if depth is not None:
+            if ref < n_in:  # this cycle's depth replaces the last (none: no prior, as before this cycle)
+                if depth is None:
+                    self.input_depths.pop(views[ref].name, None)
+                else:
                     self.input_depths[views[ref].name] = depth
             else:
                 views[ref].depth = depth
