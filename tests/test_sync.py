@@ -53,12 +53,14 @@ def test_the_default_reads_every_step_on_the_cpu_and_the_setting_is_checked():
     assert tr.sync_every == 1 and tr._sync_due(0) and tr._sync_due(3)
 
 
-def test_deferred_reads_give_the_same_run(scene, monkeypatch):
+@pytest.mark.parametrize("kernels", [False, True])
+def test_deferred_reads_give_the_same_run(scene, monkeypatch, kernels):
     """130 steps (densification every 20 from 30, an opacity reset at 120): the same parameters, losses and
-    loss ratio with a read every step and every 5 steps, and 26 reads instead of 130."""
+    loss ratio with a read every step and every 5 steps, and 26 reads instead of 130; with the deferred
+    verdicts from torch ops and from the Warp kernels (``train.guard_kernels``)."""
     runs = {}
     for every in (1, 5):
-        tr = Trainer(tiny_config(130, sync_every=every), scene)
+        tr = Trainer(tiny_config(130, sync_every=every, guard_kernels=kernels), scene)
         reads = _reads(tr, monkeypatch)
         tr.train()
         runs[every] = (param_copy(tr), tr.losses, tr.guard.max_loss_ratio, len(reads), tr)
@@ -82,8 +84,9 @@ def _inf_gradient_at(tr, steps):
     return loss
 
 
-def test_a_nonfinite_gradient_never_reaches_the_parameters_between_reads(scene, monkeypatch):
-    tr = Trainer(tiny_config(40, sync_every=5), scene)
+@pytest.mark.parametrize("kernels", [False, True])
+def test_a_nonfinite_gradient_never_reaches_the_parameters_between_reads(scene, monkeypatch, kernels):
+    tr = Trainer(tiny_config(40, sync_every=5, guard_kernels=kernels), scene)
     monkeypatch.setattr(tr, "compute_loss", _inf_gradient_at(tr, {12}))
     import warpgs.train
 
@@ -117,10 +120,11 @@ def test_a_nonfinite_gradient_never_reaches_the_parameters_between_reads(scene, 
     assert tr.losses[13:] == twin.losses[13:]
 
 
-def test_an_exploding_loss_between_reads_is_rolled_back_exactly(scene, monkeypatch):
+@pytest.mark.parametrize("kernels", [False, True])
+def test_an_exploding_loss_between_reads_is_rolled_back_exactly(scene, monkeypatch, kernels):
     """As tests/test_stability.py's exact rollback, with reads every 5 steps: steps 70 and 71 skip their
     updates on the device, 72 is the divergence; the read at step 74 finds it and rolls back to 50."""
-    tr = Trainer(tiny_config(100, snapshot_every=25, sync_every=5), scene)
+    tr = Trainer(tiny_config(100, snapshot_every=25, sync_every=5, guard_kernels=kernels), scene)
     real = tr.compute_loss
 
     def explode_from_70_until_a_rollback(out, cam):
@@ -206,33 +210,74 @@ def test_ctrl_c_between_reads_saves_a_state_that_resumes_exactly(scene, tmp_path
     assert same_params(param_copy(straight), param_copy(resumed)) and straight.losses == resumed.losses
 
 
+def _random_guard(rng, factors):
+    """A guard, its window and the host's losses at random: a window of 1-8, a factor from ``factors``, up to
+    14 float32 losses with up to 3 NaN (skipped steps) and a restart anywhere. (guard, losses, window
+    filled from them, the median the host takes (1 without one))."""
+    from types import SimpleNamespace
+
+    window = int(rng.integers(1, 9))
+    cfg = SimpleNamespace(explode_factor=float(rng.choice(factors)), explode_window=window,
+                          explode_patience=3, max_nan_steps=3)
+    g = DivergenceGuard(cfg)
+    n = int(rng.integers(0, 15))
+    losses = [float(np.float32(x)) for x in rng.uniform(0.01, 1.0, n)]
+    for i in rng.choice(n, size=min(n, int(rng.integers(0, 4))), replace=False) if n else []:
+        losses[i] = float("nan")
+    g.restart(int(rng.integers(0, n + 1)))
+    w = LossWindow(window, "cpu")
+    w.rebuild(losses, g.stat_start, n)
+    recent = [x for x in losses[max(g.stat_start, n - window):] if math.isfinite(x)]
+    return g, losses, w, float(np.median(recent)) if recent else 1.0
+
+
 def test_the_device_verdict_is_the_hosts():
     """``exploding_on_device`` against ``exploding`` on random windows (NaN for skipped steps, restarts, odd
     and even counts), at and around the threshold."""
-    from types import SimpleNamespace
-
     rng = np.random.default_rng(0)
     for trial in range(60):
-        window = int(rng.integers(1, 9))
-        cfg = SimpleNamespace(explode_factor=float(rng.choice([2.0, 10.0])), explode_window=window,
-                              explode_patience=3, max_nan_steps=3)
-        g = DivergenceGuard(cfg)
-        n = int(rng.integers(0, 15))
-        losses = [float(np.float32(x)) for x in rng.uniform(0.01, 1.0, n)]
-        for i in rng.choice(n, size=min(n, int(rng.integers(0, 4))), replace=False) if n else []:
-            losses[i] = float("nan")
-        g.restart(int(rng.integers(0, n + 1)))
-        w = LossWindow(window, "cpu")
-        w.rebuild(losses, g.stat_start, n)
-        start = max(g.stat_start, n - window)
-        recent = [x for x in losses[start:] if math.isfinite(x)]
-        median = float(np.median(recent)) if recent else 1.0
+        g, losses, w, median = _random_guard(rng, [2.0, 10.0])
+        cfg, window = g.cfg, w.size
         for v in (median * cfg.explode_factor, np.nextafter(median * cfg.explode_factor, np.inf),
                   np.nextafter(median * cfg.explode_factor, 0), 0.5 * median, 3.0):
             v = float(v)
             host = g.exploding(v, losses) is not None
             dev = bool(g.exploding_on_device(torch.tensor(v, dtype=torch.float64), w))
             assert host == dev, (trial, losses, g.stat_start, window, v)
+
+
+def test_the_kernels_step_verdict_is_the_hosts():
+    """``step_on_device`` (two Warp launches) against the host's ``exploding`` and ``finite_flags`` on random
+    windows with skipped steps and restarts, float32 losses at and around the threshold, a NaN or inf
+    gradient, an empty tensor and the check turned off: the record, whether the update applies, fused
+    Adam's ``found_inf`` and the window's new entry."""
+    rng = np.random.default_rng(1)
+    for trial in range(80):
+        g, losses, w, median = _random_guard(rng, [2.0, 10.0, 0.0])
+        n, window, factor = len(losses), w.size, g.cfg.explode_factor
+        threshold = np.float32(median * max(factor, 1.0))
+        for v in (threshold, np.nextafter(threshold, np.float32(np.inf)), np.nextafter(threshold, np.float32(0)),
+                  np.float32(0.5 * median), np.float32(3.0)):
+            bad = [None, float("nan"), float("inf"), "empty"][int(rng.integers(0, 4))]
+            grads = [torch.rand(4, 3), torch.zeros(()), torch.rand(2)]
+            if bad == "empty":
+                grads[1] = torch.zeros(0, 3)
+            elif bad is not None:
+                grads[2][1] = bad
+            loss = torch.tensor(float(v) + 1.0, dtype=torch.float32)
+            inputs = torch.tensor(float(v), dtype=torch.float32)
+            w.rebuild(losses, g.stat_start, n)
+            before = w.values.clone()
+            record, apply, found_inf = g.step_on_device([loss] + grads, inputs, w, n)
+            flags = finite_flags([loss] + grads)
+            exploding = bool(flags.all()) and g.exploding(float(v), losses) is not None
+            ok = bool(flags.all()) and not exploding
+            want = [float(v)] + [float(f) for f in flags] + [float(exploding), 0.0]
+            assert record.tolist() == want, (trial, bad, v, record.tolist(), want)
+            assert apply.dtype == torch.bool and apply.shape == () and bool(apply) == ok
+            assert found_inf.dtype == torch.float32 and float(found_inf) == float(not ok)
+            before[n % window] = float(v) if ok else float("inf")
+            assert torch.equal(w.values, before), (trial, w.values, before)
 
 
 def test_masked_step_changes_nothing_when_told_so():

@@ -12,6 +12,8 @@ state with lower learning rates; ``warpgs.train``).
     window.rebuild(losses, guard.stat_start, step)           # from the losses the host holds
     flag = guard.exploding_on_device(value, window)          # a bool tensor: ``exploding``'s verdict
     window.push(step, value)                                 # the step's entry (not finite: skipped)
+    record, apply, found_inf = guard.step_on_device(tensors, value, window, step)   # all of a deferred
+                                                             # step's verdict in two Warp launches
 
 A step is skipped when its loss or gradients are not finite, or when its loss explodes: above
 ``explode_factor`` x the median of the last ``explode_window`` finite losses of the phase. A divergence is
@@ -22,7 +24,9 @@ On CUDA the trainer reads the verdicts only every ``train.sync_every`` steps (a 
 device): between reads a step's verdict is computed on the device from ``LossWindow``, the last
 ``explode_window`` losses of the phase kept there, and the update is skipped there; at the read the
 host replays the verdicts through the counts above. ``exploding_on_device`` computes the same median, in
-the same float64 arithmetic, as ``exploding``, so both give the same verdict.
+the same float64 arithmetic, as ``exploding``, so both give the same verdict; the trainer's deferred steps
+use ``step_on_device``, the same arithmetic in two kernels (warpgs/kernels/guard.py) instead of two dozen
+small torch ops.
 """
 
 from __future__ import annotations
@@ -77,6 +81,37 @@ class DivergenceGuard:
         median = window.median()  # inf when the window is empty: never exploding, as the host has it
         return (median > 0) & (value.double() / median > tc.explode_factor)
 
+    def step_on_device(self, tensors: list[torch.Tensor], inputs: torch.Tensor, window: "LossWindow",
+                       step: int) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """A deferred step's verdict without a host read, in two Warp launches (``warpgs.kernels.guard``):
+        ``tensors`` are the loss and the gradients (each must be finite), ``inputs`` the input views' loss (0-dim)
+        that ``exploding_on_device`` judges against ``window``. Returns the step's record (float64: [the
+        inputs' loss, one finiteness flag per tensor (1 / 0), exploding (1 / 0), 0 for the render's MSE]),
+        whether its update applies (a 0-dim bool) and fused Adam's ``found_inf`` (0-dim float32); the window's
+        entry for ``step`` is written (the loss, or +inf for a step without its update). The same arithmetic
+        as ``finite_flags``, ``exploding_on_device`` and ``LossWindow.push``."""
+        from warpgs import _warp
+        from warpgs.kernels import guard as kg
+
+        dev = inputs.device
+        if all(t.numel() for t in tensors):
+            norms = torch.stack(torch._foreach_norm(tensors, float("inf"))).float()
+        else:  # an empty tensor has no norm: finite -> 0, not -> NaN
+            norms = torch.where(torch.stack([torch.isfinite(t).all() for t in tensors]), 0.0, float("nan")).float()
+        record = torch.empty(len(tensors) + 3, dtype=torch.float64, device=dev)
+        flags = torch.empty(1, dtype=torch.uint8, device=dev)
+        found_inf = torch.empty(1, dtype=torch.float32, device=dev)
+        tc = self.cfg
+        check = int(tc.explode_factor > 0 and tc.explode_window > 0)
+        wdev = _warp.device_of(window.values)
+        stream = _warp.stream_of(wdev)
+        if check:
+            _warp.fast_launch(kg.window_middle, window.size, wdev, stream, window.values, window.middle)
+        _warp.fast_launch(kg.step_verdict, 1, wdev, stream, norms, inputs.reshape(1).float(),
+                          window.middle, window.values, step % window.size, float(tc.explode_factor), check,
+                          record, flags, found_inf)
+        return record, flags.view(torch.bool).reshape(()), found_inf.reshape(())
+
     def skipped(self) -> bool:
         """One more skipped step; True when that makes ``max_nan_steps`` in a row."""
         self.nan_steps += 1
@@ -100,6 +135,7 @@ class LossWindow:
     def __init__(self, size: int, device):
         self.size = max(int(size), 1)
         self.values = torch.full((self.size,), float("inf"), dtype=torch.float64, device=device)
+        self.middle = torch.zeros(2, dtype=torch.float64, device=device)  # step_on_device's two middle values
         self._pair = torch.tensor([0, 1], device=device)  # the two middle ranks: (count - 1 + [0, 1]) // 2
 
     def rebuild(self, losses: list[float], stat_start: int, step: int) -> None:

@@ -578,9 +578,10 @@ class Trainer:
         loss.backward()
         # the guard judges the input views' loss: extra views (the full method's pseudo views) change what is
         # optimised and can be far off at first without anything diverging
-        record = self._step_record(loss.detach(), parts.get("inputs", loss).detach())
+        loss, inputs = loss.detach(), parts.get("inputs", loss).detach()
         if not self._sync_due(step):
-            return self._deferred_step(step, record, out, cam)
+            return self._deferred_step(step, loss, inputs, out, cam)
+        record = self._step_record(loss, inputs)
         with torch.no_grad():
             record[_MSE] = ((out.image.detach().clamp(0, 1) - cam.image) ** 2).mean()
         rolled_back, row = self._resolve(record)  # the one host read of the step, with the deferred steps'
@@ -719,12 +720,20 @@ class Trainer:
         """A step's record, float64 on the device: [the input views' loss, whether the loss and each
         parameter's gradient are finite (1 / 0), exploding (a deferred verdict's), the render's MSE (where
         read)]."""
-        zero = loss.new_zeros(())
-        flags = finite_flags([loss] + [zero if p.grad is None else p.grad for p in self.trained_parameters().values()])
+        flags = finite_flags(self._guarded_tensors(loss))
         record = torch.zeros(len(flags) + 3, dtype=torch.float64, device=loss.device)
         record[_VALUE] = inputs
         record[_LOSS_FINITE:_EXPLODING] = flags
         return record
+
+    def _guarded_tensors(self, loss: torch.Tensor) -> list[torch.Tensor]:
+        """What must be finite for a step to make its update: the loss and each trained parameter's gradient
+        (a zero for one without)."""
+        grads = [p.grad for p in self.trained_parameters().values()]
+        if any(g is None for g in grads):
+            zero = loss.new_zeros(())
+            grads = [zero if g is None else g for g in grads]
+        return [loss] + grads
 
     def _nonfinite_cause(self, row: list[float]) -> str:
         if not row[_LOSS_FINITE]:
@@ -732,24 +741,35 @@ class Trainer:
         bad = [n for n, ok in zip(self.trained_parameters(), row[_LOSS_FINITE + 1:_EXPLODING]) if not ok]
         return f"the gradient of {', '.join(bad)} is not finite"
 
-    def _deferred_step(self, step: int, record: torch.Tensor, out, cam) -> dict:
+    def _deferred_step(self, step: int, loss: torch.Tensor, inputs: torch.Tensor, out, cam) -> dict:
         """A step whose verdict the host reads later: the guard's verdict on the device (non-finite, or an
-        exploding loss against ``LossWindow``), the update made or skipped there (``masked_step``), and only a
-        step that made its update counts in the densification statistics. The record waits in
-        ``_pending`` for the next read (``_resolve``)."""
+        exploding loss against ``LossWindow``, which gets the step's entry; ``DivergenceGuard.step_on_device``
+        with ``train.guard_kernels``, else ``_deferred_verdict``), the update made or skipped there (``masked_step``), and only a step that made its
+        update counts in the densification statistics. The record waits in ``_pending`` for the next read
+        (``_resolve``)."""
+        if self.cfg.train.guard_kernels:
+            record, apply, found_inf = self.guard.step_on_device(self._guarded_tensors(loss), inputs,
+                                                                 self._loss_window(step), step)
+        else:
+            record, apply, found_inf = self._deferred_verdict(step, loss, inputs)
+        for opt in self.optimizers:
+            masked_step(opt, apply, found_inf)
+            opt.zero_grad(set_to_none=True)
+        self._pending.append((step, self.guard.stat_start, record))
+        # a step without its update is one in which no Gaussian was seen, for the densification statistics
+        return self._after_update(step, out._replace(radii=out.radii * apply), cam, apply)
+
+    def _deferred_verdict(self, step: int, loss: torch.Tensor, inputs: torch.Tensor):
+        """``DivergenceGuard.step_on_device``'s results from torch ops (record, apply, found_inf): the step's
+        record, its verdict on the device and its entry in the loss window."""
+        record = self._step_record(loss, inputs)
         value = record[_VALUE]
         finite = record[_LOSS_FINITE:_EXPLODING].all()
         exploding = finite & self.guard.exploding_on_device(value, self._loss_window(step))
         apply = finite & ~exploding
         record[_EXPLODING] = exploding
-        found_inf = (~apply).to(torch.float32)  # one flag for every optimiser (fused Adam's skip)
-        for opt in self.optimizers:
-            masked_step(opt, apply, found_inf)
-            opt.zero_grad(set_to_none=True)
         self._window.push(step, torch.where(apply, value, float("inf")))
-        self._pending.append((step, self.guard.stat_start, record))
-        # a step without its update is one in which no Gaussian was seen, for the densification statistics
-        return self._after_update(step, out._replace(radii=out.radii * apply), cam, apply)
+        return record, apply, (~apply).to(torch.float32)  # one flag for every optimiser (fused Adam's skip)
 
     def _loss_window(self, step: int):
         if self._window is None:  # after a new statistic: from the host's losses (none, at a phase's start)
