@@ -19,6 +19,8 @@ trainer's), SH degree schedule and loss (``loss.l1_weight`` L1 + ``loss.ssim_wei
 - ``plain_gsplat`` (CUDA, gsplat importable): ``gsplat.rasterization`` (packed=False, classic, as gsplat's
   examples/simple_trainer.py), gsplat's ``DefaultStrategy`` and one Adam per parameter (gsplat's
   convention; fused where the trainer's is, so the optimiser is no difference between the loops);
+- ``warpgs_trainer_kernels`` (only when asked for): the trainer with ``train.guard_kernels`` (a deferred step's
+  verdict in two Warp launches); it must end with the same model as ``warpgs_trainer``;
 - ``warpgs_trainer_sync1`` (only when asked for): the trainer reading its verdicts every step
   (``train.sync_every=1``): what the host reads cost; it must end with the same model as ``warpgs_trainer``.
 
@@ -52,7 +54,7 @@ sys.path.insert(0, str(ROOT))
 from warpgs import losses  # noqa: E402
 from warpgs.model import PARAM_NAMES, GaussianModel  # noqa: E402
 
-LOOPS = ("warpgs_trainer", "plain_warpgs", "plain_gsplat", "warpgs_trainer_sync1")
+LOOPS = ("warpgs_trainer", "plain_warpgs", "plain_gsplat", "warpgs_trainer_sync1", "warpgs_trainer_kernels")
 DEFAULT_LOOPS = LOOPS[:3]
 
 
@@ -180,13 +182,15 @@ class Setup:
         return {k: v.to(self.device, copy=True) for k, v in self.init_state["params"].items()}
 
 
-def run_warpgs_trainer(setup: Setup, iterations: int, sync_every: int | None = None):
+def run_warpgs_trainer(setup: Setup, iterations: int, sync_every: int | None = None, guard_kernels: bool | None = None):
     from warpgs.pipelines.sparse import make_trainer
 
     cfg = copy.deepcopy(setup.cfg)
     cfg.train.iterations = iterations
     if sync_every is not None:
         cfg.train.sync_every = sync_every
+    if guard_kernels is not None:
+        cfg.train.guard_kernels = guard_kernels
     tr = make_trainer(cfg, setup.train_scene)
     tr.load_state_dict(setup.init_state)  # the same initial Gaussians (and a fresh optimiser)
     tr.log = lambda msg: print(msg, file=sys.stderr)
@@ -280,7 +284,8 @@ def run_plain_gsplat(setup: Setup, iterations: int):
 
 
 RUNNERS = {"warpgs_trainer": run_warpgs_trainer, "plain_warpgs": run_plain_warpgs, "plain_gsplat": run_plain_gsplat,
-           "warpgs_trainer_sync1": lambda setup, iterations: run_warpgs_trainer(setup, iterations, sync_every=1)}
+           "warpgs_trainer_sync1": lambda setup, iterations: run_warpgs_trainer(setup, iterations, sync_every=1),
+           "warpgs_trainer_kernels": lambda setup, iterations: run_warpgs_trainer(setup, iterations, guard_kernels=True)}
 
 
 def measure(name: str, setup: Setup, iterations: int, warmup: int) -> dict:
@@ -363,14 +368,18 @@ def main(argv=None) -> dict:
         result["loops"][name] = row
     secs = {k: v["seconds"] for k, v in result["loops"].items()}
     ratios = {}
-    for other in ("plain_gsplat", "plain_warpgs", "warpgs_trainer_sync1"):
+    for other in ("plain_gsplat", "plain_warpgs", "warpgs_trainer_sync1", "warpgs_trainer_kernels"):
         if "warpgs_trainer" in secs and other in secs:
             ratios[f"warpgs_trainer/{other}"] = round(secs["warpgs_trainer"] / secs[other], 3)
+    if "warpgs_trainer_kernels" in secs and "plain_gsplat" in secs:
+        ratios["warpgs_trainer_kernels/plain_gsplat"] = round(secs["warpgs_trainer_kernels"] / secs["plain_gsplat"], 3)
     result["ratios"] = ratios
-    if {"warpgs_trainer", "warpgs_trainer_sync1"} <= set(result["loops"]):
-        a, b = result["loops"]["warpgs_trainer"], result["loops"]["warpgs_trainer_sync1"]
-        result["same_model_every_sync"] = all(a[k] == b[k] for k in ("gaussians", "train_psnr", "test_psnr"))
-        print(f"  the same model whatever train.sync_every: {result['same_model_every_sync']}")
+    for other, key, what in (("warpgs_trainer_sync1", "same_model_every_sync", "whatever train.sync_every"),
+                             ("warpgs_trainer_kernels", "same_model_guard_kernels", "with train.guard_kernels")):
+        if {"warpgs_trainer", other} <= set(result["loops"]):
+            a, b = result["loops"]["warpgs_trainer"], result["loops"][other]
+            result[key] = all(a[k] == b[k] for k in ("gaussians", "train_psnr", "test_psnr"))
+            print(f"  the same model {what}: {result[key]}")
     for k, v in ratios.items():
         print(f"  time ratio {k}: {v:.3f}")
     out_path.parent.mkdir(parents=True, exist_ok=True)
