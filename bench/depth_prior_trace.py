@@ -4,8 +4,9 @@
     python bench/depth_prior_trace.py --data-root D --scenes castle_p30 --views 9 --out trace.json
 
 For each capture and view count (384x256, the training views of the standard split): the prior that
-``full.early_depth`` gives each input (``FullMethod.early_input_depths``: plane-sweep stereo between the inputs
-with ``densify.stereo`` of configs/nerfstudio.yaml, within the scene's bounds from the SfM points), its
+``full.early_depth`` gives each input (``inputs_plane_sweep``, as ``FullMethod.early_input_depths`` runs it:
+plane-sweep stereo between the inputs with ``densify.stereo`` of configs/nerfstudio.yaml, within the scene's
+bounds from the SfM points), its
 confident pixels, and, against the SfM points (pycolmap with the poses held fixed; the run's ``model.init:
 sfm`` before any fallback) that land on a confident pixel, the median relative depth error and the share off
 by more than 10%. Writes JSON (``--out``) and prints a line per case. Nothing here trains.
@@ -23,7 +24,7 @@ import torch
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from warpgs.densify import neighbour_views, stereo_point_cloud  # noqa: E402
+from warpgs.pipelines.full import inputs_plane_sweep  # noqa: E402
 from warpgs.pipelines.sparse import build_parser, load_scene_for, make_config  # noqa: E402
 from warpgs.points import GeometryConfig, initial_geometry  # noqa: E402
 
@@ -53,11 +54,7 @@ def trace(data_root: str, scene_name: str, views: int) -> dict:
     scene = load_scene_for(cfg)
     cams = [c.to_torch("cpu") for c in scene.train]
     geo = initial_geometry(scene.train, "sfm", GeometryConfig())
-    scfg = cfg.densify.stereo
-    viewmats = torch.stack([c.viewmat for c in cams]).float()
-    nb = neighbour_views(viewmats, min(scfg.neighbours, len(cams) - 1), translation_scale=scfg.translation_scale)
-    st = stereo_point_cloud(torch.stack([c.image for c in cams]).float(), torch.stack([c.K for c in cams]).float(),
-                            viewmats, geo.bounds, scfg, neighbours=nb)
+    st = inputs_plane_sweep(cams, geo.bounds, cfg.densify.stereo)
     xyz = torch.tensor(geo.xyz, dtype=torch.float32) if geo.method == "sfm" else None
     rows = []
     for v, cam in enumerate(cams):

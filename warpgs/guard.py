@@ -37,6 +37,15 @@ import numpy as np
 import torch
 
 
+def inf_norms(tensors: list[torch.Tensor]) -> torch.Tensor:
+    """Each tensor's largest absolute value, stacked on the device (no host read), finite exactly when the
+    tensor is: one fused reduction, which keeps NaN and inf (``torch._foreach_norm``'s infinity norm, as
+    ``clip_grad_norm_`` relies on), or, where a tensor is empty, one check each (0 when finite, NaN when not)."""
+    if all(t.numel() for t in tensors):
+        return torch.stack(torch._foreach_norm(tensors, float("inf")))
+    return torch.where(torch.stack([torch.isfinite(t).all() for t in tensors]), 0.0, float("nan"))
+
+
 class DivergenceGuard:
     def __init__(self, train_cfg):
         self.cfg = train_cfg  # warpgs.config.TrainConfig: max_nan_steps, explode_factor, explode_window, explode_patience
@@ -89,15 +98,12 @@ class DivergenceGuard:
         inputs' loss, one finiteness flag per tensor (1 / 0), exploding (1 / 0), 0 for the render's MSE]),
         whether its update applies (a 0-dim bool) and fused Adam's ``found_inf`` (0-dim float32); the window's
         entry for ``step`` is written (the loss, or +inf for a step without its update). The same arithmetic
-        as ``finite_flags``, ``exploding_on_device`` and ``LossWindow.push``."""
+        as ``finite_flags`` (``warpgs.optim``), ``exploding_on_device`` and ``LossWindow.push``."""
         from warpgs import _warp
         from warpgs.kernels import guard as kg
 
         dev = inputs.device
-        if all(t.numel() for t in tensors):
-            norms = torch.stack(torch._foreach_norm(tensors, float("inf"))).float()
-        else:  # an empty tensor has no norm: finite -> 0, not -> NaN
-            norms = torch.where(torch.stack([torch.isfinite(t).all() for t in tensors]), 0.0, float("nan")).float()
+        norms = inf_norms(tensors).float()
         record = torch.empty(len(tensors) + 3, dtype=torch.float64, device=dev)
         flags = torch.empty(1, dtype=torch.uint8, device=dev)
         found_inf = torch.empty(1, dtype=torch.float32, device=dev)

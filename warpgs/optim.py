@@ -11,6 +11,7 @@ import copy
 import torch
 
 from warpgs.config import Config
+from warpgs.guard import inf_norms
 from warpgs.model import GaussianModel
 
 STATE_PARTS = ("model", "progress", "history")  # what a checkpoint holds; a rollback snapshot takes them all
@@ -51,12 +52,8 @@ def with_adam_options(saved: dict, optimizer: torch.optim.Optimizer) -> dict:
 
 
 def finite_flags(tensors: list[torch.Tensor]) -> torch.Tensor:
-    """Whether each tensor is all finite, as a bool tensor on the device (no host read): their largest
-    absolute values in one fused reduction, which keeps NaN and inf (``torch._foreach_norm``'s infinity
-    norm, as ``clip_grad_norm_`` relies on), or one check each where a tensor is empty."""
-    if all(t.numel() for t in tensors):
-        return torch.isfinite(torch.stack(torch._foreach_norm(tensors, float("inf"))))
-    return torch.stack([torch.isfinite(t).all() for t in tensors])
+    """Whether each tensor is all finite, as a bool tensor on the device (no host read; ``inf_norms``)."""
+    return torch.isfinite(inf_norms(tensors))
 
 
 def masked_step(optimizer: torch.optim.Optimizer, apply: torch.Tensor, found_inf: torch.Tensor | None = None) -> None:

@@ -744,9 +744,9 @@ class Trainer:
     def _deferred_step(self, step: int, loss: torch.Tensor, inputs: torch.Tensor, out, cam) -> dict:
         """A step whose verdict the host reads later: the guard's verdict on the device (non-finite, or an
         exploding loss against ``LossWindow``, which gets the step's entry; ``DivergenceGuard.step_on_device``
-        with ``train.guard_kernels``, else ``_deferred_verdict``), the update made or skipped there (``masked_step``), and only a step that made its
-        update counts in the densification statistics. The record waits in ``_pending`` for the next read
-        (``_resolve``)."""
+        with ``train.guard_kernels``, else ``_deferred_verdict``), the update made or skipped there
+        (``masked_step``), and only a step that made its update counts in the densification statistics. The
+        record waits in ``_pending`` for the next read (``_resolve``)."""
         if self.cfg.train.guard_kernels:
             record, apply, found_inf = self.guard.step_on_device(self._guarded_tensors(loss), inputs,
                                                                  self._loss_window(step), step)

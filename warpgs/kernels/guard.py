@@ -1,5 +1,5 @@
 """The divergence guard's verdict on a step whose verdict the host reads later (warpgs/guard.py,
-``device_verdict``): two launches instead of the two dozen small torch ops the same arithmetic takes.
+``DivergenceGuard.step_on_device``): two launches instead of the two dozen small torch ops the same arithmetic takes.
 
 ``window_middle``: the two middle values of the loss window (+inf entries sorted last), one thread per entry,
 each counting the entries below and equal to its own: the entry whose rank range holds a middle rank writes it

@@ -234,18 +234,12 @@ class FullMethod(Method):
         """``full.early_depth``: the inputs' plane-sweep depth against each other (``densify.stereo``, the
         scene's bounds), where confident, is their depth prior (w3) from the first step, as the paper's input
         loss has its depth term throughout; without it the prior appears with the first cycle's stereo."""
-        from warpgs.densify import neighbour_views, stereo_point_cloud
-
         tr = self.trainer
         cams = list(tr.train_cams)
         if len(cams) < 2 or self.settings.input_depth_weight <= 0:
             return
         t0 = time.perf_counter()
-        scfg = tr.cfg.densify.stereo
-        viewmats = torch.stack([c.viewmat for c in cams]).float()
-        nb = neighbour_views(viewmats, min(scfg.neighbours, len(cams) - 1), translation_scale=scfg.translation_scale)
-        st = stereo_point_cloud(torch.stack([c.image for c in cams]).float(), torch.stack([c.K for c in cams]).float(),
-                                viewmats, tr.scene.bounds, scfg, neighbours=nb)
+        st = inputs_plane_sweep(cams, tr.scene.bounds, tr.cfg.densify.stereo)
         for v, c in enumerate(cams):
             depth = depth_prior(st.mask[v], st.depth[v], tr.device)
             if depth is not None:
@@ -413,6 +407,18 @@ class FullMethod(Method):
                              self.pseudo_config().trajectory.order)
             write_report(tr.out, metrics, self.history, baseline)
         return metrics
+
+
+def inputs_plane_sweep(cams, bounds, stereo_cfg):
+    """Plane-sweep stereo of each input against its nearest inputs (``stereo_cfg``: ``densify.stereo``)
+    within the scene's depth ``bounds``: the ``StereoResult`` of every input (``full.early_depth``'s prior)."""
+    from warpgs.densify import neighbour_views, stereo_point_cloud
+
+    viewmats = torch.stack([c.viewmat for c in cams]).float()
+    nb = neighbour_views(viewmats, min(stereo_cfg.neighbours, len(cams) - 1),
+                         translation_scale=stereo_cfg.translation_scale)
+    return stereo_point_cloud(torch.stack([c.image for c in cams]).float(), torch.stack([c.K for c in cams]).float(),
+                              viewmats, bounds, stereo_cfg, neighbours=nb)
 
 
 def depth_prior(mask: torch.Tensor, depth: torch.Tensor, device, min_pixels: int = 16) -> torch.Tensor | None:
