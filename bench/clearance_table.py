@@ -19,9 +19,9 @@ then the default's gain (median of the full method's runs minus the baseline's) 
 medians, and the "collapses" of each column, its runs more than 2 dB below their own case's median.
 Nothing in it is typed by hand.
 
-``--variants``: session 15's runs (bench/results/real_captures/session15_runs.json, bench/gpu_session15.sh a, c,
-d; same setting, over the session-14 defaults) beside the default's two columns: view clearance for both
-methods, and five changes of the full method (VARIANTS). Below it, each variant's mean and worst difference of
+``--variants``: sessions 15 and 16's runs (bench/results/real_captures/session15_runs.json, bench/gpu_session15.sh a,
+c, d; session16_runs.json, bench/gpu_session16.sh v; same setting, over the session-14 defaults) beside the
+default's two columns: view clearance for both methods, and seven changes of the full method (VARIANTS). Below it, each variant's mean and worst difference of
 medians against the default baseline (what issue 13 asks of the full method: mean >= +0.5, none below -0.2)
 and against its own method's default.
 """
@@ -180,13 +180,19 @@ VARIANTS = [("baseline + view clearance 0.5", "vc_base", "pcff_base"),
             ("full, no depth terms", "nd_full", "pcff_full"),
             ("full, no input depth term", "ni_full", "pcff_full"),
             ("full, pseudo weight 2", "pw_full", "pcff_full"),
-            ("full, pseudo views from step 750", "bf_full", "pcff_full")]
+            ("full, pseudo views from step 750", "bf_full", "pcff_full"),
+            ("full, unguided pseudo views (session 16)", "rg_full", "pcff_full"),
+            ("full, delta 0.25 (session 16)", "d25_full", "pcff_full")]
+SESSION16_RUNS = DEFAULT_RUNS.parent / "session16_runs.json"
 
 
-def variants_table(session14=DEFAULT_RUNS, session15=SESSION15_RUNS) -> str:
-    """Session 15's variants (VARIANTS) beside the session-14 default, and their mean / worst differences of
-    medians against the default baseline and against their method's default."""
-    configs = {**load_session14(session14), **load_groups(session15, {k.split("_")[0] for _, k, _ in VARIANTS})}
+def variants_table(session14=DEFAULT_RUNS, session15=SESSION15_RUNS, session16=SESSION16_RUNS) -> str:
+    """Sessions 15 and 16's variants (VARIANTS) beside the session-14 default, and their mean / worst differences
+    of medians against the default baseline and against their method's default."""
+    groups = {k.split("_")[0] for _, k, _ in VARIANTS}
+    configs = {**load_session14(session14), **load_groups(session15, groups)}
+    if session16 is not None and Path(session16).is_file():
+        configs.update(load_groups(session16, groups))
     cols = [("default baseline", "pcff_base"), ("default full", "pcff_full")] + [(h, k) for h, k, _ in VARIANTS]
     lines = ["| scene | views | " + " | ".join(h for h, _ in cols) + " |", "|---|---|" + "---|" * len(cols)]
     for case in CASES:

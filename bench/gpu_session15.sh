@@ -12,7 +12,8 @@
 # s: issue 15's ratios with this code (no speed change since session 13): bench/rasterizer.py against gsplat 1.5.3
 #    (.device/gsplat) and bench/train_speed.py on fern (3 views, 3000 it, 50,000 frustum Gaussians), 3 repeats
 #    (session 15 gave it 300 s, which ran out during the third repeat: now 450 s).
-# k: (for the next session) bench/train_speed.py with the loop warpgs_trainer_kernels (train.guard_kernels) beside
+# k: (for the next session) bench/train_speed.py with the loop warpgs_trainer_kernels (train.guard_kernels; since session
+#    16 the default, and the loop that compares is warpgs_trainer_torch_guard) beside
 #    the trainer, the plain warpgs loop and gsplat, 3 repeats interleaved, alone in one call.
 # Each run: bench/gpu_one.sh's one (python -m warpgs.pipelines.sparse, resumed when a call's time ran out).
 # The default runs these are compared with: session 14's pcff_* (bench/gpu_session14.sh c).
@@ -61,7 +62,7 @@ k)
   python3 -m pip install -q --no-index --no-deps --target /tmp/site .device/gsplat/*.whl 2>/dev/null
   export MAX_JOBS=16 TORCH_CUDA_ARCH_LIST=9.0
   timeout 560 python3 bench/train_speed.py --data-root "$D" --set model.init=frustum --repeats 3 \
-    --loops warpgs_trainer,plain_warpgs,plain_gsplat,warpgs_trainer_kernels \
+    --loops warpgs_trainer,plain_warpgs,plain_gsplat,warpgs_trainer_torch_guard \
     --out "$OUT/train_speed_cuda_kernels.json" > "$OUT/train_speed_kernels.log" 2>&1; echo "train_speed rc=$?"
   tail -16 "$OUT/train_speed_kernels.log"
   exit 0

@@ -53,6 +53,29 @@ def make_inputs(n, width, height, device, seed=0):
     return dict(zip(["means", "quats", "scales", "opacities", "colors", "viewmat", "K", "w_img"], t))
 
 
+def inputs_from_ply(path, data, data_root, scale, device, seed=0):
+    """A trained model's Gaussians (``GaussianModel.load_ply``: SH degree 3 colours) seen from the first test
+    camera of the scene it was trained on (``data``: a dataset name or folder as ``--data`` takes it), its
+    image ``scale`` x the scene's size (intrinsics scaled with it)."""
+    from warpgs.data import load_scene
+    from warpgs.model import GaussianModel
+
+    model = GaussianModel.load_ply(path, device=device)
+    scene = load_scene(data, root=data_root, device="cpu")
+    cam = (scene.test or scene.train)[0]
+    width, height = int(cam.width * scale), int(cam.height * scale)
+    K = torch.as_tensor(cam.K, dtype=torch.float32).clone()
+    K[:2] *= scale
+    g = torch.Generator(device="cpu").manual_seed(seed)
+    with torch.no_grad():
+        t = {"means": model.means, "quats": model.quats, "scales": model.scales, "opacities": model.opacities,
+             "colors": model.sh, "viewmat": torch.as_tensor(cam.viewmat, dtype=torch.float32), "K": K,
+             "w_img": torch.rand(height, width, 3, generator=g)}
+    inp = {k: v.detach().float().contiguous().to(device) for k, v in t.items()}
+    inp["sh_degree"] = model.max_sh_degree
+    return inp, width, height
+
+
 def grad_inputs(inp):
     return {k: inp[k].clone().requires_grad_(True) for k in ("means", "quats", "scales", "opacities", "colors")}
 
@@ -60,7 +83,8 @@ def grad_inputs(inp):
 def warpgs_fn(inp, width, height, alpha_max, deterministic=True):
     def fwd(p):
         out = rasterize(p["means"], p["quats"], p["scales"], p["opacities"], p["colors"], inp["viewmat"], inp["K"],
-                        width, height, alpha_max=alpha_max, deterministic=deterministic, check_finite=False)
+                        width, height, sh_degree=inp.get("sh_degree"), alpha_max=alpha_max,
+                        deterministic=deterministic, check_finite=False)
         return out.image
     return fwd
 
@@ -71,7 +95,7 @@ def gsplat_fn(inp, width, height, mode="RGB"):
     def fwd(p):
         img, alpha, _ = gsplat.rasterization(
             p["means"], p["quats"], p["scales"], p["opacities"], p["colors"], inp["viewmat"][None], inp["K"][None],
-            width, height, packed=False, render_mode=mode)
+            width, height, packed=False, render_mode=mode, sh_degree=inp.get("sh_degree"))
         return img[0, ..., :3]
     return fwd
 
@@ -176,7 +200,8 @@ def diagnose(inp, width, height, img_w, img_g):
     m2, con, dep, _, radii, _ = _Project.apply(inp["means"], inp["quats"], inp["scales"], inp["opacities"],
                                                inp["viewmat"], inp["K"], width, height, 0.3, 0.01, 1e10, False)
     _, _, meta = gsplat.rasterization(inp["means"], inp["quats"], inp["scales"], inp["opacities"], inp["colors"],
-                                      inp["viewmat"][None], inp["K"][None], width, height, packed=False)
+                                      inp["viewmat"][None], inp["K"][None], width, height, packed=False,
+                                      sh_degree=inp.get("sh_degree"))
     g_r = meta["radii"][0].reshape(-1, 2)
     both = (radii > 0).all(-1) & (g_r > 0).all(-1)
     out = {"visible_warpgs": int((radii > 0).all(-1).sum()), "visible_gsplat": int((g_r > 0).all(-1).sum()),
@@ -201,6 +226,12 @@ def main(argv=None):
     ap.add_argument("--out", type=Path, default=None)
     ap.add_argument("--configs", type=str, default=None, help="e.g. '138766x648x420,256000x1280x720'")
     ap.add_argument("--profile", action="store_true", help="print a per-kernel CUDA time table of warpgs")
+    ap.add_argument("--ply", type=Path, default=None,
+                    help="a trained model's point_cloud.ply instead of random Gaussians (SH degree 3 colours), seen "
+                         "from the first test view of --data")
+    ap.add_argument("--data", default="llff", help="with --ply: the scene it was trained on (name or folder)")
+    ap.add_argument("--data-root", default=None, help="with --ply: the datasets' folder")
+    ap.add_argument("--scales", default="1,2", help="with --ply: image sizes as factors of the scene's")
     args = ap.parse_args(argv)
     device = args.device
     configs = CUDA_CONFIGS if device == "cuda" else CPU_CONFIGS
@@ -219,10 +250,21 @@ def main(argv=None):
     import warp as wp
 
     result["warp"] = wp.__version__
-    for n, width, height in configs:
-        print(f"{n} Gaussians, {width}x{height}", flush=True)
-        inp = make_inputs(n, width, height, device)
-        row = {"gaussians": n, "width": width, "height": height}
+    if args.ply is not None:
+        if device != "cuda":
+            ap.error("--ply compares with gsplat on CUDA")
+        configs = [float(x) for x in args.scales.split(",")]
+        result["ply"] = str(args.ply)
+    for config in configs:
+        if args.ply is not None:
+            inp, width, height = inputs_from_ply(args.ply, args.data, args.data_root, config, device)
+            n = int(inp["means"].shape[0])
+        else:
+            n, width, height = config
+            inp = make_inputs(n, width, height, device)
+        print(f"{n} Gaussians, {width}x{height}" + (f" (trained, SH degree {inp['sh_degree']})" if args.ply else ""),
+              flush=True)
+        row = {"gaussians": n, "width": width, "height": height, "sh_degree": inp.get("sh_degree")}
         if device == "cuda":
             row["warpgs"], img_w = measure("warpgs", warpgs_fn(inp, width, height, 0.999), inp, iters, warmup, device)
             row["warpgs_float_atomics"], _ = measure("warpgs float+", warpgs_fn(inp, width, height, 0.999, False), inp,

@@ -21,12 +21,12 @@ def test_train_speed_writes_its_json_and_the_loops_train_alike(tmp_path):
                       "--set", "model.init=box", "--set", "model.init_box=[-1.2,-1.2,-1.2,1.2,1.2,1.2]",
                       "--set", "model.init_num=200", "--set", "strategy.refine_start_iter=5",
                       "--set", "strategy.refine_every=10", "--set", "train.sync_every=5",
-                      "--loops", "warpgs_trainer,plain_warpgs,warpgs_trainer_sync1,warpgs_trainer_kernels",
+                      "--loops", "warpgs_trainer,plain_warpgs,warpgs_trainer_sync1,warpgs_trainer_torch_guard",
                       "--out", str(out)])
     r = json.loads(out.read_text())
-    assert set(r["loops"]) == {"warpgs_trainer", "plain_warpgs", "warpgs_trainer_sync1", "warpgs_trainer_kernels"}
+    assert set(r["loops"]) == {"warpgs_trainer", "plain_warpgs", "warpgs_trainer_sync1", "warpgs_trainer_torch_guard"}
     assert r["same_model_every_sync"] is True and r["settings"]["sync_every"] == 5
-    assert r["same_model_guard_kernels"] is True
+    assert r["same_model_torch_guard"] is True
     assert r["settings"]["initial_gaussians"] == 200 and r["settings"]["views"] == 3
     assert r["machine"]["torch"] and r["machine"]["warp"] and r["machine"]["cpu"]
     a, b = r["loops"]["warpgs_trainer"], r["loops"]["plain_warpgs"]

@@ -158,9 +158,9 @@ class TrainConfig:
     max_recoveries: int = 3  # rollbacks before the run stops; 0 = stop at the first divergence
     recovery_lr_factor: float = 0.5  # learning-rate scale applied at each rollback (recorded in metrics.json)
     cpu_threads: int = 1  # torch threads on the CPU (0: torch's default); Warp's CPU kernels use one anyway
-    guard_kernels: bool = False  # a deferred step's verdict in two Warp launches (DivergenceGuard.step_on_device)
-    #   instead of two dozen small torch ops: the same arithmetic, bit-identical runs on the CPU; off until its
-    #   effect on the GPU is measured (session 15 had no device time left)
+    guard_kernels: bool = True  # a deferred step's verdict in two Warp launches (DivergenceGuard.step_on_device)
+    #   instead of two dozen small torch ops: the same arithmetic (bit-identical runs); false: the torch ops. H100,
+    #   fern 3 views (bench/results/train_speed_cuda_kernels.json): the trainer 8% faster, the same model
     sync_every: int | None = None  # steps between host reads of the losses and the guard's verdicts (a read
     #   waits for the device); in between, a step with a non-finite or exploding loss skips its update on the
     #   device and a divergence is acted on at the next read, up to this many steps late. The progress bar's
