@@ -10,7 +10,8 @@
 # s: issue 15 with train.guard_kernels on by default: bench/train_speed.py (the trainer, the plain warpgs loop, gsplat,
 #    the trainer with the torch-op guard), 3 repeats interleaved, alone in one call.
 # r: issue 15: bench/rasterizer.py on a trained model's Gaussians: fern's baseline (3 views, 3000 it, frustum start,
-#    as train_speed), its point_cloud.ply (SH degree 3) seen from fern's first test view at 1x, 2x and 3x its size.
+#    as train_speed), its point_cloud.ply (SH degree 3) seen from fern's first test view at 1x, 2x and 3x its size
+#    (SCALES=1,2,1 RARGS="--warmup 20 --iters 50 --profile": the repeat of 1x after 2x, the kernels' table).
 # v G1 "SETS1" [G2 "SETS2"]: issue 13: the full method with each group of --set options, the six cases, seeds 0-2
 #    (${JOBS:-36} runs at once); compared with session 14's default runs (pcff_*).
 set -u
@@ -35,7 +36,8 @@ r)
     > "$OUT/fern_base.log" 2>&1
   tail -3 "$OUT/fern_base.log"
   timeout ${T:-400} python3 bench/rasterizer.py --ply "$R/fern_base/point_cloud.ply" --data llff --data-root "$D" \
-    --scales 1,2,3 --out "$OUT/rasterizer_cuda_trained.json" 2>&1 | tee "$OUT/rasterizer_trained.log" | grep -v diagnosis
+    --scales ${SCALES:-1,2,3} ${RARGS:-} --out "$OUT/rasterizer_cuda_trained.json" 2>&1 \
+    | tee "$OUT/rasterizer_trained.log" | grep -v diagnosis | grep -E "Gaussians|warpgs|gsplat|ratio|wrote"
   exit 0
   ;;
 q)
