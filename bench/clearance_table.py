@@ -21,7 +21,7 @@ Nothing in it is typed by hand.
 
 ``--variants``: sessions 15 and 16's runs (bench/results/real_captures/session15_runs.json, bench/gpu_session15.sh a,
 c, d; session16_runs.json, bench/gpu_session16.sh v; same setting, over the session-14 defaults) beside the
-default's two columns: view clearance for both methods, and seven changes of the full method (VARIANTS). Below it, each variant's mean and worst difference of
+default's two columns: view clearance for both methods, and eight changes of the full method (VARIANTS). Below it, each variant's mean and worst difference of
 medians against the default baseline (what issue 13 asks of the full method: mean >= +0.5, none below -0.2)
 and against its own method's default.
 """
@@ -182,7 +182,8 @@ VARIANTS = [("baseline + view clearance 0.5", "vc_base", "pcff_base"),
             ("full, pseudo weight 2", "pw_full", "pcff_full"),
             ("full, pseudo views from step 750", "bf_full", "pcff_full"),
             ("full, unguided pseudo views (session 16)", "rg_full", "pcff_full"),
-            ("full, delta 0.25 (session 16)", "d25_full", "pcff_full")]
+            ("full, delta 0.25 (session 16)", "d25_full", "pcff_full"),
+            ("full without pseudo views or densification (session 16)", "np_full", "pcff_full")]
 SESSION16_RUNS = DEFAULT_RUNS.parent / "session16_runs.json"
 
 
