@@ -191,9 +191,7 @@ def variants_table(session14=DEFAULT_RUNS, session15=SESSION15_RUNS, session16=S
     """Sessions 15 and 16's variants (VARIANTS) beside the session-14 default, and their mean / worst differences
     of medians against the default baseline and against their method's default."""
     groups = {k.split("_")[0] for _, k, _ in VARIANTS}
-    configs = {**load_session14(session14), **load_groups(session15, groups)}
-    if session16 is not None and Path(session16).is_file():
-        configs.update(load_groups(session16, groups))
+    configs = {**load_session14(session14), **load_groups(session15, groups), **load_groups(session16, groups)}
     cols = [("default baseline", "pcff_base"), ("default full", "pcff_full")] + [(h, k) for h, k, _ in VARIANTS]
     lines = ["| scene | views | " + " | ".join(h for h, _ in cols) + " |", "|---|---|" + "---|" * len(cols)]
     for case in CASES:

@@ -82,8 +82,7 @@ def trajectories_through(train_names: list[str], train_V: np.ndarray, frames: li
         inside = [f for f in frames if train_names[a] < f.name < train_names[b]]
         if not inside:
             continue
-        V = np.stack([train_V[a]] + [f.viewmat.astype(np.float64) if isinstance(f.viewmat, np.ndarray)
-                                      else f.viewmat.double().cpu().numpy() for f in inside] + [train_V[b]])
+        V = np.stack([train_V[a]] + [np.asarray(f.viewmat, np.float64) for f in inside] + [train_V[b]])
         trajs.append(Trajectory(a, b, V))
         owners.append(inside)
     return trajs, owners

@@ -53,16 +53,19 @@ def make_inputs(n, width, height, device, seed=0):
     return dict(zip(["means", "quats", "scales", "opacities", "colors", "viewmat", "K", "w_img"], t))
 
 
-def inputs_from_ply(path, data, data_root, scale, device, seed=0):
-    """A trained model's Gaussians (``GaussianModel.load_ply``: SH degree 3 colours) seen from the first test
-    camera of the scene it was trained on (``data``: a dataset name or folder as ``--data`` takes it), its
-    image ``scale`` x the scene's size (intrinsics scaled with it)."""
+def trained_model_and_view(path, data, data_root, device):
+    """A trained model (``GaussianModel.load_ply``: SH degree 3 colours) and the first test camera of the
+    scene it was trained on (``data``: a dataset name or folder as ``--data`` takes it)."""
     from warpgs.data import load_scene
     from warpgs.model import GaussianModel
 
-    model = GaussianModel.load_ply(path, device=device)
     scene = load_scene(data, root=data_root, device="cpu")
-    cam = (scene.test or scene.train)[0]
+    return GaussianModel.load_ply(path, device=device), (scene.test or scene.train)[0]
+
+
+def inputs_from_model(model, cam, scale, device, seed=0):
+    """``model``'s Gaussians seen from ``cam``, its image ``scale`` x the camera's size (intrinsics scaled
+    with it)."""
     width, height = int(cam.width * scale), int(cam.height * scale)
     K = torch.as_tensor(cam.K, dtype=torch.float32).clone()
     K[:2] *= scale
@@ -255,9 +258,10 @@ def main(argv=None):
             ap.error("--ply compares with gsplat on CUDA")
         configs = [float(x) for x in args.scales.split(",")]
         result["ply"] = str(args.ply)
+        trained, view = trained_model_and_view(args.ply, args.data, args.data_root, device)
     for config in configs:
         if args.ply is not None:
-            inp, width, height = inputs_from_ply(args.ply, args.data, args.data_root, config, device)
+            inp, width, height = inputs_from_model(trained, view, config, device)
             n = int(inp["means"].shape[0])
         else:
             n, width, height = config
