@@ -31,6 +31,31 @@ sys.path.insert(0, str(ROOT))
 import train_speed as ts  # noqa: E402
 
 
+def busy_share(maker, setup, iterations: int) -> str:
+    """One loop's wall time per step without cProfile, and the share of it the GPU spends in kernels (torch.profiler's
+    CUDA kernel time, summed, over the wall time of the same steps); kernels of one stream do not overlap."""
+    from torch.profiler import ProfilerActivity, profile
+
+    go, *_ = maker(setup, iterations)
+    ts.sync("cuda")
+    t0 = time.perf_counter()
+    go()
+    ts.sync("cuda")
+    plain = (time.perf_counter() - t0) / iterations
+    go, *_ = maker(setup, iterations)
+    ts.sync("cuda")
+    with profile(activities=[ProfilerActivity.CUDA]) as prof:
+        t0 = time.perf_counter()
+        go()
+        ts.sync("cuda")
+        wall = time.perf_counter() - t0
+    kernel_us = sum(e.device_time_total if hasattr(e, "device_time_total") else e.cuda_time_total
+                    for e in prof.events() if getattr(e, "device_type", None) is not None
+                    and str(e.device_type).endswith("CUDA"))
+    return (f"    without cProfile: {plain * 1e3:.2f} ms a step; under torch.profiler {wall / iterations * 1e3:.2f} ms a "
+            f"step, GPU kernels {kernel_us / 1e3 / iterations:.2f} ms a step: busy {kernel_us / 1e6 / wall:.0%}")
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--data", default="llff")
@@ -46,6 +71,10 @@ def main(argv=None) -> int:
     ap.add_argument("--sort", default="tottime", help="pstats order: tottime (own time) or cumulative (with callees)")
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
     ap.add_argument("--out", type=Path, default=None)
+    ap.add_argument("--busy", action="store_true",
+                    help="CUDA: also time each loop without cProfile and under torch.profiler, and print the GPU's "
+                         "busy share (kernel time / wall time): near 1, the step is bound by the GPU; well below, by "
+                         "the host")
     args = ap.parse_args(argv)
     cfg = ts.make_config(args)
     setup = ts.Setup(cfg, ts.load_scene(cfg, args.shrink))
@@ -67,6 +96,8 @@ def main(argv=None) -> int:
         text.write(f"\n=== {name}: {args.iterations} steps, {dt / args.iterations * 1e3:.2f} ms a step under "
                    f"cProfile ({args.device})\n")
         pstats.Stats(prof, stream=text).sort_stats(args.sort).print_stats(args.top)
+        if args.busy and args.device == "cuda":
+            text.write(busy_share(makers[name], setup, args.iterations) + "\n")
     print(text.getvalue())
     if args.out:
         args.out.parent.mkdir(parents=True, exist_ok=True)

@@ -178,8 +178,9 @@ def measure(name, make_fwd, inp, iters, warmup, device):
     return res, res_img
 
 
-def profile(make_fwd, inp):
-    """Kernel-level breakdown of one warpgs forward+backward (CUDA)."""
+def profile(make_fwd, inp, label="warpgs"):
+    """Kernel-level breakdown of one forward+backward (CUDA): prints torch.profiler's table and returns the
+    CUDA time of each kernel per call (ms, summed over its launches in one forward+backward), largest first."""
     from torch.profiler import ProfilerActivity
     from torch.profiler import profile as torch_profile
 
@@ -187,11 +188,22 @@ def profile(make_fwd, inp):
     for _ in range(3):
         (make_fwd(p) * inp["w_img"]).sum().backward()
     torch.cuda.synchronize()
+    reps = 5
     with torch_profile(activities=[ProfilerActivity.CPU, ProfilerActivity.CUDA]) as prof:
-        for _ in range(5):
+        for _ in range(reps):
             (make_fwd(p) * inp["w_img"]).sum().backward()
         torch.cuda.synchronize()
+    print(f"  profile: {label}")
     print(prof.key_averages().table(sort_by="cuda_time_total", row_limit=25, max_name_column_width=60))
+    kernels = {}
+    for e in prof.key_averages():
+        t = getattr(e, "self_device_time_total", None)
+        if t is None:
+            t = getattr(e, "self_cuda_time_total", 0.0)
+        if t > 0 and not e.key.startswith(("aten::", "autograd::", "_", "cuda", "Memcpy", "Memset")):
+            key = e.key[:90]  # (several cub kernels share a long prefix: summed)
+            kernels[key] = kernels.get(key, 0.0) + t / reps / 1000.0
+    return {k: round(v, 4) for k, v in sorted(kernels.items(), key=lambda kv: -kv[1])}
 
 
 def diagnose(inp, width, height, img_w, img_g):
@@ -228,7 +240,7 @@ def main(argv=None):
     ap.add_argument("--warmup", type=int, default=None)
     ap.add_argument("--out", type=Path, default=None)
     ap.add_argument("--configs", type=str, default=None, help="e.g. '138766x648x420,256000x1280x720'")
-    ap.add_argument("--profile", action="store_true", help="print a per-kernel CUDA time table of warpgs")
+    ap.add_argument("--profile", action="store_true", help="print per-kernel CUDA time tables of warpgs and gsplat (and record them)")
     ap.add_argument("--ply", type=Path, default=None,
                     help="a trained model's point_cloud.ply instead of random Gaussians (SH degree 3 colours), seen "
                          "from the first test view of --data")
@@ -279,7 +291,8 @@ def main(argv=None):
             row["max_abs_rgb_diff"] = float((img_w - img_g).abs().max())
             row["diagnosis"] = diagnose(inp, width, height, img_w, img_g)
             if args.profile:
-                profile(warpgs_fn(inp, width, height, 0.999), inp)
+                row["kernels_ms"] = {"warpgs": profile(warpgs_fn(inp, width, height, 0.999), inp),
+                                     "gsplat": profile(gsplat_fn(inp, width, height), inp, "gsplat")}
             row["ratio_fwd"] = row["warpgs"]["forward_ms"] / row["gsplat"]["forward_ms"]
             row["ratio_fwd_bwd"] = row["warpgs"]["forward_backward_ms"] / row["gsplat"]["forward_backward_ms"]
             row["ratio_fwd_bwd_vs_rgb_ed"] = (row["warpgs"]["forward_backward_ms"]

@@ -347,3 +347,49 @@ def test_state_copies_are_independent_and_go_where_asked():
     if torch.cuda.is_available():  # the trainer's snapshots on CUDA stay on the GPU
         g = state_copy(st, "cuda")
         assert g["params"]["means"].is_cuda and torch.equal(g["params"]["means"].cpu(), a.detach())
+
+
+def test_grouped_adam_is_torch_fused_adam_bit_for_bit():
+    """``GroupedAdam`` (``make_optimizer``'s) against torch's fused Adam: the same parameters, moments and step
+    counts after steps with and without ``found_inf`` set, groups with different learning rates, a parameter
+    without a gradient in some steps, and a parameter added between steps (its first step: torch's path);
+    the CPU's default Adam takes torch's path throughout and matches torch's default."""
+    from warpgs.optim import GroupedAdam
+
+    try:
+        p = torch.nn.Parameter(torch.ones(2))
+        p.grad = torch.ones(2)
+        torch.optim.Adam([p], fused=True).step()
+    except RuntimeError:  # no fused CPU kernel in this torch
+        pytest.skip("torch has no fused Adam on the CPU")
+    for opts in ({"fused": True}, {}):
+        g = torch.Generator().manual_seed(3)
+        shapes = [(7, 3), (7, 4), (7,), (7, 15, 3)]
+        params = [torch.nn.Parameter(torch.randn(s, generator=g)) for s in shapes]
+        twin = [torch.nn.Parameter(p.detach().clone()) for p in params]
+        groups = lambda ps: [{"params": [p], "lr": 0.01 * (i + 1), "name": str(i)} for i, p in enumerate(ps)]
+        ours = GroupedAdam(groups(params), eps=1e-15, **opts)
+        ref = torch.optim.Adam(groups(twin), eps=1e-15, **opts)
+        for step in range(12):
+            if step == 5:  # densification adds a group's parameter: no state yet
+                extra = torch.randn(4, 3, generator=g)
+                for opt, ps in ((ours, params), (ref, twin)):
+                    q = torch.nn.Parameter(extra.clone())
+                    ps.append(q)
+                    opt.add_param_group({"params": [q], "lr": 0.003, "name": "extra"})
+            for i, (p, q) in enumerate(zip(params, twin)):
+                grad = None if (step + i) % 4 == 3 else torch.randn(p.shape, generator=g)
+                p.grad = None if grad is None else grad.clone()
+                q.grad = None if grad is None else grad.clone()
+            skip = torch.tensor(1.0 if step in (2, 8) else 0.0)
+            for opt in (ours, ref):
+                if opts:
+                    opt.found_inf = skip
+                    opt.grad_scale = None
+                opt.step()
+                if opts:
+                    del opt.found_inf, opt.grad_scale
+            for p, q in zip(params, twin):
+                assert torch.equal(p, q), (opts, step)
+                for k, v in ref.state[q].items():
+                    assert torch.equal(ours.state[p][k], v), (opts, step, k)

@@ -25,11 +25,69 @@ def base_learning_rates(cfg: Config, scene_scale: float) -> dict[str, float]:
 
 
 def make_optimizer(model: GaussianModel, cfg: Config, scene_scale: float) -> torch.optim.Adam:
-    """Adam, one group per parameter, with ``adam_options`` for the model's device."""
+    """Adam, one group per parameter, with ``adam_options`` for the model's device (``GroupedAdam``)."""
     o = cfg.optim
     lrs = base_learning_rates(cfg, scene_scale)
     groups = [{"params": [model.params[k]], "lr": lrs[k], "name": k} for k in model.params.keys()]
-    return torch.optim.Adam(groups, eps=o.eps, **adam_options(model.device))
+    return GroupedAdam(groups, eps=o.eps, **adam_options(model.device))
+
+
+class GroupedAdam(torch.optim.Adam):
+    """torch's Adam, whose fused step (all groups ``fused``) does the same arithmetic with less host work.
+
+    torch's ``Adam.step`` runs, for every parameter group, its state set-up, a regrouping of the tensors by
+    device and dtype, and three launches (step count + 1, the fused update, and with ``found_inf`` the count
+    back); with one group per parameter that is six times per training step, and on CUDA, where a step is
+    bound by the host, it is time the GPU waits. Here the step counts of all groups move in one launch each
+    way and each group's update is the same ``torch._fused_adam_`` call: identical results (tests check it
+    bit for bit), about a third of the host time. Anything else (a non-fused group, amsgrad, maximize,
+    weight decay, a tensor learning rate, a group mixing devices or dtypes, a parameter without state yet, a
+    closure, a ``grad_scale``) takes torch's own step. A ``found_inf`` attribute skips the update on the
+    device, as torch's GradScaler and ``masked_step`` set it."""
+
+    def step(self, closure=None):
+        work = self._fused_work() if closure is None and getattr(self, "grad_scale", None) is None else None
+        if work is None:
+            return super().step(closure)
+        found_inf = getattr(self, "found_inf", None)
+        steps = [s for *_, ss in work for s in ss]
+        if not steps:
+            return None
+        torch._foreach_add_(steps, 1)
+        for g, ps, gs, ms, vs, ss in work:
+            b1, b2 = g["betas"]
+            torch._fused_adam_(ps, gs, ms, vs, [], ss, amsgrad=False, lr=g["lr"], beta1=b1, beta2=b2,
+                               weight_decay=0.0, eps=g["eps"], maximize=False, grad_scale=None,
+                               found_inf=found_inf)
+        if found_inf is not None:
+            torch._foreach_sub_(steps, [found_inf] * len(steps))
+        return None
+
+    def _fused_work(self):
+        """Per group with gradients: (group, params, grads, exp_avgs, exp_avg_sqs, steps); None where torch's step
+        must run instead."""
+        work = []
+        for g in self.param_groups:
+            if (not g.get("fused") or g["amsgrad"] or g["maximize"] or g["weight_decay"] or g["capturable"]
+                    or g["differentiable"] or g.get("decoupled_weight_decay") or isinstance(g["lr"], torch.Tensor)):
+                return None
+            ps, gs, ms, vs, ss = [], [], [], [], []
+            for p in g["params"]:
+                if p.grad is None:
+                    continue
+                st = self.state.get(p)
+                if not st:  # its first step: torch's makes the state
+                    return None
+                ps.append(p)
+                gs.append(p.grad)
+                ms.append(st["exp_avg"])
+                vs.append(st["exp_avg_sq"])
+                ss.append(st["step"])
+            if any(p.device != ps[0].device or p.dtype != ps[0].dtype for p in ps[1:]):
+                return None
+            if ps:
+                work.append((g, ps, gs, ms, vs, ss))
+        return work
 
 
 def adam_options(device) -> dict:

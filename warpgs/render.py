@@ -133,19 +133,23 @@ class _SHColors(torch.autograd.Function):
         colors = torch.empty(means.shape[0], 3, device=means.device, dtype=torch.float32)
         fast_launch(ksh.sh_to_color_fwd, means.shape[0], dev, stream_of(dev),
                     means, campos.reshape(1, 3), coeffs, degree, radii, colors)
-        ctx.save_for_backward(coeffs, means, campos, radii)
+        ctx.save_for_backward(coeffs, means, campos, radii, colors)
         ctx.degree = degree
         return colors
 
     @staticmethod
     def backward(ctx, v_colors):
-        coeffs, means, campos, radii = ctx.saved_tensors
+        coeffs, means, campos, radii, colors = ctx.saved_tensors
         dev = device_of(means)
+        stream = stream_of(dev)
         v_coeffs = torch.empty_like(coeffs)
         v_means = torch.empty_like(means)
-        fast_launch(ksh.sh_to_color_bwd, means.shape[0], dev, stream_of(dev),
-                    means, campos.reshape(1, 3), coeffs, ctx.degree, radii, v_colors.contiguous(), v_coeffs,
-                    v_means)
+        v_colors = v_colors.contiguous()
+        campos = campos.reshape(1, 3)
+        fast_launch(ksh.sh_coeffs_bwd, coeffs.shape[0] * coeffs.shape[1], dev, stream,
+                    means, campos, ctx.degree, radii, colors, v_colors, v_coeffs)
+        fast_launch(ksh.sh_dir_bwd, means.shape[0], dev, stream,
+                    means, campos, coeffs, ctx.degree, radii, colors, v_colors, v_means)
         return v_coeffs, v_means, None, None, None
 
 

@@ -262,6 +262,63 @@ def accumulate_grad(valid: int, gid: int, g: grad10, fixed: int, with_depth: int
                     wp.atomic_add(v_depths, gid, r[9])
 
 
+# The CUDA backward's accumulation, as one native function: the warp's ten sums by a reduce-scatter instead of
+# ten all-reduces. ``accumulate_grad`` sums each value over the warp with five xor shuffles (50 shuffles a
+# Gaussian, and the shuffle unit, a quarter of the FP32 rate, was what the backward waited on); here the first
+# xor round swaps halves of a 16-slot vector (8 shuffles), the next a quarter (4), then 2, 1 and 1: 16 shuffles,
+# after which lane l holds the warp's sum of value l / 2. Each value goes through the same pairs in the same
+# order as in ``warp_sum`` (own partial + partner's, partners lane ^ 16, ^ 8, ^ 4, ^ 2, ^ 1), so the sums are
+# the same floats. The atomics are then one instruction of nine or ten lanes (the even lanes of the first
+# ten) instead of nine or ten in a row from lane 0; in fixed point the ten integers of a Gaussian are
+# contiguous ([N, 10] int64), so they go out as one request. Every lane must call it.
+@wp.func_native(
+    """
+#if defined(__CUDA_ARCH__)
+    const unsigned lane = threadIdx.x & 31;
+    float a[16];
+    #pragma unroll
+    for (int j = 0; j < 10; ++j) a[j] = g.c[j];
+    #pragma unroll
+    for (int j = 10; j < 16; ++j) a[j] = 0.0f;
+    // 16 -> 8 -> 4 -> 2 -> 1 slots: the lanes with the round's bit set keep the upper half
+#define WARPGS_HALVE(HALF, BIT) { \
+        const bool up = (lane & (BIT)) != 0; \
+        _Pragma("unroll") for (int j = 0; j < (HALF); ++j) { \
+            const float send = up ? a[j] : a[j + (HALF)]; \
+            const float keep = up ? a[j + (HALF)] : a[j]; \
+            a[j] = keep + __shfl_xor_sync(0xffffffff, send, (BIT)); \
+        } }
+    WARPGS_HALVE(8, 16)
+    WARPGS_HALVE(4, 8)
+    WARPGS_HALVE(2, 4)
+    WARPGS_HALVE(1, 2)
+#undef WARPGS_HALVE
+    a[0] = a[0] + __shfl_xor_sync(0xffffffff, a[0], 1);
+    const int idx = (int)(lane >> 1);  // which of the ten sums this lane holds (each is held by two lanes)
+    if ((lane & 1) == 0 && idx < (with_depth != 0 ? 10 : 9)) {
+        if (fixed != 0) {
+            const float v = fminf(fmaxf(a[0], -1048576.0f), 1048576.0f) * 1099511627776.0f;  // to_fixed
+            long long* row = (long long*)((char*)v_fixed.data + (size_t)gid * v_fixed.strides[0]);
+            atomicAdd((unsigned long long*)(row + idx), (unsigned long long)(long long)roundf(v));
+        } else {
+            float* dst;
+            if (idx < 2) dst = (float*)((char*)v_means2d.data + (size_t)gid * v_means2d.strides[0]) + idx;
+            else if (idx < 5) dst = (float*)((char*)v_conics.data + (size_t)gid * v_conics.strides[0]) + (idx - 2);
+            else if (idx == 5) dst = (float*)((char*)v_opacities.data + (size_t)gid * v_opacities.strides[0]);
+            else if (idx < 9) dst = (float*)((char*)v_colors.data + (size_t)gid * v_colors.strides[0]) + (idx - 6);
+            else dst = (float*)((char*)v_depths.data + (size_t)gid * v_depths.strides[0]);
+            atomicAdd(dst, a[0]);
+        }
+    }
+#endif
+"""
+)
+def accumulate_grad_scattered(gid: int, g: grad10, fixed: int, with_depth: int, v_fixed: wp.array2d(dtype=wp.int64),
+                              v_means2d: wp.array(dtype=wp.vec2), v_conics: wp.array(dtype=wp.vec3),
+                              v_opacities: wp.array(dtype=float), v_colors: wp.array(dtype=wp.vec3),
+                              v_depths: wp.array(dtype=float)): ...
+
+
 @wp.kernel
 def fixed_to_grads(v_fixed: wp.array2d(dtype=wp.int64), v_means2d: wp.array(dtype=wp.vec2),
                    v_conics: wp.array(dtype=wp.vec3), v_opacities: wp.array(dtype=float),
@@ -434,13 +491,14 @@ def _compositing_kernels(cuda: bool, fixed_variant: int = -1, depth_variant: int
                     batch_splat(1, lane, splats[g], g)
                 block_sync()
                 for t in range(wp.min(BLOCK, end - k0)):
-                    if done == 0:
-                        s = stored_splat(batch_splat(0, t, splat(), 0))
-                        status, T, C, D = composite_splat(s, px, py, alpha_max, T, C, D)
-                        if status == SATURATED:
-                            done = 1
-                        elif status == COMPOSITED:
-                            n = k0 + t + 1
+                    if done != 0:  # this pixel is saturated: its thread leaves the batch (a warp whose pixels
+                        break      # all are, leaves it at once and waits at the barrier), as gsplat's does
+                    s = stored_splat(batch_splat(0, t, splat(), 0))
+                    status, T, C, D = composite_splat(s, px, py, alpha_max, T, C, D)
+                    if status == SATURATED:
+                        done = 1
+                    elif status == COMPOSITED:
+                        n = k0 + t + 1
                 block_sync()
         elif inside:
             for k in range(start, end):
@@ -527,8 +585,9 @@ def _compositing_kernels(cuda: bool, fixed_variant: int = -1, depth_variant: int
                     if inside and k < last:
                         valid, T, S_c, S_d, grad = splat_backward(s, px, py, alpha_max, T, S_c, S_d, vC, vD, vA_bg,
                                                                   T_final, with_depth)
-                    accumulate_grad(valid, g, grad, fixed, with_depth, v_fixed, v_means2d, v_conics, v_opacities, v_colors,
-                                    v_depths)
+                    if warp_any(valid) != 0:  # the same for every lane of the warp
+                        accumulate_grad_scattered(g, grad, fixed, with_depth, v_fixed, v_means2d, v_conics, v_opacities,
+                                                  v_colors, v_depths)
         else:
             g_nxt = int(0)
             s_nxt = splat()
