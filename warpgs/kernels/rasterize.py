@@ -1,9 +1,9 @@
 """Front-to-back alpha compositing of depth-sorted Gaussians per 16x16 tile, and its hand-written backward.
 
 One thread per pixel; threads are numbered tile-major (256 consecutive threads = one tile), so a CUDA
-block of 256 threads is one image tile and every 32-lane warp shares one tile's Gaussian list. The
-backward pass sums each Gaussian's gradient over a warp with shuffles before one atomic add (as gsplat
-does); on the CPU (one thread per kernel) the same helpers are identities.
+block of 256 threads is one image tile and every 32-lane warp shares one tile's Gaussian list. The CUDA
+backward sums each Gaussian's gradient over a warp with shuffles before adding it once (as gsplat does;
+``accumulate_grad_scattered``); the CPU kernels (one thread each) add theirs directly (``accumulate_grad``).
 
 Constants (3D-GS / gsplat): a Gaussian is skipped where alpha < 1/255; alpha is clamped at ``alpha_max``
 (0.99 in 3D-GS, 0.999 in gsplat); a pixel stops before the Gaussian that would bring its transmittance
@@ -35,20 +35,6 @@ SIGMA_SKIP = wp.constant(5.55)
 @wp.func_native(
     """
 #if defined(__CUDA_ARCH__)
-    float r = v;
-    for (int o = 16; o > 0; o >>= 1) r += __shfl_xor_sync(0xffffffff, r, o);
-    return r;
-#else
-    return v;
-#endif
-"""
-)
-def warp_sum(v: float) -> float: ...
-
-
-@wp.func_native(
-    """
-#if defined(__CUDA_ARCH__)
     int r = v;
     for (int o = 16; o > 0; o >>= 1) r = max(r, __shfl_xor_sync(0xffffffff, r, o));
     return r;
@@ -70,18 +56,6 @@ def warp_max(v: int) -> int: ...
 """
 )
 def warp_any(v: int) -> int: ...
-
-
-@wp.func_native(
-    """
-#if defined(__CUDA_ARCH__)
-    return (threadIdx.x & 31) == 0 ? 1 : 0;
-#else
-    return 1;
-#endif
-"""
-)
-def warp_leader() -> int: ...
 
 
 @wp.func
@@ -239,36 +213,30 @@ def accumulate_grad(valid: int, gid: int, g: grad10, fixed: int, with_depth: int
                     v_means2d: wp.array(dtype=wp.vec2), v_conics: wp.array(dtype=wp.vec3),
                     v_opacities: wp.array(dtype=float), v_colors: wp.array(dtype=wp.vec3),
                     v_depths: wp.array(dtype=float)):
-    """Sums a Gaussian's gradient over the warp (CUDA) and adds it once, as floats or (``fixed``) as
-    fixed-point integers into ``v_fixed`` [N, 10]; every lane must call this."""
-    if warp_any(valid) != 0:
-        d = float(0.0)
-        if with_depth != 0:  # else every lane's depth term is 0
-            d = warp_sum(g[9])
-        r = grad10(warp_sum(g[0]), warp_sum(g[1]), warp_sum(g[2]), warp_sum(g[3]), warp_sum(g[4]),
-                   warp_sum(g[5]), warp_sum(g[6]), warp_sum(g[7]), warp_sum(g[8]), d)
-        if warp_leader() != 0:
-            if fixed != 0:
-                for c in range(9):
-                    wp.atomic_add(v_fixed, gid, c, to_fixed(r[c]))
-                if with_depth != 0:
-                    wp.atomic_add(v_fixed, gid, 9, to_fixed(r[9]))
-            else:
-                wp.atomic_add(v_means2d, gid, wp.vec2(r[0], r[1]))
-                wp.atomic_add(v_conics, gid, wp.vec3(r[2], r[3], r[4]))
-                wp.atomic_add(v_opacities, gid, r[5])
-                wp.atomic_add(v_colors, gid, wp.vec3(r[6], r[7], r[8]))
-                if with_depth != 0:
-                    wp.atomic_add(v_depths, gid, r[9])
+    """Adds a Gaussian's gradient from a CPU kernel (one thread: nothing to sum over a warp; the CUDA backward's
+    is ``accumulate_grad_scattered``), as floats or (``fixed``) as fixed-point integers into ``v_fixed`` [N, 10]."""
+    if valid != 0:
+        if fixed != 0:
+            for c in range(9):
+                wp.atomic_add(v_fixed, gid, c, to_fixed(g[c]))
+            if with_depth != 0:
+                wp.atomic_add(v_fixed, gid, 9, to_fixed(g[9]))
+        else:
+            wp.atomic_add(v_means2d, gid, wp.vec2(g[0], g[1]))
+            wp.atomic_add(v_conics, gid, wp.vec3(g[2], g[3], g[4]))
+            wp.atomic_add(v_opacities, gid, g[5])
+            wp.atomic_add(v_colors, gid, wp.vec3(g[6], g[7], g[8]))
+            if with_depth != 0:
+                wp.atomic_add(v_depths, gid, g[9])
 
 
 # The CUDA backward's accumulation, as one native function: the warp's ten sums by a reduce-scatter instead of
-# ten all-reduces. ``accumulate_grad`` sums each value over the warp with five xor shuffles (50 shuffles a
-# Gaussian, and the shuffle unit, a quarter of the FP32 rate, was what the backward waited on); here the first
+# ten all-reduces. An all-reduce sums each value over the warp with five xor shuffles (50 shuffles a Gaussian,
+# and the shuffle unit, a quarter of the FP32 rate, was what the backward waited on until session 17); here the first
 # xor round swaps halves of a 16-slot vector (8 shuffles), the next a quarter (4), then 2, 1 and 1: 16 shuffles,
 # after which lane l holds the warp's sum of value l / 2. Each value goes through the same pairs in the same
-# order as in ``warp_sum`` (own partial + partner's, partners lane ^ 16, ^ 8, ^ 4, ^ 2, ^ 1), so the sums are
-# the same floats. The atomics are then one instruction of nine or ten lanes (the even lanes of the first
+# order as in that all-reduce (own partial + partner's, partners lane ^ 16, ^ 8, ^ 4, ^ 2, ^ 1), so the sums
+# are the same floats. The atomics are then one instruction of nine or ten lanes (the even lanes of the first
 # ten) instead of nine or ten in a row from lane 0; in fixed point the ten integers of a Gaussian are
 # contiguous ([N, 10] int64), so they go out as one request. Every lane must call it.
 @wp.func_native(
@@ -297,7 +265,7 @@ def accumulate_grad(valid: int, gid: int, g: grad10, fixed: int, with_depth: int
     const int idx = (int)(lane >> 1);  // which of the ten sums this lane holds (each is held by two lanes)
     if ((lane & 1) == 0 && idx < (with_depth != 0 ? 10 : 9)) {
         if (fixed != 0) {
-            const float v = fminf(fmaxf(a[0], -1048576.0f), 1048576.0f) * 1099511627776.0f;  // to_fixed
+            const float v = fminf(fmaxf(a[0], -FIXED_CLAMP), FIXED_CLAMP) * FIXED_SCALE;  // to_fixed
             long long* row = (long long*)((char*)v_fixed.data + (size_t)gid * v_fixed.strides[0]);
             atomicAdd((unsigned long long*)(row + idx), (unsigned long long)(long long)roundf(v));
         } else {
@@ -311,7 +279,7 @@ def accumulate_grad(valid: int, gid: int, g: grad10, fixed: int, with_depth: int
         }
     }
 #endif
-"""
+""".replace("FIXED_CLAMP", f"{float(FIXED_CLAMP)!r}f").replace("FIXED_SCALE", f"{float(FIXED_SCALE)!r}f")
 )
 def accumulate_grad_scattered(gid: int, g: grad10, fixed: int, with_depth: int, v_fixed: wp.array2d(dtype=wp.int64),
                               v_means2d: wp.array(dtype=wp.vec2), v_conics: wp.array(dtype=wp.vec3),

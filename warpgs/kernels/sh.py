@@ -27,9 +27,9 @@ C3_6 = wp.constant(-0.5900435899266435)
 def _sh_term(k: int):
     """Y_k(d), and its gradient with respect to d (before normalisation), for one ``k`` fixed when the code is
     generated. The kernels sum over k in loops that Warp unrolls, each step calling its own pair, so the
-    compiled code holds no test on k: with k known only at run time, every coefficient went through a
-    chain of up to 16 tests for the value and again for the gradient, and the backward took 5x the
-    forward on the GPU (0.29 ms for 246k Gaussians on an H100)."""
+    compiled code holds no test on k (with k known only at run time, every coefficient went through a chain
+    of up to 16 tests). On the H100 this alone did not make the backward faster: its writes did (see
+    ``sh_coeffs_bwd``)."""
 
     @wp.func
     def basis(d: wp.vec3) -> float:
