@@ -23,7 +23,9 @@ trainer's), SH degree schedule and loss (``loss.l1_weight`` L1 + ``loss.ssim_wei
   step's verdict from two dozen torch ops instead of the default's two Warp launches); it must end with the same
   model as ``warpgs_trainer``;
 - ``warpgs_trainer_sync1`` (only when asked for): the trainer reading its verdicts every step
-  (``train.sync_every=1``): what the host reads cost; it must end with the same model as ``warpgs_trainer``.
+  (``train.sync_every=1``): what the host reads cost; it must end with the same model as ``warpgs_trainer``;
+- ``warpgs_trainer_eager`` (only when asked for): the trainer without CUDA graphs (``train.cuda_graph=false``:
+  every step launches its kernels one by one); it must end with the same model as ``warpgs_trainer``.
 
 Each loop runs ``--warmup`` steps first (kernel loading, cuDNN, allocator), then ``--iterations`` steps timed
 with ``time.perf_counter`` between two ``torch.cuda.synchronize()``; with ``--repeats`` the loops take turns
@@ -55,7 +57,8 @@ sys.path.insert(0, str(ROOT))
 from warpgs import losses  # noqa: E402
 from warpgs.model import PARAM_NAMES, GaussianModel  # noqa: E402
 
-LOOPS = ("warpgs_trainer", "plain_warpgs", "plain_gsplat", "warpgs_trainer_sync1", "warpgs_trainer_torch_guard")
+LOOPS = ("warpgs_trainer", "plain_warpgs", "plain_gsplat", "warpgs_trainer_sync1", "warpgs_trainer_torch_guard",
+         "warpgs_trainer_eager")
 DEFAULT_LOOPS = LOOPS[:3]
 
 
@@ -183,7 +186,8 @@ class Setup:
         return {k: v.to(self.device, copy=True) for k, v in self.init_state["params"].items()}
 
 
-def run_warpgs_trainer(setup: Setup, iterations: int, sync_every: int | None = None, guard_kernels: bool | None = None):
+def run_warpgs_trainer(setup: Setup, iterations: int, sync_every: int | None = None, guard_kernels: bool | None = None,
+                       cuda_graph: bool | None = None):
     from warpgs.pipelines.sparse import make_trainer
 
     cfg = copy.deepcopy(setup.cfg)
@@ -192,6 +196,8 @@ def run_warpgs_trainer(setup: Setup, iterations: int, sync_every: int | None = N
         cfg.train.sync_every = sync_every
     if guard_kernels is not None:
         cfg.train.guard_kernels = guard_kernels
+    if cuda_graph is not None:
+        cfg.train.cuda_graph = cuda_graph
     tr = make_trainer(cfg, setup.train_scene)
     tr.load_state_dict(setup.init_state)  # the same initial Gaussians (and a fresh optimiser)
     tr.log = lambda msg: print(msg, file=sys.stderr)
@@ -287,7 +293,8 @@ def run_plain_gsplat(setup: Setup, iterations: int):
 RUNNERS = {"warpgs_trainer": run_warpgs_trainer, "plain_warpgs": run_plain_warpgs, "plain_gsplat": run_plain_gsplat,
            "warpgs_trainer_sync1": lambda setup, iterations: run_warpgs_trainer(setup, iterations, sync_every=1),
            "warpgs_trainer_torch_guard": lambda setup, iterations: run_warpgs_trainer(setup, iterations,
-                                                                                       guard_kernels=False)}
+                                                                                       guard_kernels=False),
+           "warpgs_trainer_eager": lambda setup, iterations: run_warpgs_trainer(setup, iterations, cuda_graph=False)}
 
 
 def measure(name: str, setup: Setup, iterations: int, warmup: int) -> dict:
@@ -370,12 +377,14 @@ def main(argv=None) -> dict:
         result["loops"][name] = row
     secs = {k: v["seconds"] for k, v in result["loops"].items()}
     ratios = {}
-    for other in ("plain_gsplat", "plain_warpgs", "warpgs_trainer_sync1", "warpgs_trainer_torch_guard"):
+    for other in ("plain_gsplat", "plain_warpgs", "warpgs_trainer_sync1", "warpgs_trainer_torch_guard",
+                  "warpgs_trainer_eager"):
         if "warpgs_trainer" in secs and other in secs:
             ratios[f"warpgs_trainer/{other}"] = round(secs["warpgs_trainer"] / secs[other], 3)
     result["ratios"] = ratios
     for other, key, what in (("warpgs_trainer_sync1", "same_model_every_sync", "whatever train.sync_every"),
-                             ("warpgs_trainer_torch_guard", "same_model_torch_guard", "with the torch-op guard")):
+                             ("warpgs_trainer_torch_guard", "same_model_torch_guard", "with the torch-op guard"),
+                             ("warpgs_trainer_eager", "same_model_eager", "without CUDA graphs")):
         if {"warpgs_trainer", other} <= set(result["loops"]):
             a, b = result["loops"]["warpgs_trainer"], result["loops"][other]
             result[key] = all(a[k] == b[k] for k in ("gaussians", "train_psnr", "test_psnr"))

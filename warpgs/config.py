@@ -165,6 +165,10 @@ class TrainConfig:
     #   waits for the device); in between, a step with a non-finite or exploding loss skips its update on the
     #   device and a divergence is acted on at the next read, up to this many steps late. The progress bar's
     #   loss and PSNR are read at the same steps. None: 10 on CUDA, 1 (every step) on the CPU
+    cuda_graph: bool = True  # CUDA: a deferred step that holds nothing a graph cannot (no densification at that
+    #   step, no random draws, no Pearson depth term, no co-regularised pair or far field, the baseline's loss) is
+    #   recorded once as a CUDA graph and replayed (warpgs/graphstep.py): the same numbers, a fraction of the host
+    #   time; false: every step launches its kernels one by one
     progress: bool = True
 
     LIMITS = {"iterations": ">= 1", "seed": ">= 0", "sh_degree_interval": ">= 0", "checkpoint_every": ">= 0",

@@ -91,14 +91,15 @@ class DivergenceGuard:
         return (median > 0) & (value.double() / median > tc.explode_factor)
 
     def step_on_device(self, tensors: list[torch.Tensor], inputs: torch.Tensor, window: "LossWindow",
-                       step: int) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+                       step: int | None) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
         """A deferred step's verdict without a host read, in two Warp launches (``warpgs.kernels.guard``):
         ``tensors`` are the loss and the gradients (each must be finite), ``inputs`` the input views' loss (0-dim)
         that ``exploding_on_device`` judges against ``window``. Returns the step's record (float64: [the
         inputs' loss, one finiteness flag per tensor (1 / 0), exploding (1 / 0), 0 for the render's MSE]),
         whether its update applies (a 0-dim bool) and fused Adam's ``found_inf`` (0-dim float32); the window's
-        entry for ``step`` is written (the loss, or +inf for a step without its update). The same arithmetic
-        as ``finite_flags`` (``warpgs.optim``), ``exploding_on_device`` and ``LossWindow.push``."""
+        entry for ``step`` is written (the loss, or +inf for a step without its update); ``step`` None: in the slot
+        ``window.set_slot`` chose (a CUDA graph of the step, whose launches cannot take the step as a number). The
+        same arithmetic as ``finite_flags`` (``warpgs.optim``), ``exploding_on_device`` and ``LossWindow.push``."""
         from warpgs import _warp
         from warpgs.kernels import guard as kg
 
@@ -111,10 +112,12 @@ class DivergenceGuard:
         check = int(tc.explode_factor > 0 and tc.explode_window > 0)
         wdev = _warp.device_of(window.values)
         stream = _warp.stream_of(wdev)
+        if step is not None:
+            window.set_slot(step)
         if check:
             _warp.fast_launch(kg.window_middle, window.size, wdev, stream, window.values, window.middle)
         _warp.fast_launch(kg.step_verdict, 1, wdev, stream, norms, inputs.reshape(1).float(),
-                          window.middle, window.values, step % window.size, float(tc.explode_factor), check,
+                          window.middle, window.values, window.slot, float(tc.explode_factor), check,
                           record, flags, found_inf)
         return record, flags.view(torch.bool).reshape(()), found_inf.reshape(())
 
@@ -142,6 +145,7 @@ class LossWindow:
         self.size = max(int(size), 1)
         self.values = torch.full((self.size,), float("inf"), dtype=torch.float64, device=device)
         self.middle = torch.zeros(2, dtype=torch.float64, device=device)  # step_on_device's two middle values
+        self.slot = torch.zeros(1, dtype=torch.int32, device=device)  # where step_on_device writes its entry
         self._pair = torch.tensor([0, 1], device=device)  # the two middle ranks: (count - 1 + [0, 1]) // 2
 
     def rebuild(self, losses: list[float], stat_start: int, step: int) -> None:
@@ -155,6 +159,10 @@ class LossWindow:
             idx = torch.tensor([j % self.size for j in range(lo, step)], device=self.values.device)
             kept = [x if math.isfinite(x) else math.inf for x in losses[lo:step]]
             self.values[idx] = torch.tensor(kept, dtype=torch.float64).to(self.values.device)
+
+    def set_slot(self, step: int) -> None:
+        """Step ``step``'s slot, where ``DivergenceGuard.step_on_device`` writes its entry (one fill on the device)."""
+        self.slot.fill_(step % self.size)
 
     def push(self, step: int, value) -> None:
         """Step ``step``'s entry: a float (a step the host judged) or a 0-dim tensor (not finite: a skipped

@@ -16,6 +16,7 @@ torchvision AlexNet layout itself, so the same weight file loads.
 
 from __future__ import annotations
 
+import functools
 import importlib
 import os
 import sys
@@ -47,10 +48,43 @@ def l1(pred: torch.Tensor, target: torch.Tensor, mask: torch.Tensor | None = Non
 
 
 def ssim(pred: torch.Tensor, target: torch.Tensor, window_size: int = 11, padding: str = "same") -> torch.Tensor:
-    """Mean SSIM (Gaussian window, sigma 1.5) through kornia."""
+    """Mean SSIM (Gaussian window, sigma 1.5) through kornia. On a GPU, with float32 images and ``'same'``
+    padding, ``_ssim_map`` computes kornia's map with its window made once per device (kornia makes it on every
+    call, from a copy from the host that a CUDA graph cannot hold)."""
+    a, b = _bchw(pred), _bchw(target)
+    if padding == "same" and a.device.type != "cpu" and a.dtype == b.dtype == torch.float32 and a.shape == b.shape:
+        return _ssim_map(a, b, window_size).mean()
     from kornia.metrics import ssim as kssim
 
-    return kssim(_bchw(pred), _bchw(target), window_size, max_val=1.0, padding=padding).mean()
+    return kssim(a, b, window_size, max_val=1.0, padding=padding).mean()
+
+
+@functools.cache  # never evicted: a CUDA graph of a training step reads it where it is
+def _ssim_window(window_size: int, device: torch.device, dtype: torch.dtype) -> torch.Tensor:
+    """kornia's SSIM window (a sampled Gaussian, sigma 1.5), as ``kornia.metrics.ssim`` makes it."""
+    from kornia.filters import get_gaussian_kernel1d
+
+    return get_gaussian_kernel1d(window_size, 1.5, device=device, dtype=dtype)
+
+
+def _ssim_map(img1: torch.Tensor, img2: torch.Tensor, window_size: int) -> torch.Tensor:
+    """``kornia.metrics.ssim(img1, img2, window_size, max_val=1.0)`` of two float32 [B, C, H, W] images off the CPU:
+    the same operations in the same order (so the same numbers), with the window from ``_ssim_window``."""
+    from kornia.filters import filter2d_separable
+
+    kernel = _ssim_window(window_size, img1.device, img1.dtype)
+    c1, c2, eps = 0.01 ** 2, 0.03 ** 2, 1e-12
+    mu1 = filter2d_separable(img1, kernel, kernel)
+    mu2 = filter2d_separable(img2, kernel, kernel)
+    mu1_sq = mu1 ** 2
+    mu2_sq = mu2 ** 2
+    mu1_mu2 = mu1 * mu2
+    sigma1_sq = filter2d_separable(img1 ** 2, kernel, kernel) - mu1_sq
+    sigma2_sq = filter2d_separable(img2 ** 2, kernel, kernel) - mu2_sq
+    sigma12 = filter2d_separable(img1 * img2, kernel, kernel) - mu1_mu2
+    num = (2.0 * mu1_mu2 + c1) * (2.0 * sigma12 + c2)
+    den = (mu1_sq + mu2_sq + c1) * (sigma1_sq + sigma2_sq + c2)
+    return num / (den + eps)
 
 
 def dssim(pred: torch.Tensor, target: torch.Tensor, window_size: int = 11) -> torch.Tensor:

@@ -43,7 +43,25 @@ class GroupedAdam(torch.optim.Adam):
     bit for bit), about a third of the host time. Anything else (a non-fused group, amsgrad, maximize,
     weight decay, a tensor learning rate, a group mixing devices or dtypes, a parameter without state yet, a
     closure, a ``grad_scale``) takes torch's own step. A ``found_inf`` attribute skips the update on the
-    device, as torch's GradScaler and ``masked_step`` set it."""
+    device, as torch's GradScaler and ``masked_step`` set it. ``set_lr`` keeps a group's rate on the device too
+    (``lr_tensors``), and the fused update reads it there."""
+
+    def __init__(self, params, **kwargs):
+        super().__init__(params, **kwargs)
+        self.lr_tensors: dict[str, torch.Tensor] = {}  # by group name: a learning rate read on the device
+
+    def set_lr(self, name: str, value: float) -> None:
+        """Group ``name``'s learning rate, also kept on the device where the fused step runs (float32, the
+        precision fused Adam reads a tensor learning rate in): a CUDA graph of the step then reads each step's
+        rate (``warpgs.graphstep``), and a step outside the graph uses the same rounded value."""
+        for g in self.param_groups:
+            if g.get("name") == name:
+                g["lr"] = value
+                if g.get("fused") and g["params"] and g["params"][0].device.type == "cuda":
+                    t = self.lr_tensors.get(name)
+                    if t is None:
+                        t = self.lr_tensors[name] = torch.empty((), dtype=torch.float32, device=g["params"][0].device)
+                    t.fill_(value)
 
     def step(self, closure=None):
         work = self._fused_work() if closure is None and getattr(self, "grad_scale", None) is None else None
@@ -56,7 +74,8 @@ class GroupedAdam(torch.optim.Adam):
         torch._foreach_add_(steps, 1)
         for g, ps, gs, ms, vs, ss in work:
             b1, b2 = g["betas"]
-            torch._fused_adam_(ps, gs, ms, vs, [], ss, amsgrad=False, lr=g["lr"], beta1=b1, beta2=b2,
+            lr = self.lr_tensors.get(g.get("name"), g["lr"])
+            torch._fused_adam_(ps, gs, ms, vs, [], ss, amsgrad=False, lr=lr, beta1=b1, beta2=b2,
                                weight_decay=0.0, eps=g["eps"], maximize=False, grad_scale=None,
                                found_inf=found_inf)
         if found_inf is not None:

@@ -17,6 +17,7 @@ quaternions (w, x, y, z), scales as standard deviations, opacities in [0, 1]).
 
 from __future__ import annotations
 
+import functools
 import math
 from typing import NamedTuple
 
@@ -79,25 +80,32 @@ def _camera(viewmat, K, width, height, eps2d, antialiased):
     return (viewmat.reshape(1, 4, 4), K.reshape(1, 3, 3), width, height, eps2d, int(antialiased))
 
 
+def _project(means, quats, scales, opacities, viewmat, K, width, height, eps2d, near, far, antialiased):
+    """The projection kernel: (means2d, conics, depths, opac_eff, radii, tiles_touched)."""
+    dev = device_of(means)
+    stream = stream_of(dev)
+    n = means.shape[0]
+    ts, tiles_x, tiles_y = _tile_grid(dev, width, height)
+    f = dict(device=means.device, dtype=torch.float32)
+    means2d = torch.empty(n, 2, **f)
+    conics = torch.empty(n, 3, **f)
+    depths = torch.empty(n, **f)
+    opac_eff = torch.empty(n, **f)
+    radii = torch.empty(n, 2, device=means.device, dtype=torch.int32)
+    tiles_touched = torch.empty(n, device=means.device, dtype=torch.int32)
+    fast_launch(
+        kp.project_gaussians_fwd, n, dev, stream,
+        (means, quats, scales, opacities), _camera(viewmat, K, width, height, eps2d, antialiased),
+        near, far, ts, tiles_x, tiles_y, means2d, conics, depths, radii, opac_eff, tiles_touched,
+    )
+    return means2d, conics, depths, opac_eff, radii, tiles_touched
+
+
 class _Project(torch.autograd.Function):
     @staticmethod
     def forward(ctx, means, quats, scales, opacities, viewmat, K, width, height, eps2d, near, far, antialiased):
-        dev = device_of(means)
-        stream = stream_of(dev)
-        n = means.shape[0]
-        ts, tiles_x, tiles_y = _tile_grid(dev, width, height)
-        f = dict(device=means.device, dtype=torch.float32)
-        means2d = torch.empty(n, 2, **f)
-        conics = torch.empty(n, 3, **f)
-        depths = torch.empty(n, **f)
-        opac_eff = torch.empty(n, **f)
-        radii = torch.empty(n, 2, device=means.device, dtype=torch.int32)
-        tiles_touched = torch.empty(n, device=means.device, dtype=torch.int32)
-        fast_launch(
-            kp.project_gaussians_fwd, n, dev, stream,
-            (means, quats, scales, opacities), _camera(viewmat, K, width, height, eps2d, antialiased),
-            near, far, ts, tiles_x, tiles_y, means2d, conics, depths, radii, opac_eff, tiles_touched,
-        )
+        means2d, conics, depths, opac_eff, radii, tiles_touched = _project(
+            means, quats, scales, opacities, viewmat, K, width, height, eps2d, near, far, antialiased)
         ctx.save_for_backward(means, quats, scales, opacities, viewmat, K, radii, conics)
         ctx.cfg = (width, height, eps2d, antialiased)
         ctx.mark_non_differentiable(radii, tiles_touched)
@@ -153,14 +161,31 @@ class _SHColors(torch.autograd.Function):
         return v_coeffs, v_means, None, None, None
 
 
-def _bin_gaussians(means2d, radii, depths, tiles_touched, tiles_x, tiles_y):
-    """Sorted Gaussian ids per tile: returns (ranges [tiles, 2] int32, gauss_ids [total] int32, total)."""
+def _bin_gaussians(means2d, radii, depths, tiles_touched, tiles_x, tiles_y, capacity: int | None = None):
+    """Sorted Gaussian ids per tile: returns (ranges [tiles, 2] int32, gauss_ids [total] int32, total).
+
+    ``capacity``: the key buffers hold that many entries whatever the count, so nothing is read on the host
+    (a CUDA graph can hold the render; ``warpgs.graphstep``): the unused entries are padding keys that sort
+    after every real one (a tile past the grid), the sort is torch's stable one (the same order as Warp's
+    radix sort of the real keys), and ``total`` is the capacity. The caller guarantees that the count fits
+    (``count_intersections``); the kernel writes no entry past the buffers either way."""
     dev = device_of(means2d)
     stream = stream_of(dev)
     n_tiles = tiles_x * tiles_y
     ranges = torch.zeros(n_tiles, 2, device=means2d.device, dtype=torch.int32)
     n = means2d.shape[0]
     offsets = torch.cumsum(tiles_touched, 0, dtype=torch.int32)
+    if capacity is not None:
+        keys = torch.full((capacity,), _PADDING_KEY, device=means2d.device, dtype=torch.int64)
+        values = torch.zeros(capacity, device=means2d.device, dtype=torch.int32)
+        if n and capacity:
+            fast_launch(kb.emit_intersections, n, dev, stream,
+                        means2d, radii, depths.view(torch.int32), offsets, kr.tile_size_for(dev), tiles_x, tiles_y,
+                        keys, values)
+            keys, order = torch.sort(keys, stable=True)
+            values = values[order]
+            fast_launch(kb.tile_ranges_from_keys, capacity, dev, stream, keys, capacity, ranges)
+        return ranges, values, capacity
     total = int(offsets[-1]) if n else 0  # the one host sync of a render: sizes the key buffers
     if total == 0:
         return ranges, torch.empty(0, device=means2d.device, dtype=torch.int32), 0
@@ -173,6 +198,10 @@ def _bin_gaussians(means2d, radii, depths, tiles_touched, tiles_x, tiles_y):
     _sort_pairs(keys, values, total, 32 + tile_bits, stream)
     fast_launch(kb.tile_ranges_from_keys, total, dev, stream, keys, total, ranges)
     return ranges, values[:total], total
+
+
+# a key past every tile (tile id 2^31 - 1): the padding of fixed-capacity key buffers, sorted last
+_PADDING_KEY = (1 << 63) - 1
 
 
 def _sort_pairs(keys: torch.Tensor, values: torch.Tensor, count: int, end_bit: int, stream) -> None:
@@ -307,6 +336,7 @@ def rasterize(
     alpha_max: float = 0.99,
     deterministic: bool | str = True,
     check_finite: bool = True,
+    isect_capacity: int | None = None,
 ) -> RenderOutput:
     """Render N 3D Gaussians from one pinhole camera.
 
@@ -328,6 +358,9 @@ def rasterize(
             little faster, but the order of additions varies run to run). The CPU backend is
             deterministic either way; "fixed" forces the fixed-point path there too (tests).
         check_finite: raise a ValueError naming the argument that holds NaN or Inf.
+        isect_capacity: size the tile-intersection buffers to this many entries instead of reading the count on
+            the host (the render's one device sync), so that a CUDA graph can hold the render; it must be at least
+            ``count_intersections`` of the same inputs. ``n_intersections`` is then the capacity.
     """
     if not isinstance(means, torch.Tensor):
         _fail("means", f"must be a torch.Tensor, got {type(means).__name__}")
@@ -386,7 +419,7 @@ def rasterize(
     else:
         rgb = colors
     ranges, gauss_ids, total = _bin_gaussians(means2d.detach(), radii, depths.detach(), tiles_touched,
-                                              tiles_x, tiles_y)
+                                              tiles_x, tiles_y, isect_capacity)
     image, depth, alpha = _Composite.apply(
         means2d, conics, opac_eff, rgb, depths, background, ranges, gauss_ids, width, height, alpha_max,
         deterministic
@@ -396,14 +429,35 @@ def rasterize(
     return RenderOutput(image, depth, alpha, means2d, radii, depths, total)
 
 
+def count_intersections(means, quats, scales, opacities, viewmat, K, width: int, height: int, *,
+                        near_plane: float = 0.01, far_plane: float = 1e10, eps2d: float = 0.3,
+                        antialiased: bool = False) -> int:
+    """How many (Gaussian, tile) pairs ``rasterize`` of the same inputs (and the same keyword arguments) sorts: its
+    ``n_intersections`` without ``isect_capacity``, from the projection alone and one host read. What a
+    fixed-capacity render (``isect_capacity``) must hold."""
+    with torch.no_grad():
+        means, quats, scales, opacities = (t.detach().float().contiguous() for t in (means, quats, scales, opacities))
+        viewmat, K = (t.detach().float().contiguous() for t in (viewmat, K))
+        if means.shape[0] == 0:
+            return 0
+        tiles_touched = _project(means, quats, scales, opacities, viewmat, K, width, height, eps2d, near_plane,
+                                 far_plane, antialiased)[5]
+        return int(tiles_touched.sum())
+
+
 def means2d_grad_norm(out: RenderOutput, width: int, height: int) -> torch.Tensor:
     """Per-Gaussian norm of dL/d(means2d) in normalised device units (gsplat's densification statistic).
     Needs ``out.means2d.grad`` (set after backward; ``rasterize`` retains it)."""
     g = out.means2d.grad
     if g is None:
         raise RuntimeError("means2d has no gradient: call backward() on a loss of this render first")
-    scale = torch.tensor([width / 2.0, height / 2.0], device=g.device)
-    return (g * scale).norm(dim=-1)
+    return (g * _ndc_scale(width, height, g.device)).norm(dim=-1)
+
+
+@functools.cache  # never evicted: a CUDA graph of a training step reads it where it is
+def _ndc_scale(width: int, height: int, device: torch.device) -> torch.Tensor:
+    """[width / 2, height / 2] on ``device``, made once (a copy from the host cannot be part of a CUDA graph)."""
+    return torch.tensor([width / 2.0, height / 2.0], device=device)
 
 
 def eval_sh(coeffs: torch.Tensor, dirs: torch.Tensor, degree: int) -> torch.Tensor:

@@ -87,6 +87,15 @@ class DefaultStrategy:
             info["reset"] = 1
         return info
 
+    def only_updates_state(self, step: int) -> bool:
+        """Whether ``step_post_backward`` at ``step`` does no more than ``update_state`` (no growth, pruning or
+        opacity reset; nothing at all past ``refine_stop_iter``): such a step can be part of a CUDA graph."""
+        if step >= self.refine_stop_iter:
+            return True
+        refine = (step > self.refine_start_iter and step % self.refine_every == 0
+                  and step % self.reset_every >= self.pause_refine_after_reset)
+        return not refine and not (step % self.reset_every == 0 and step > 0)
+
     def update_state(self, state: dict, out: RenderOutput, width: int, height: int) -> None:
         grads = means2d_grad_norm(out, width, height)
         sel = (out.radii > 0).all(dim=-1)  # visible in this view
@@ -94,7 +103,8 @@ class DefaultStrategy:
         state["count"] += sel.float()
         if self.refine_scale2d_stop_iter > 0:
             r = out.radii.max(dim=-1).values.float() / float(max(width, height))
-            state["radii"] = torch.where(sel, torch.maximum(state["radii"], r), state["radii"])
+            # in place: the statistics stay where they are (a CUDA graph of the step writes them there)
+            state["radii"].copy_(torch.where(sel, torch.maximum(state["radii"], r), state["radii"]))
 
     def grow(self, model, optimizer, state, step, scene_scale, generator=None) -> tuple[int, int]:
         grads = state["grad2d"] / state["count"].clamp_min(1)

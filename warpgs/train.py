@@ -335,6 +335,11 @@ class Method:
     def loss_terms(self, out, cam, loss: torch.Tensor, parts: dict) -> torch.Tensor:
         return loss
 
+    def graph_safe(self) -> bool:
+        """Whether ``loss_terms`` now adds only torch operations with no host read and no random draw, so that
+        a CUDA graph can hold the step (``warpgs.graphstep``)."""
+        return True
+
     def extra_views(self) -> list:
         return []
 
@@ -452,6 +457,12 @@ class Trainer:
             self.pair = CoRegPair(self)
         self.method = method if method is not None else Method()
         self.method.attach(self)
+        # train.cuda_graph: deferred steps replayed as one CUDA graph (warpgs/graphstep.py)
+        self.graph = None
+        if self.device.type == "cuda" and cfg.train.cuda_graph and cfg.train.guard_kernels:
+            from warpgs.graphstep import StepGraph
+
+            self.graph = StepGraph(self)
 
     # ------------------------------------------------------------------------------------------
     # training
@@ -562,11 +573,14 @@ class Trainer:
         exploding step's gradient never reaches the parameters."""
         step = self.step
         self.model.active_sh_degree = min(step // max(self.cfg.train.sh_degree_interval, 1), self.model.max_sh_degree)
+        lr = self.means_lr(step) * self.lr_scale
         for opt in self.optimizers:
-            for g in opt.param_groups:
-                if g["name"] == "means":
-                    g["lr"] = self.means_lr(step) * self.lr_scale
+            opt.set_lr("means", lr)
         cam = self.train_cams[self.next_view()]
+        if self.graph is not None and not self._sync_due(step) and self.graph.covers(step, cam):
+            info = self.graph.step(step, cam)  # the deferred step below as one CUDA graph (warpgs.graphstep)
+            if info is not None:
+                return info
         cam, bg = self.with_training_background(cam, self.split_gen)
         # no input checks in the rasterizer (each is a host read): the guard checks the loss, the gradients and
         # the parameters, and a step with non-finite ones makes no update

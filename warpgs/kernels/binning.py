@@ -35,20 +35,31 @@ def emit_intersections(
     if i > 0:
         k = offsets[i - 1]
     dbits = wp.int64(depth_bits[i])
+    cap = keys.shape[0]
     for ty in range(ty0, ty1):
         for tx in range(tx0, tx1):
-            tile = wp.int64(ty * tiles_x + tx)
-            keys[k] = (tile << wp.int64(32)) | dbits
-            values[k] = i
+            if k < cap:  # never false when the buffers were sized from the offsets (rasterize's two modes)
+                tile = wp.int64(ty * tiles_x + tx)
+                keys[k] = (tile << wp.int64(32)) | dbits
+                values[k] = i
             k += 1
 
 
 @wp.kernel
 def tile_ranges_from_keys(keys: wp.array(dtype=wp.int64), count: int, ranges: wp.array2d(dtype=wp.int32)):
     """ranges[tile] = [first, last + 1) of the tile's entries in the sorted key list (zeros if empty).
-    Each element is written by exactly one thread."""
+    Each element is written by exactly one thread. Keys of a tile past the grid (``ranges.shape[0]``: the
+    padding ``rasterize`` sorts after every real key when its buffers have a fixed capacity) end the range
+    before them and are otherwise skipped."""
     k = wp.tid()
+    n_tiles = ranges.shape[0]
     tile = int(keys[k] >> wp.int64(32))
+    if tile >= n_tiles:
+        if k > 0:
+            prev = int(keys[k - 1] >> wp.int64(32))
+            if prev < n_tiles:
+                ranges[prev, 1] = k
+        return
     if k == 0:
         ranges[tile, 0] = 0
     else:

@@ -5,7 +5,8 @@
 each counting the entries below and equal to its own: the entry whose rank range holds a middle rank writes it
 (entries with the same value write the same number). ``step_verdict``: one thread reads them and the
 inf-norms of the loss and gradients, and writes the step's record, whether its update applies, fused Adam's
-``found_inf`` and the step's entry in the window. Only Warp code lives here.
+``found_inf`` and the step's entry in the window (its slot read from the device, so that a CUDA graph of the step
+can be replayed at any step). Only Warp code lives here.
 """
 
 import warp as wp
@@ -42,7 +43,7 @@ def window_middle(values: wp.array(dtype=wp.float64), middle: wp.array(dtype=wp.
 
 @wp.kernel
 def step_verdict(norms: wp.array(dtype=wp.float32), inputs: wp.array(dtype=wp.float32),
-                 middle: wp.array(dtype=wp.float64), values: wp.array(dtype=wp.float64), slot: int,
+                 middle: wp.array(dtype=wp.float64), values: wp.array(dtype=wp.float64), slot: wp.array(dtype=wp.int32),
                  factor: wp.float64, check_explode: int, record: wp.array(dtype=wp.float64),
                  apply: wp.array(dtype=wp.uint8), found_inf: wp.array(dtype=wp.float32)):
     n = norms.shape[0]
@@ -64,4 +65,4 @@ def step_verdict(norms: wp.array(dtype=wp.float32), inputs: wp.array(dtype=wp.fl
     ok_step = finite == 1 and exploding == 0
     apply[0] = wp.where(ok_step, wp.uint8(1), wp.uint8(0))
     found_inf[0] = wp.where(ok_step, wp.float32(0.0), wp.float32(1.0))
-    values[slot] = wp.where(ok_step, value, wp.float64(wp.inf))
+    values[slot[0]] = wp.where(ok_step, value, wp.float64(wp.inf))

@@ -164,6 +164,11 @@ class FullMethod(Method):
                 parts["pseudo_depth_smooth"] = sm
         return loss
 
+    def graph_safe(self) -> bool:
+        """Before the first cycle ``loss_terms`` adds nothing; after it, a pseudo view's render and masked
+        depth terms, which a CUDA graph cannot hold."""
+        return not self.pseudo_cams and not self.input_depths
+
     def extra_views(self) -> list:
         """This cycle's pseudo views."""
         return self.pseudo_cams

@@ -1,0 +1,187 @@
+"""A deferred training step as one CUDA graph (``train.cuda_graph``): the host launches it in one call.
+
+On a GPU the training step is bound by the host: a step of fern at 504x378 keeps the GPU busy about a fifth of
+the time, the rest is Python and the launches of some hundred kernels and torch operations (measured in
+``bench/host_profile.py``). A step whose verdict the host reads later (``Trainer._deferred_step``) has no host
+read left but one, the render's count of tile intersections that sizes its sort buffers, so it can be
+recorded once as a CUDA graph and replayed:
+
+    graph = StepGraph(trainer)
+    if graph.covers(step, cam):          # a deferred step the graph can hold (below)
+        info = graph.step(step, cam)     # None: captured nothing (the trainer runs the step itself)
+
+What one replay does, in order, is exactly the deferred step: render the view, the loss, backward, the guard's
+verdict on the device (``DivergenceGuard.step_on_device``), the masked fused Adam update, the densification
+statistics (``update_state``). What changes from step to step is read from the device: the camera and target
+(copied into the graph's own tensors), the means' learning rate (``GroupedAdam.set_lr``), the guard's slot
+(``LossWindow.set_slot``). The render uses buffers of a fixed capacity (``rasterize(isect_capacity=...)``);
+before each replay ``count_intersections`` reads the step's count (the one host read, which the step without
+the graph also makes) and a count above the capacity records the graph again with more room, so no step ever
+renders less than it would without the graph. The same kernels in the same order give the same numbers as the
+step without the graph, bit for bit (the GPU test in ``bench/graph_check.py`` checks it).
+
+The graph is recorded again whenever what it holds changed: the Gaussians (growth, pruning, a reset, a
+rollback: other tensors), the optimiser's state or its other learning rates, the densification statistics,
+the guard's window, the image size, the SH degree in use. It covers only steps with nothing the graph cannot
+hold: no densification at that step, no random draws (dropout, opacity noise, a random background), no
+Pearson depth term (its mask selects pixels on the host), no co-regularised pair or far field, and a method
+whose loss adds nothing (the baseline; the full method before its first cycle). A recording that fails turns
+the graphs off for the run, with one line saying why; training goes on without them.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import torch
+
+from warpgs import render
+from warpgs.optim import masked_step
+from warpgs.render import count_intersections, means2d_grad_norm
+
+
+class StepGraph:
+    def __init__(self, trainer):
+        self.tr = trainer
+        self.graph: torch.cuda.CUDAGraph | None = None
+        self.key = None  # what the recorded graph holds (``_key``)
+        self.capacity = 0  # the render's intersection buffers
+        self.record: torch.Tensor | None = None  # the graph's output: the step's record (``_step_record``'s layout)
+        self.off: str | None = None  # why the graphs are off for this run
+        self.captures = 0
+        self.replays = 0
+        self.stream = torch.cuda.Stream(trainer.device)
+        self.inputs: dict[str, torch.Tensor] = {}
+
+    # ------------------------------------------------------------------------------------------
+
+    def covers(self, step: int, cam) -> bool:
+        """Whether the deferred step ``step`` on the view ``cam`` can be a replay (module docstring)."""
+        tr = self.tr
+        tc, lc = tr.cfg.train, tr.cfg.loss
+        if self.off is not None or tr.pair is not None or tr.far_field is not None:
+            return False
+        if tc.opacity_noise > 0 or tr.drop_rate * min(step / max(tr.total_steps, 1), 1.0) > 0:
+            return False
+        if tc.random_background and cam.alpha is not None:
+            return False
+        if lc.depth_weight > 0 and lc.depth_prior == "scene" and cam.depth is not None:
+            return False
+        only = getattr(tr.strategy, "only_updates_state", None)
+        if only is None or not only(step) or not getattr(tr.method, "graph_safe", lambda: False)():
+            return False
+        # every parameter has its Adam state (the first step makes it, outside any graph)
+        return all(len(opt.state) == sum(len(g["params"]) for g in opt.param_groups) for opt in tr.optimizers)
+
+    def step(self, step: int, cam) -> dict | None:
+        """Step ``step`` on the view ``cam`` as a replay: the record waits in the trainer's ``_pending`` as a
+        deferred step's does. None (nothing done) when recording failed."""
+        tr = self.tr
+        model = tr.model
+        window = tr._loss_window(step)
+        count = count_intersections(model.means, model.quats, model.scales, model.opacities, cam.viewmat, cam.K,
+                                    cam.width, cam.height)
+        key = self._key(cam)
+        if self.graph is None or key != self.key or count > self.capacity:
+            capacity = max(count + count // 2, 1024)  # room for the other views and the next steps' growth
+            if not self._capture(key, cam, capacity):
+                return None
+        inp = self.inputs
+        inp["viewmat"].copy_(cam.viewmat)
+        inp["K"].copy_(cam.K)
+        inp["image"].copy_(cam.image)
+        if cam.alpha is not None:
+            inp["alpha"].copy_(cam.alpha)
+        window.set_slot(step)
+        self.graph.replay()
+        self.replays += 1
+        tr._pending.append((step, tr.guard.stat_start, self.record.clone()))
+        return {"cloned": 0, "split": 0, "pruned": 0, "reset": 0}
+
+    # ------------------------------------------------------------------------------------------
+
+    def _key(self, cam) -> tuple:
+        """Everything the recorded graph holds that may change between steps: the tensors it reads and writes
+        (by address), the numbers it was recorded with."""
+        tr = self.tr
+        model = tr.model
+        ptrs = [p.data_ptr() for p in model.params.values()] + [len(model)]
+        for opt in tr.optimizers:
+            for g in opt.param_groups:
+                ptrs.append((g.get("name"), g["lr"] if g.get("name") not in opt.lr_tensors else None,
+                             g["betas"], g["eps"]))
+                for p in g["params"]:
+                    ptrs.append(p.data_ptr())
+                    ptrs.extend(v.data_ptr() for v in opt.state[p].values() if isinstance(v, torch.Tensor))
+            ptrs.extend(t.data_ptr() for t in opt.lr_tensors.values())
+        ptrs.extend(v.data_ptr() for v in tr.state.values())
+        w = tr._window
+        ptrs += [w.values.data_ptr(), w.middle.data_ptr(), w.slot.data_ptr(), tr.background.data_ptr()]
+        ptrs += [b.data_ptr() for b in render._ZERO_INPUTS.values()]  # the zeros a backward reads (it only grows)
+        sc = tr.strategy
+        return (tuple(ptrs), cam.width, cam.height, cam.alpha is not None, model.active_sh_degree,
+                tr.step < sc.refine_stop_iter, tr.guard.cfg.explode_factor)
+
+    def _capture(self, key, cam, capacity: int) -> bool:
+        """Records the step (a warm-up of its forward and backward on the graph's stream first, then the capture);
+        False, with the graphs off for the run, when that fails."""
+        tr = self.tr
+        self.graph = self.record = None
+        self.inputs = inp = {"viewmat": cam.viewmat.clone(), "K": cam.K.clone(), "image": cam.image.clone()}
+        if cam.alpha is not None:
+            inp["alpha"] = cam.alpha.clone()
+        static = dataclasses.replace(cam, viewmat=inp["viewmat"], K=inp["K"], image=inp["image"],
+                                     alpha=inp.get("alpha"), depth=None, mask=None)
+        try:
+            self.stream.wait_stream(torch.cuda.current_stream(tr.device))
+            with torch.cuda.stream(self.stream):  # the warm-up: lazy set-ups happen outside the capture
+                out = self._render(static, capacity)
+                loss, _ = tr.compute_loss(out, static)
+                loss.backward()
+                means2d_grad_norm(out, static.width, static.height)  # its constant is made here, not in the capture
+                for opt in tr.optimizers:
+                    opt.zero_grad(set_to_none=True)
+                del out, loss
+            torch.cuda.current_stream(tr.device).wait_stream(self.stream)
+            # capture_begin / capture_end rather than torch.cuda.graph, whose entry collects Python's garbage and
+            # empties the allocator's cache each time (tens of milliseconds a recording)
+            graph = torch.cuda.CUDAGraph()
+            with torch.cuda.stream(self.stream):
+                graph.capture_begin()
+                try:
+                    self.record = self._body(static, capacity)
+                finally:
+                    graph.capture_end()
+            torch.cuda.current_stream(tr.device).wait_stream(self.stream)
+        except Exception as e:  # noqa: BLE001 - anything the capture refuses: the step runs without it
+            self.off = f"{type(e).__name__}: {e}"
+            self.graph = self.record = None
+            for opt in tr.optimizers:
+                opt.zero_grad(set_to_none=True)
+            tr.log(f"warpgs: CUDA graphs off for this run (train.cuda_graph): recording the step failed: {self.off}")
+            return False
+        self.graph, self.capacity = graph, capacity
+        self.key = self._key(cam)  # as it is now: the warm-up may have grown the backward's zeros
+        self.captures += 1
+        return True
+
+    def _render(self, cam, capacity: int):
+        tr = self.tr
+        return tr.model.render(cam.viewmat, cam.K, cam.width, cam.height, background=tr.background,
+                               check_finite=False, isect_capacity=capacity)
+
+    def _body(self, cam, capacity: int) -> torch.Tensor:
+        """What the graph holds: ``Trainer.train_step``'s deferred step (render, loss, backward,
+        ``_deferred_step``'s verdict, update and densification statistics); returns the step's record."""
+        tr = self.tr
+        out = self._render(cam, capacity)
+        loss, parts = tr.compute_loss(out, cam)
+        loss.backward()
+        loss, inputs = loss.detach(), parts.get("inputs", loss).detach()
+        record, apply, found_inf = tr.guard.step_on_device(tr._guarded_tensors(loss), inputs, tr._window, None)
+        for opt in tr.optimizers:
+            masked_step(opt, apply, found_inf)
+            opt.zero_grad(set_to_none=True)
+        if tr.step < tr.strategy.refine_stop_iter:  # a step without its update counts as unseen
+            tr.strategy.update_state(tr.state, out._replace(radii=out.radii * apply), cam.width, cam.height)
+        return record
