@@ -4,6 +4,9 @@
 #   T=seconds bash bench/gpu_session18.sh PHASE D RUNS
 # g: the CUDA tests of the rasterizer (fixed-capacity render included) and of the optimiser and guard, then
 #    bench/graph_check.py: the captured rasterizer and the trainer with and without graphs, bit for bit (fern).
+# r: bench/rasterizer.py (no graphs there: one rasterize call forward and backward): the three random configurations
+#    (the first again at the end), then fern's baseline trained (3 views, 3000 it, frustum start; graphs on) and its
+#    Gaussians at 1x, 2x and 3x the test view.
 # s: bench/train_speed.py: the trainer (graphs on, the default), the plain warpgs loop, gsplat and the trainer
 #    without graphs, 3 repeats interleaved.
 set -u
@@ -16,6 +19,19 @@ g)
     2>&1 | tail -4 | tee "$OUT/tests_cuda.log"
   timeout ${T:-300} python3 bench/graph_check.py --data-root "$D" --iterations ${ITERS:-1000} \
     --out "$OUT/graph_check_cuda.json" 2>&1 | grep -v "^Module\|^Warp" | tee "$OUT/graph_check.log" | tail -40
+  ;;
+r)
+  python3 -m pip install -q --no-index --no-deps --target /tmp/site .device/gsplat/*.whl 2>/dev/null
+  timeout ${T:-300} python3 bench/rasterizer.py --warmup 20 --iters 50 --out "$OUT/rasterizer_cuda.json" \
+    --configs 138766x648x420,256000x1280x720,1000000x1920x1080,138766x648x420 2>&1 \
+    | tee "$OUT/rasterizer.log" | grep -E "Gaussians|ratio|wrote"
+  [ -f "$R/fern_base/point_cloud.ply" ] || python3 -m warpgs.pipelines.sparse --method baseline --data llff \
+    --data-root "$D" --iterations 3000 --set model.init=frustum --device cuda --no-progress --out "$R/fern_base" \
+    > "$OUT/fern_base.log" 2>&1
+  tail -2 "$OUT/fern_base.log"
+  timeout ${T:-300} python3 bench/rasterizer.py --ply "$R/fern_base/point_cloud.ply" --data llff --data-root "$D" \
+    --scales 1,2,3 --warmup 20 --iters 50 --out "$OUT/rasterizer_cuda_trained.json" 2>&1 \
+    | tee "$OUT/rasterizer_trained.log" | grep -E "Gaussians|ratio|wrote"
   ;;
 s)
   python3 -m pip install -q --no-index --no-deps --target /tmp/site .device/gsplat/*.whl 2>/dev/null

@@ -198,3 +198,27 @@ def test_quat_to_rotmat_is_a_rotation(q):
     w, x, y, z = q.tolist()
     vx = torch.tensor([1 - 2 * (y * y + z * z), 2 * (x * y + w * z), 2 * (x * z - w * y)])
     assert torch.allclose(R[:, 0], vx, atol=1e-6)
+
+
+@pytest.mark.parametrize("pause", [0, 3])
+def test_only_updates_state_is_what_step_post_backward_does(monkeypatch, pause):
+    """``only_updates_state(step)`` (whether a CUDA graph may hold the step's densification) is true exactly at
+    the steps where ``step_post_backward`` neither grows, prunes nor resets, over a schedule with its start,
+    stop, pause after a reset and reset steps."""
+    s = DefaultStrategy(refine_start_iter=3, refine_every=2, reset_every=6, refine_stop_iter=20,
+                        pause_refine_after_reset=pause)
+    m = _model([0.05] * 4, [0.5] * 4)
+    opt = make_optimizer(m, Config(), 1.0)
+    st = s.initialize_state(len(m), "cpu")
+    acted = []
+    monkeypatch.setattr(s, "update_state", lambda *a: None)
+    monkeypatch.setattr(s, "grow", lambda *a, **k: acted.append("grow") or (0, 0))
+    monkeypatch.setattr(s, "prune", lambda *a, **k: acted.append("prune") or 0)
+    monkeypatch.setattr("warpgs.strategy.reset_opacities", lambda *a, **k: acted.append("reset"))
+    seen = set()
+    for step in range(26):
+        acted.clear()
+        s.step_post_backward(m, opt, st, step, None, 8, 8, 1.0)
+        assert s.only_updates_state(step) == (not acted), (step, acted)
+        seen.add(bool(acted))
+    assert seen == {True, False}

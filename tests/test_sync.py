@@ -268,7 +268,12 @@ def test_the_kernels_step_verdict_is_the_hosts():
             inputs = torch.tensor(float(v), dtype=torch.float32)
             w.rebuild(losses, g.stat_start, n)
             before = w.values.clone()
-            record, apply, found_inf = g.step_on_device([loss] + grads, inputs, w, n)
+            if trial % 2:  # the slot from the step, or set beforehand (a CUDA graph's replay)
+                record, apply, found_inf = g.step_on_device([loss] + grads, inputs, w, n)
+            else:
+                w.slot.fill_(-7)
+                w.set_slot(n)
+                record, apply, found_inf = g.step_on_device([loss] + grads, inputs, w, None)
             flags = finite_flags([loss] + grads)
             exploding = bool(flags.all()) and g.exploding(float(v), losses) is not None
             ok = bool(flags.all()) and not exploding
