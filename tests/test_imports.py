@@ -17,6 +17,7 @@ LAYERS = [
     ["points", "clearance"],
     ["config"],
     ["optim"],
+    ["graphstep"],
     ["evaluation", "train", "coreg"],
     ["compact"],
     ["pipelines", "view"],
