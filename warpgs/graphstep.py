@@ -23,7 +23,7 @@ step without the graph, bit for bit (the GPU test in ``bench/graph_check.py`` ch
 The graph is recorded again whenever what it holds changed: the Gaussians (growth, pruning, a reset, a
 rollback: other tensors), the optimiser's state or its other learning rates, the densification statistics,
 the guard's window, the image size, the SH degree in use. It covers only steps with nothing the graph cannot
-hold: no densification at that step, no random draws (dropout, opacity noise, a random background), no
+hold: no densification at that step (``Trainer.densify_only_updates_state``), no random draws (dropout, opacity noise, a random background), no
 Pearson depth term (its mask selects pixels on the host), no co-regularised pair or far field, and a method
 whose loss adds nothing (the baseline; the full method before its first cycle). A recording that fails turns
 the graphs off for the run, with one line saying why; training goes on without them.
@@ -36,7 +36,6 @@ import dataclasses
 import torch
 
 from warpgs import render
-from warpgs.optim import masked_step
 from warpgs.render import count_intersections, means2d_grad_norm
 
 
@@ -67,8 +66,7 @@ class StepGraph:
             return False
         if lc.depth_weight > 0 and lc.depth_prior == "scene" and cam.depth is not None:
             return False
-        only = getattr(tr.strategy, "only_updates_state", None)
-        if only is None or not only(step) or not getattr(tr.method, "graph_safe", lambda: False)():
+        if not tr.densify_only_updates_state(step) or not getattr(tr.method, "graph_safe", lambda: False)():
             return False
         # every parameter has its Adam state (the first step makes it, outside any graph)
         return all(len(opt.state) == sum(len(g["params"]) for g in opt.param_groups) for opt in tr.optimizers)
@@ -84,7 +82,7 @@ class StepGraph:
         key = self._key(cam)
         if self.graph is None or key != self.key or count > self.capacity:
             capacity = max(count + count // 2, 1024)  # room for the other views and the next steps' growth
-            if not self._capture(key, cam, capacity):
+            if not self._capture(cam, capacity):
                 return None
         inp = self.inputs
         inp["viewmat"].copy_(cam.viewmat)
@@ -122,7 +120,7 @@ class StepGraph:
         return (tuple(ptrs), cam.width, cam.height, cam.alpha is not None, model.active_sh_degree,
                 tr.step < sc.refine_stop_iter, tr.guard.cfg.explode_factor)
 
-    def _capture(self, key, cam, capacity: int) -> bool:
+    def _capture(self, cam, capacity: int) -> bool:
         """Records the step (a warm-up of its forward and backward on the graph's stream first, then the capture);
         False, with the graphs off for the run, when that fails."""
         tr = self.tr
@@ -135,13 +133,11 @@ class StepGraph:
         try:
             self.stream.wait_stream(torch.cuda.current_stream(tr.device))
             with torch.cuda.stream(self.stream):  # the warm-up: lazy set-ups happen outside the capture
-                out = self._render(static, capacity)
-                loss, _ = tr.compute_loss(out, static)
-                loss.backward()
+                out, _, _ = tr.forward_backward(tr.step, static, tr.background, capacity)
                 means2d_grad_norm(out, static.width, static.height)  # its constant is made here, not in the capture
                 for opt in tr.optimizers:
                     opt.zero_grad(set_to_none=True)
-                del out, loss
+                del out
             torch.cuda.current_stream(tr.device).wait_stream(self.stream)
             # capture_begin / capture_end rather than torch.cuda.graph, whose entry collects Python's garbage and
             # empties the allocator's cache each time (tens of milliseconds a recording)
@@ -165,23 +161,14 @@ class StepGraph:
         self.captures += 1
         return True
 
-    def _render(self, cam, capacity: int):
-        tr = self.tr
-        return tr.model.render(cam.viewmat, cam.K, cam.width, cam.height, background=tr.background,
-                               check_finite=False, isect_capacity=capacity)
-
     def _body(self, cam, capacity: int) -> torch.Tensor:
-        """What the graph holds: ``Trainer.train_step``'s deferred step (render, loss, backward,
-        ``_deferred_step``'s verdict, update and densification statistics); returns the step's record."""
+        """What the graph holds: ``Trainer.train_step``'s deferred step (``forward_backward``, ``update_on_device``,
+        the densification statistics of ``densify``, which does no more at a covered step); returns its record."""
         tr = self.tr
-        out = self._render(cam, capacity)
-        loss, parts = tr.compute_loss(out, cam)
-        loss.backward()
-        loss, inputs = loss.detach(), parts.get("inputs", loss).detach()
-        record, apply, found_inf = tr.guard.step_on_device(tr._guarded_tensors(loss), inputs, tr._window, None)
-        for opt in tr.optimizers:
-            masked_step(opt, apply, found_inf)
-            opt.zero_grad(set_to_none=True)
-        if tr.step < tr.strategy.refine_stop_iter:  # a step without its update counts as unseen
-            tr.strategy.update_state(tr.state, out._replace(radii=out.radii * apply), cam.width, cam.height)
+        step = tr.step
+        out, loss, inputs = tr.forward_backward(step, cam, tr.background, capacity)
+        record, apply = tr.update_on_device(None, loss, inputs)
+        # a step without its update is one in which no Gaussian was seen, for the densification statistics
+        tr.densify(tr.strategy, tr.model, tr.optimizer, tr.state, step, out._replace(radii=out.radii * apply), cam,
+                   tr.split_gen)
         return record

@@ -175,29 +175,27 @@ def _bin_gaussians(means2d, radii, depths, tiles_touched, tiles_x, tiles_y, capa
     ranges = torch.zeros(n_tiles, 2, device=means2d.device, dtype=torch.int32)
     n = means2d.shape[0]
     offsets = torch.cumsum(tiles_touched, 0, dtype=torch.int32)
-    if capacity is not None:
-        keys = torch.full((capacity,), _PADDING_KEY, device=means2d.device, dtype=torch.int64)
-        values = torch.zeros(capacity, device=means2d.device, dtype=torch.int32)
-        if n and capacity:
-            fast_launch(kb.emit_intersections, n, dev, stream,
-                        means2d, radii, depths.view(torch.int32), offsets, kr.tile_size_for(dev), tiles_x, tiles_y,
-                        keys, values)
-            keys, order = torch.sort(keys, stable=True)
-            values = values[order]
-            fast_launch(kb.tile_ranges_from_keys, capacity, dev, stream, keys, capacity, ranges)
-        return ranges, values, capacity
-    total = int(offsets[-1]) if n else 0  # the one host sync of a render: sizes the key buffers
-    if total == 0:
-        return ranges, torch.empty(0, device=means2d.device, dtype=torch.int32), 0
-    keys = torch.empty(2 * total, device=means2d.device, dtype=torch.int64)
-    values = torch.empty(2 * total, device=means2d.device, dtype=torch.int32)
+    if capacity is None:
+        count = int(offsets[-1]) if n else 0  # the one host sync of a render: sizes the key buffers
+        keys = torch.empty(2 * count, device=means2d.device, dtype=torch.int64)  # the sort's double buffer
+        values = torch.empty(2 * count, device=means2d.device, dtype=torch.int32)
+    else:
+        count = capacity
+        keys = torch.full((count,), _PADDING_KEY, device=means2d.device, dtype=torch.int64)
+        values = torch.zeros(count, device=means2d.device, dtype=torch.int32)
+    if n == 0 or count == 0:
+        return ranges, values[:count], count
     fast_launch(kb.emit_intersections, n, dev, stream,
                 means2d, radii, depths.view(torch.int32), offsets, kr.tile_size_for(dev), tiles_x, tiles_y,
                 keys, values)
-    tile_bits = int(math.floor(math.log2(n_tiles))) + 1
-    _sort_pairs(keys, values, total, 32 + tile_bits, stream)
-    fast_launch(kb.tile_ranges_from_keys, total, dev, stream, keys, total, ranges)
-    return ranges, values[:total], total
+    if capacity is None:
+        tile_bits = int(math.floor(math.log2(n_tiles))) + 1
+        _sort_pairs(keys, values, count, 32 + tile_bits, stream)
+    else:
+        keys, order = torch.sort(keys, stable=True)
+        values = values[order]
+    fast_launch(kb.tile_ranges_from_keys, count, dev, stream, keys, count, ranges)
+    return ranges, values[:count], count
 
 
 # a key past every tile (tile id 2^31 - 1): the padding of fixed-capacity key buffers, sorted last

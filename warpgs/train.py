@@ -582,17 +582,7 @@ class Trainer:
             if info is not None:
                 return info
         cam, bg = self.with_training_background(cam, self.split_gen)
-        # no input checks in the rasterizer (each is a host read): the guard checks the loss, the gradients and
-        # the parameters, and a step with non-finite ones makes no update
-        out = self.model.render(cam.viewmat, cam.K, cam.width, cam.height, background=bg,
-                                opacity_scale=self.opacity_scale(step), check_finite=False)
-        loss, parts = self.compute_loss(out, cam)
-        if self.pair is not None:  # its partner on the same view, and the two co-regularised (one backward for both)
-            loss = loss + self.pair.loss(step, cam, bg, parts)
-        loss.backward()
-        # the guard judges the input views' loss: extra views (the full method's pseudo views) change what is
-        # optimised and can be far off at first without anything diverging
-        loss, inputs = loss.detach(), parts.get("inputs", loss).detach()
+        out, loss, inputs = self.forward_backward(step, cam, bg)
         if not self._sync_due(step):
             return self._deferred_step(step, loss, inputs, out, cam)
         record = self._step_record(loss, inputs)
@@ -626,6 +616,23 @@ class Trainer:
             self.take_snapshot(step + 1)
         return {"loss": value, "psnr": -10 * math.log10(max(row[_MSE], 1e-10)), **info}
 
+    def forward_backward(self, step: int, cam, bg, isect_capacity: int | None = None):
+        """Step ``step``'s render of the view ``cam`` over ``bg``, its loss (``compute_loss``, and the co-regularised
+        partner's) and the backward pass; returns (the render, the loss, the input views' loss), both detached.
+        ``isect_capacity``: the render's fixed-capacity buffers (``rasterize``; a CUDA graph of the step)."""
+        # no input checks in the rasterizer (each is a host read): the guard checks the loss, the gradients and
+        # the parameters, and a step with non-finite ones makes no update
+        out = self.model.render(cam.viewmat, cam.K, cam.width, cam.height, background=bg,
+                                opacity_scale=self.opacity_scale(step), check_finite=False,
+                                isect_capacity=isect_capacity)
+        loss, parts = self.compute_loss(out, cam)
+        if self.pair is not None:  # its partner on the same view, and the two co-regularised (one backward for both)
+            loss = loss + self.pair.loss(step, cam, bg, parts)
+        loss.backward()
+        # the guard judges the input views' loss: extra views (the full method's pseudo views) change what is
+        # optimised and can be far off at first without anything diverging
+        return out, loss.detach(), parts.get("inputs", loss).detach()
+
     def _after_update(self, step: int, out, cam, apply: torch.Tensor | None = None) -> dict:
         """What follows a step's update: densification (``densify``), the co-regularised partner's and the
         co-pruning (``train.co_reg``), and a new statistic after an opacity reset (whose jump in the loss is
@@ -636,6 +643,14 @@ class Trainer:
         if info.get("reset"):
             self._restart_statistic(step + 1)
         return info
+
+    def densify_only_updates_state(self, step: int) -> bool:
+        """Whether ``densify`` at ``step`` does no more than the strategy's ``update_state`` (no growth, pruning,
+        reset, nor pruning on the camera path): such a step can be part of a CUDA graph (``warpgs.graphstep``)."""
+        s = self.strategy
+        only = getattr(s, "only_updates_state", None)
+        return (only is not None and only(step)
+                and not (self.clearance is not None and step % s.refine_every == 0))
 
     def densify(self, strategy, model: GaussianModel, optimizer, state: dict, step: int, out, cam,
                 generator: torch.Generator) -> dict:
@@ -761,17 +776,24 @@ class Trainer:
         with ``train.guard_kernels``, else ``_deferred_verdict``), the update made or skipped there
         (``masked_step``), and only a step that made its update counts in the densification statistics. The
         record waits in ``_pending`` for the next read (``_resolve``)."""
+        record, apply = self.update_on_device(step, loss, inputs)
+        self._pending.append((step, self.guard.stat_start, record))
+        # a step without its update is one in which no Gaussian was seen, for the densification statistics
+        return self._after_update(step, out._replace(radii=out.radii * apply), cam, apply)
+
+    def update_on_device(self, step: int | None, loss: torch.Tensor, inputs: torch.Tensor):
+        """A deferred step's verdict and its update, made or skipped on the device (``masked_step``); returns
+        (the step's record, whether the update applies). ``step`` None: the guard kernels' window slot was set
+        beforehand (a CUDA graph's replay, ``warpgs.graphstep``, which needs ``train.guard_kernels``)."""
         if self.cfg.train.guard_kernels:
-            record, apply, found_inf = self.guard.step_on_device(self._guarded_tensors(loss), inputs,
-                                                                 self._loss_window(step), step)
+            window = self._window if step is None else self._loss_window(step)
+            record, apply, found_inf = self.guard.step_on_device(self._guarded_tensors(loss), inputs, window, step)
         else:
             record, apply, found_inf = self._deferred_verdict(step, loss, inputs)
         for opt in self.optimizers:
             masked_step(opt, apply, found_inf)
             opt.zero_grad(set_to_none=True)
-        self._pending.append((step, self.guard.stat_start, record))
-        # a step without its update is one in which no Gaussian was seen, for the densification statistics
-        return self._after_update(step, out._replace(radii=out.radii * apply), cam, apply)
+        return record, apply
 
     def _deferred_verdict(self, step: int, loss: torch.Tensor, inputs: torch.Tensor):
         """``DivergenceGuard.step_on_device``'s results from torch ops (record, apply, found_inf): the step's
