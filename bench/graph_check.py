@@ -3,7 +3,8 @@ the step without it, and what it saves.
 
     python bench/graph_check.py --data-root DIR [--iterations 1000] [--out FILE.json]
 
-fern, 3 views, the baseline from the same initial Gaussians (``model.init=frustum``, as bench/train_speed.py), trained
+fern, 3 views (``--data``, ``--scene``, ``--views``), the baseline from the same initial Gaussians (``model.init=frustum``,
+as bench/train_speed.py; ``--set`` adds config overrides, e.g. dropout, opacity noise, the far field), trained
 without the graphs and twice with them: every parameter and every recorded loss equal bit for bit; the time of each,
 the number of recordings and replays. (The fixed-capacity render itself is checked against the counted one bit for
 bit on both devices by tests/test_rasterizer.py.)
@@ -26,11 +27,12 @@ sys.path.insert(0, str(ROOT))
 from bench.train_speed import Setup, load_scene, machine, make_config  # noqa: E402
 
 
-def trainer_check(data_root: str | None, iterations: int) -> dict:
+def trainer_check(data_root: str | None, iterations: int, data: str = "llff", scene: str | None = None,
+                  views: int = 3, sets: tuple = ()) -> dict:
     from bench.train_speed import run_warpgs_trainer
 
-    args = argparse.Namespace(data="llff", scene=None, views=3, data_root=data_root, iterations=iterations,
-                              device="cuda", set=["model.init=frustum"])
+    args = argparse.Namespace(data=data, scene=scene, views=views, data_root=data_root, iterations=iterations,
+                              device="cuda", set=["model.init=frustum", *sets])
     cfg = make_config(args)
     setup = Setup(cfg, load_scene(cfg, 1))
     rows, models = {}, {}
@@ -63,9 +65,15 @@ def main(argv=None) -> dict:
     ap.add_argument("--data-root", default=None)
     ap.add_argument("--iterations", type=int, default=1000)
     ap.add_argument("--out", type=Path, default=ROOT / "bench" / "results" / "graph_check_cuda.json")
+    ap.add_argument("--data", default="llff")
+    ap.add_argument("--scene", default=None)
+    ap.add_argument("--views", type=int, default=3)
+    ap.add_argument("--set", action="append", default=[],
+                    help="config overrides over plain 3D-GS (e.g. train.drop_rate=0.2: dropout's draws in the graph)")
     args = ap.parse_args(argv)
-    result = {"machine": machine("cuda")}
-    result["trainer"] = trainer_check(args.data_root, args.iterations)
+    result = {"machine": machine("cuda"), "data": args.data, "scene": args.scene, "views": args.views,
+              "set": args.set}
+    result["trainer"] = trainer_check(args.data_root, args.iterations, args.data, args.scene, args.views, args.set)
     print(json.dumps(result["trainer"], indent=1))
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(json.dumps(result, indent=2))

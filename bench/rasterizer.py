@@ -6,8 +6,13 @@
 
 Identical inputs for both rasterizers in the same run: N random Gaussians (means uniform in a box
 in front of the camera, random rotations, scales uniform up to 0.02, opacities uniform in [0, 1], RGB
-colours), one pinhole camera (focal = image width). Times are means over --iters runs after warm-up,
-measured with CUDA events; "warpgs" is the default deterministic backward (fixed-point sums),
+colours), one pinhole camera (focal = image width). On CUDA the four rasterizers of a configuration are timed
+in --rounds interleaved rounds (each round times every one for --iters calls after all were warmed up, the order
+rotating from round to round, Python's garbage collector paused), and a time is the median over the rounds of
+the mean per call, measured with CUDA events; the rounds' range is in the JSON. Interleaving keeps a slow start
+of the process (clocks, caches, a busy host) from landing on whichever rasterizer happens to be timed first,
+which single back-to-back measurements did (session 18: the first configuration 1.38-1.70 when measured first,
+0.71-1.07 when measured last). On the CPU: one round. "warpgs" is the default deterministic backward (fixed-point sums),
 "warpgs_float_atomics" the float-atomic one (deterministic=False); forward+backward backpropagates a fixed random weighting of the image to
 means, quats, scales, opacities and colours. Peak memory is torch's allocator peak above the inputs
 plus Warp's memory-pool high-water mark (Warp's radix-sort scratch). The RGB agreement uses gsplat's
@@ -17,8 +22,10 @@ alpha clamp (0.999) in warpgs so that the two compute the same function.
 from __future__ import annotations
 
 import argparse
+import gc
 import json
 import platform
+import statistics
 import sys
 import time
 from pathlib import Path
@@ -156,26 +163,56 @@ def peak_mem_mb(fn, device):
     return (peak + warp_peak) / 2**20
 
 
-def measure(name, make_fwd, inp, iters, warmup, device):
+def calls(make_fwd, inp):
+    """(forward only, forward + backward) of one rasterizer on its own copy of the inputs."""
     p = grad_inputs(inp)
-    fwd = make_fwd
     w = inp["w_img"]
 
     def f_only():
         with torch.no_grad():
-            fwd(p)
+            make_fwd(p)
 
     def f_b():
-        img = fwd(p)
+        img = make_fwd(p)
         (img * w).sum().backward()
 
-    res = {"forward_ms": time_it(f_only, iters, warmup, device), "forward_backward_ms": time_it(f_b, iters, warmup, device)}
-    res["peak_mem_mb"] = peak_mem_mb(f_b, device)
-    with torch.no_grad():
-        res_img = fwd(p).float()
-    print(f"  {name:<14} fwd {res['forward_ms']:9.3f} ms   fwd+bwd {res['forward_backward_ms']:9.3f} ms"
-          + (f"   peak {res['peak_mem_mb']:.1f} MB" if res["peak_mem_mb"] is not None else ""), flush=True)
-    return res, res_img
+    return p, f_only, f_b
+
+
+def measure(fns: dict, inp, iters, warmup, device, rounds: int = 1) -> dict:
+    """Times every rasterizer of ``fns`` (name: make_fwd) in ``rounds`` interleaved rounds (module docstring);
+    returns name: ({forward_ms, forward_backward_ms (medians over rounds), rounds_ms, peak_mem_mb}, image)."""
+    made = {name: calls(fn, inp) for name, fn in fns.items()}
+    for _, f_only, f_b in made.values():
+        for _ in range(warmup):
+            f_only()
+            f_b()
+    times = {name: {"forward_ms": [], "forward_backward_ms": []} for name in fns}
+    names = list(fns)
+    gc.collect()
+    gc.disable()
+    try:
+        for r in range(rounds):
+            for name in names[r % len(names):] + names[:r % len(names)]:
+                _, f_only, f_b = made[name]
+                times[name]["forward_ms"].append(time_it(f_only, iters, 0, device))
+                times[name]["forward_backward_ms"].append(time_it(f_b, iters, 0, device))
+    finally:
+        gc.enable()
+    out = {}
+    for name, (p, _, f_b) in made.items():
+        t = times[name]
+        res = {k: statistics.median(v) for k, v in t.items()}
+        res["rounds_ms"] = {k: [round(x, 4) for x in v] for k, v in t.items()}
+        res["peak_mem_mb"] = peak_mem_mb(f_b, device)
+        with torch.no_grad():
+            img = fns[name](p).float()
+        fw, fb = t["forward_ms"], t["forward_backward_ms"]
+        print(f"  {name:<14} fwd {res['forward_ms']:9.3f} ms [{min(fw):.3f}, {max(fw):.3f}]   fwd+bwd "
+              f"{res['forward_backward_ms']:9.3f} ms [{min(fb):.3f}, {max(fb):.3f}]"
+              + (f"   peak {res['peak_mem_mb']:.1f} MB" if res["peak_mem_mb"] is not None else ""), flush=True)
+        out[name] = (res, img)
+    return out
 
 
 def profile(make_fwd, inp, label="warpgs"):
@@ -238,6 +275,7 @@ def main(argv=None):
     ap.add_argument("--device", choices=["cuda", "cpu"], default="cuda" if torch.cuda.is_available() else "cpu")
     ap.add_argument("--iters", type=int, default=None)
     ap.add_argument("--warmup", type=int, default=None)
+    ap.add_argument("--rounds", type=int, default=None, help="interleaved timing rounds (CUDA default 7)")
     ap.add_argument("--out", type=Path, default=None)
     ap.add_argument("--configs", type=str, default=None, help="e.g. '138766x648x420,256000x1280x720'")
     ap.add_argument("--profile", action="store_true", help="print per-kernel CUDA time tables of warpgs and gsplat (and record them)")
@@ -254,10 +292,11 @@ def main(argv=None):
         configs = [tuple(int(v) for v in c.split("x")) for c in args.configs.split(",")]
     iters = args.iters or (20 if device == "cuda" else 3)
     warmup = args.warmup or (5 if device == "cuda" else 1)
+    rounds = args.rounds or (7 if device == "cuda" else 1)
     out_path = args.out or ROOT / "bench" / "results" / f"rasterizer_{device}.json"
 
     result = {"device": torch.cuda.get_device_name() if device == "cuda" else platform.processor() or "cpu",
-              "torch": torch.__version__, "iters": iters, "configs": []}
+              "torch": torch.__version__, "iters": iters, "rounds": rounds, "warmup": warmup, "configs": []}
     if device == "cuda":
         import gsplat
 
@@ -282,12 +321,13 @@ def main(argv=None):
               flush=True)
         row = {"gaussians": n, "width": width, "height": height, "sh_degree": inp.get("sh_degree")}
         if device == "cuda":
-            row["warpgs"], img_w = measure("warpgs", warpgs_fn(inp, width, height, 0.999), inp, iters, warmup, device)
-            row["warpgs_float_atomics"], _ = measure("warpgs float+", warpgs_fn(inp, width, height, 0.999, False), inp,
-                                                     iters, warmup, device)
-            row["gsplat"], img_g = measure("gsplat", gsplat_fn(inp, width, height), inp, iters, warmup, device)
-            row["gsplat_rgb_ed"], _ = measure("gsplat RGB+ED", gsplat_fn(inp, width, height, "RGB+ED"), inp, iters,
-                                              warmup, device)
+            got = measure({"warpgs": warpgs_fn(inp, width, height, 0.999),
+                           "warpgs_float_atomics": warpgs_fn(inp, width, height, 0.999, False),
+                           "gsplat": gsplat_fn(inp, width, height),
+                           "gsplat_rgb_ed": gsplat_fn(inp, width, height, "RGB+ED")}, inp, iters, warmup, device, rounds)
+            for name, (res, _) in got.items():
+                row[name] = res
+            img_w, img_g = got["warpgs"][1], got["gsplat"][1]
             row["max_abs_rgb_diff"] = float((img_w - img_g).abs().max())
             row["diagnosis"] = diagnose(inp, width, height, img_w, img_g)
             if args.profile:
@@ -300,8 +340,9 @@ def main(argv=None):
             print(f"  ratio warpgs/gsplat: fwd {row['ratio_fwd']:.2f}  fwd+bwd {row['ratio_fwd_bwd']:.2f} "
                   f"(vs RGB+ED {row['ratio_fwd_bwd_vs_rgb_ed']:.2f})  max|RGB diff| {row['max_abs_rgb_diff']:.2e}")
         else:
-            row["warpgs"], img_w = measure("warpgs", warpgs_fn(inp, width, height, 0.99), inp, iters, warmup, device)
-            row["reference"], img_r = measure("torch oracle", reference_fn(inp, width, height, 0.99), inp, 1, 0, device)
+            got = measure({"warpgs": warpgs_fn(inp, width, height, 0.99)}, inp, iters, warmup, device)
+            got.update(measure({"reference": reference_fn(inp, width, height, 0.99)}, inp, 1, 0, device))
+            (row["warpgs"], img_w), (row["reference"], img_r) = got["warpgs"], got["reference"]
             row["max_abs_rgb_diff"] = float((img_w - img_r).abs().max())
             row["speedup_fwd_bwd"] = row["reference"]["forward_backward_ms"] / row["warpgs"]["forward_backward_ms"]
             print(f"  speed-up over the oracle (fwd+bwd) {row['speedup_fwd_bwd']:.1f}x  "

@@ -12,21 +12,27 @@ recorded once as a CUDA graph and replayed:
 
 What one replay does, in order, is exactly the deferred step: render the view, the loss, backward, the guard's
 verdict on the device (``DivergenceGuard.step_on_device``), the masked fused Adam update, the densification
-statistics (``update_state``). What changes from step to step is read from the device: the camera and target
-(copied into the graph's own tensors), the means' learning rate (``GroupedAdam.set_lr``), the guard's slot
-(``LossWindow.set_slot``). The render uses buffers of a fixed capacity (``rasterize(isect_capacity=...)``);
+statistics (``update_state``). What changes from step to step is read from the device: the camera, target and
+background (copied into the graph's own tensors; a random colour behind an alpha channel and the far field's
+image are made outside the graph, as the step without it makes them), the means' learning rate
+(``GroupedAdam.set_lr``), the guard's slot (``LossWindow.set_slot``), DropGaussian's rate
+(``Trainer.drop_rate_tensors``). Dropout and opacity noise draw inside the graph from the trainer's
+``drop_gen``, registered with it (``register_generator_state``): each replay draws anew, the numbers the step
+without the graph would draw. The render uses buffers of a fixed capacity (``rasterize(isect_capacity=...)``);
 before each replay ``count_intersections`` reads the step's count (the one host read, which the step without
-the graph also makes) and a count above the capacity records the graph again with more room, so no step ever
-renders less than it would without the graph. The same kernels in the same order give the same numbers as the
-step without the graph, bit for bit (the GPU test in ``bench/graph_check.py`` checks it).
+the graph also makes; on opacities scaled by the largest factor dropout and noise can give,
+``Trainer.opacity_scale_bound``, since the screen box grows with the opacity) and a count above the capacity
+records the graph again with more room, so no step ever renders less than it would without the graph. The same
+kernels in the same order give the same numbers as the step without the graph, bit for bit (the GPU test in
+``bench/graph_check.py`` checks it).
 
 The graph is recorded again whenever what it holds changed: the Gaussians (growth, pruning, a reset, a
 rollback: other tensors), the optimiser's state or its other learning rates, the densification statistics,
-the guard's window, the image size, the SH degree in use. It covers only steps with nothing the graph cannot
-hold: no densification at that step (``Trainer.densify_only_updates_state``), no random draws (dropout, opacity noise, a random background), no
-Pearson depth term (its mask selects pixels on the host), no co-regularised pair or far field, and a method
-whose loss adds nothing (the baseline; the full method before its first cycle). A recording that fails turns
-the graphs off for the run, with one line saying why; training goes on without them.
+the guard's window, the image size, the SH degree in use, the kind of background. It covers only steps with
+nothing the graph cannot hold: no densification at that step (``Trainer.densify_only_updates_state``), no
+Pearson depth term (its mask selects pixels on the host), no co-regularised pair, and a method whose loss adds
+nothing (the baseline; the full method before its first cycle). A recording that fails turns the graphs off for
+the run, with one line saying why; training goes on without them.
 """
 
 from __future__ import annotations
@@ -51,19 +57,18 @@ class StepGraph:
         self.replays = 0
         self.stream = torch.cuda.Stream(trainer.device)
         self.inputs: dict[str, torch.Tensor] = {}
+        self.background: torch.Tensor | None = None  # what the recorded step renders over
 
     # ------------------------------------------------------------------------------------------
 
     def covers(self, step: int, cam) -> bool:
         """Whether the deferred step ``step`` on the view ``cam`` can be a replay (module docstring)."""
         tr = self.tr
-        tc, lc = tr.cfg.train, tr.cfg.loss
-        if self.off is not None or tr.pair is not None or tr.far_field is not None:
+        lc = tr.cfg.loss
+        if self.off is not None or tr.pair is not None:
             return False
-        if tc.opacity_noise > 0 or tr.drop_rate * min(step / max(tr.total_steps, 1), 1.0) > 0:
-            return False
-        if tc.random_background and cam.alpha is not None:
-            return False
+        if self.draws(step) and not hasattr(torch.cuda.CUDAGraph, "register_generator_state"):
+            return False  # a torch whose graphs cannot hold draws from the trainer's own generator
         if lc.depth_weight > 0 and lc.depth_prior == "scene" and cam.depth is not None:
             return False
         if not tr.densify_only_updates_state(step) or not getattr(tr.method, "graph_safe", lambda: False)():
@@ -71,18 +76,31 @@ class StepGraph:
         # every parameter has its Adam state (the first step makes it, outside any graph)
         return all(len(opt.state) == sum(len(g["params"]) for g in opt.param_groups) for opt in tr.optimizers)
 
+    def draws(self, step: int) -> bool:
+        """Whether the step's render draws from the trainer's ``drop_gen`` (DropGaussian, opacity noise): the graph
+        holds the draws (the generator is registered with it, so each replay draws anew, what the step without
+        the graph would draw) and reads the dropout rate from the device (``Trainer.drop_rate_tensors``)."""
+        return self.tr.cfg.train.opacity_noise > 0 or self.tr.drop_rate_at(step) > 0
+
     def step(self, step: int, cam) -> dict | None:
         """Step ``step`` on the view ``cam`` as a replay: the record waits in the trainer's ``_pending`` as a
         deferred step's does. None (nothing done) when recording failed."""
         tr = self.tr
         model = tr.model
         window = tr._loss_window(step)
-        count = count_intersections(model.means, model.quats, model.scales, model.opacities, cam.viewmat, cam.K,
-                                    cam.width, cam.height)
-        key = self._key(cam)
+        bound = tr.opacity_scale_bound(step)  # dropout's and the noise's largest factor: the count bounds the render's
+        count = count_intersections(model.means, model.quats, model.scales,
+                                    model.opacities if bound is None else model.opacities * bound,
+                                    cam.viewmat, cam.K, cam.width, cam.height)
+        # the target and background of the step (a random colour behind an alpha channel, the far field), as
+        # the step without the graph makes them, outside the graph
+        cam, bg = tr.with_training_background(cam, tr.split_gen)
+        if tr.drop_rate_at(step) > 0:
+            tr.drop_rate_tensors(step)
+        key = self._key(cam, bg)
         if self.graph is None or key != self.key or count > self.capacity:
             capacity = max(count + count // 2, 1024)  # room for the other views and the next steps' growth
-            if not self._capture(cam, capacity):
+            if not self._capture(cam, bg, capacity):
                 return None
         inp = self.inputs
         inp["viewmat"].copy_(cam.viewmat)
@@ -90,6 +108,8 @@ class StepGraph:
         inp["image"].copy_(cam.image)
         if cam.alpha is not None:
             inp["alpha"].copy_(cam.alpha)
+        if "bg" in inp:
+            inp["bg"].copy_(bg)
         window.set_slot(step)
         self.graph.replay()
         self.replays += 1
@@ -98,7 +118,7 @@ class StepGraph:
 
     # ------------------------------------------------------------------------------------------
 
-    def _key(self, cam) -> tuple:
+    def _key(self, cam, bg) -> tuple:
         """Everything the recorded graph holds that may change between steps: the tensors it reads and writes
         (by address), the numbers it was recorded with."""
         tr = self.tr
@@ -115,12 +135,14 @@ class StepGraph:
         ptrs.extend(v.data_ptr() for v in tr.state.values())
         w = tr._window
         ptrs += [w.values.data_ptr(), w.middle.data_ptr(), w.slot.data_ptr(), tr.background.data_ptr()]
+        ptrs += [t.data_ptr() for t in tr._drop_t]
         ptrs += [b.data_ptr() for b in render._ZERO_INPUTS.values()]  # the zeros a backward reads (it only grows)
         sc = tr.strategy
         return (tuple(ptrs), cam.width, cam.height, cam.alpha is not None, model.active_sh_degree,
-                tr.step < sc.refine_stop_iter, tr.guard.cfg.explode_factor)
+                tr.step < sc.refine_stop_iter, tr.guard.cfg.explode_factor, bg is tr.background, tuple(bg.shape),
+                self.draws(tr.step))
 
-    def _capture(self, cam, capacity: int) -> bool:
+    def _capture(self, cam, bg, capacity: int) -> bool:
         """Records the step (a warm-up of its forward and backward on the graph's stream first, then the capture);
         False, with the graphs off for the run, when that fails."""
         tr = self.tr
@@ -128,20 +150,28 @@ class StepGraph:
         self.inputs = inp = {"viewmat": cam.viewmat.clone(), "K": cam.K.clone(), "image": cam.image.clone()}
         if cam.alpha is not None:
             inp["alpha"] = cam.alpha.clone()
+        if bg is not tr.background:  # a random colour or the far field's image: copied in before each replay
+            inp["bg"] = bg.clone()
+        self.background = inp.get("bg", tr.background)
         static = dataclasses.replace(cam, viewmat=inp["viewmat"], K=inp["K"], image=inp["image"],
                                      alpha=inp.get("alpha"), depth=None, mask=None)
+        draws = self.draws(tr.step)
         try:
             self.stream.wait_stream(torch.cuda.current_stream(tr.device))
+            drawn = tr.drop_gen.get_state()  # the warm-up's draws are given back: the replays draw what eager steps would
             with torch.cuda.stream(self.stream):  # the warm-up: lazy set-ups happen outside the capture
-                out, _, _ = tr.forward_backward(tr.step, static, tr.background, capacity)
+                out, _, _ = tr.forward_backward(tr.step, static, self.background, capacity)
                 means2d_grad_norm(out, static.width, static.height)  # its constant is made here, not in the capture
                 for opt in tr.optimizers:
                     opt.zero_grad(set_to_none=True)
                 del out
             torch.cuda.current_stream(tr.device).wait_stream(self.stream)
+            tr.drop_gen.set_state(drawn)
             # capture_begin / capture_end rather than torch.cuda.graph, whose entry collects Python's garbage and
             # empties the allocator's cache each time (tens of milliseconds a recording)
             graph = torch.cuda.CUDAGraph()
+            if draws:
+                graph.register_generator_state(tr.drop_gen)
             with torch.cuda.stream(self.stream):
                 graph.capture_begin()
                 try:
@@ -157,7 +187,7 @@ class StepGraph:
             tr.log(f"warpgs: CUDA graphs off for this run (train.cuda_graph): recording the step failed: {self.off}")
             return False
         self.graph, self.capacity = graph, capacity
-        self.key = self._key(cam)  # as it is now: the warm-up may have grown the backward's zeros
+        self.key = self._key(cam, bg)  # as it is now: the warm-up may have grown the backward's zeros
         self.captures += 1
         return True
 
@@ -166,7 +196,7 @@ class StepGraph:
         the densification statistics of ``densify``, which does no more at a covered step); returns its record."""
         tr = self.tr
         step = tr.step
-        out, loss, inputs = tr.forward_backward(step, cam, tr.background, capacity)
+        out, loss, inputs = tr.forward_backward(step, cam, self.background, capacity)
         record, apply = tr.update_on_device(None, loss, inputs)
         # a step without its update is one in which no Gaussian was seen, for the densification statistics
         tr.densify(tr.strategy, tr.model, tr.optimizer, tr.state, step, out._replace(radii=out.radii * apply), cam,

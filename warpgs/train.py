@@ -403,6 +403,7 @@ class Trainer:
         self.drop_rate = cfg.train.drop_rate  # the full method may set its own (full.drop_rate)
         if not 0.0 <= self.drop_rate < 1.0:
             raise ValueError(f"train.drop_rate must be in [0, 1), got {self.drop_rate}")
+        self._drop_t = (torch.zeros((), device=self.device), torch.zeros((), device=self.device))  # drop_rate_tensors
         if not 0.0 <= cfg.train.opacity_noise <= 1.0:  # a factor 1 + eps with |eps| <= sigma stays >= 0
             raise ValueError(f"train.opacity_noise must be in [0, 1], got {cfg.train.opacity_noise}")
         self.clearance = None  # train.path_clearance: the camera path's free space (warpgs/clearance.py)
@@ -673,17 +674,32 @@ class Trainer:
             info["pruned_unseen"] = s.prune_unseen(model, optimizer, state, self.train_cams, self.background)
         return info
 
+    def drop_rate_at(self, step: int) -> float:
+        """DropGaussian's rate at ``step``: ``train.drop_rate`` x step / iterations."""
+        return self.drop_rate * min(step / max(self.total_steps, 1), 1.0)
+
+    def drop_rate_tensors(self, step: int) -> tuple[torch.Tensor, torch.Tensor]:
+        """(rate, 1 - rate) at ``step`` as float32 scalars on the device, which the dropout reads, so that a CUDA
+        graph of the step (``warpgs.graphstep``) draws at each replay's rate: they are filled here, except while
+        a graph records (its replays read what ``StepGraph.step`` filled before each one)."""
+        if not (self.device.type == "cuda" and torch.cuda.is_current_stream_capturing()):
+            rate = self.drop_rate_at(step)
+            self._drop_t[0].fill_(rate)
+            self._drop_t[1].fill_(1.0 - rate)
+        return self._drop_t
+
     def dropout_scale(self, step: int, model: GaussianModel | None = None,
                       generator: torch.Generator | None = None) -> torch.Tensor | None:
         """DropGaussian's factors for one training render of ``model`` (default: the trainer's) at ``step``: 0
         for a Gaussian dropped at the rate ``train.drop_rate`` x step / iterations, 1 / (1 - rate) for the
-        others, drawn from ``generator`` (default: ``drop_gen``); None when off."""
-        rate = self.drop_rate * min(step / max(self.total_steps, 1), 1.0)
-        if rate <= 0:
+        others, drawn from ``generator`` (default: ``drop_gen``); None when off. The rate is read from the
+        device (``drop_rate_tensors``; in float32, as a Python number would be: the same factors)."""
+        if self.drop_rate_at(step) <= 0:
             return None
         n = len(model if model is not None else self.model)
+        rate, keep_fraction = self.drop_rate_tensors(step)
         keep = torch.rand(n, device=self.device, generator=generator or self.drop_gen) >= rate
-        return keep.float() / (1.0 - rate)
+        return keep.float() / keep_fraction
 
     def opacity_scale(self, step: int, model: GaussianModel | None = None,
                       generator: torch.Generator | None = None) -> torch.Tensor | None:
@@ -702,6 +718,15 @@ class Trainer:
         eps = torch.randn(len(model), device=self.device, generator=generator) * sigma
         noise = 1.0 + eps.clamp(-sigma, sigma)
         return noise if scale is None else scale * noise
+
+    def opacity_scale_bound(self, step: int) -> float | None:
+        """The largest factor ``opacity_scale`` can put on an opacity at ``step`` (None when it puts none): the
+        projection's screen box grows with the opacity, so counting tile intersections on opacities scaled by it
+        bounds what the step's render emits (a CUDA graph's fixed-capacity buffers, ``warpgs.graphstep``)."""
+        rate, sigma = self.drop_rate_at(step), self.cfg.train.opacity_noise
+        if rate <= 0 and sigma <= 0:
+            return None
+        return (1.0 + max(sigma, 0.0)) / (1.0 - max(rate, 0.0)) * (1.0 + 1e-5)
 
     def _skip(self, step: int, why: str) -> dict:
         """A step judged on the host that makes no update."""

@@ -1,0 +1,57 @@
+#!/usr/bin/env bash
+# GPU runs of session 19 (issue 15), after the packed wheels are installed in /tmp/site and the scenes copied to $D.
+#   T=seconds bash bench/gpu_session19.sh PHASE D RUNS
+# g: the CUDA tests of the rasterizer and the optimiser, then bench/graph_check.py bit for bit with and without the
+#    graphs: plain fern; fern with dropout and opacity noise (their draws inside the graph); castle_p30 9 views with
+#    the far field and dropout (the captures' default); lego 8 views with dropout and a random background.
+# r: bench/rasterizer.py with interleaved rounds: the three random configurations (the first again at the end), then
+#    fern's baseline trained (3 views, 3000 it, frustum start) and its Gaussians at 1x, 2x and 3x the test view.
+# u: bench/suite.py's full preset (the speed-against-accuracy charts) with this code.
+# s: bench/train_speed.py with DropGaussian on (the LLFF default): the trainer with and without graphs, gsplat.
+set -u
+P=$1; D=$2; R=$3; shift 3; mkdir -p "$R" "$OUT"
+export PYTHONPATH=/tmp/site:$PWD PYTHONUNBUFFERED=1 OMP_NUM_THREADS=1 MKL_NUM_THREADS=1
+export MAX_JOBS=16 TORCH_CUDA_ARCH_LIST=9.0 WARPGS_TEST_DEVICES=cuda
+gc() {  # name, then graph_check's arguments
+  local n=$1; shift
+  timeout ${T:-200} python3 bench/graph_check.py --data-root "$D" --iterations ${ITERS:-1000} --out "$OUT/graph_check_$n.json" "$@" \
+    2>&1 | grep -v "^Module\|^Warp" > "$OUT/graph_check_$n.log"
+  echo "== $n"; grep -E "^(eager|graph|graph_again) |CUDA graphs off|Error|error" "$OUT/graph_check_$n.log" | cut -c1-400
+  python3 -c "import json,sys; t=json.load(open(sys.argv[1]))['trainer']; print({k: (t[k].get('params_bit_equal'), t[k].get('losses_equal')) for k in ('graph','graph_again')}, 'speedup', t['speedup'])" "$OUT/graph_check_$n.json" 2>&1 | tail -1
+}
+case $P in
+g)
+  timeout ${T:-200} python3 -m pytest -q -x tests/test_rasterizer.py tests/test_sync.py -k "cuda or adam or masked or capacity" \
+    2>&1 | tail -3 | tee "$OUT/tests_cuda.log"
+  gc plain
+  gc drop_noise --set train.drop_rate=0.2 --set train.opacity_noise=0.8
+  gc castle_ff --data dl3dv --scene castle_p30 --views 9 --set train.far_field=elevation --set train.drop_rate=0.2
+  gc lego_rb --data blender --scene lego --views 8 --set train.drop_rate=0.2
+  ;;
+r)
+  python3 -m pip install -q --no-index --no-deps --target /tmp/site .device/gsplat/*.whl 2>/dev/null
+  timeout ${T:-300} python3 bench/rasterizer.py --warmup 10 --iters 20 --rounds 7 --out "$OUT/rasterizer_cuda.json" \
+    --configs 138766x648x420,256000x1280x720,1000000x1920x1080,138766x648x420 2>&1 \
+    | tee "$OUT/rasterizer.log" | grep -E "Gaussians|ratio|wrote"
+  [ -f "$R/fern_base/point_cloud.ply" ] || python3 -m warpgs.pipelines.sparse --method baseline --data llff \
+    --data-root "$D" --iterations 3000 --set model.init=frustum --device cuda --no-progress --out "$R/fern_base" \
+    > "$OUT/fern_base.log" 2>&1
+  tail -2 "$OUT/fern_base.log"
+  timeout ${T:-300} python3 bench/rasterizer.py --ply "$R/fern_base/point_cloud.ply" --data llff --data-root "$D" \
+    --scales 1,2,3 --warmup 10 --iters 20 --rounds 7 --out "$OUT/rasterizer_cuda_trained.json" 2>&1 \
+    | tee "$OUT/rasterizer_trained.log" | grep -E "Gaussians|ratio|wrote"
+  ;;
+u)
+  timeout ${T:-560} python3 bench/suite.py --device cuda --data-root "$D" --preset full --jobs ${JOBS:-6} \
+    --out "$OUT/suite_cuda" --work "$R/suite" > "$OUT/suite.log" 2>&1; echo "suite rc=$?"
+  tail -30 "$OUT/suite.log" | cut -c1-300
+  ;;
+s)
+  python3 -m pip install -q --no-index --no-deps --target /tmp/site .device/gsplat/*.whl 2>/dev/null
+  timeout ${T:-560} python3 bench/train_speed.py --data-root "$D" --set model.init=frustum --set train.drop_rate=0.2 \
+    --repeats ${REPEATS:-1} --loops warpgs_trainer,warpgs_trainer_eager,plain_gsplat \
+    --out "$OUT/train_speed_drop_cuda.json" > "$OUT/train_speed_drop.log" 2>&1; echo "train_speed rc=$?"
+  tail -10 "$OUT/train_speed_drop.log"
+  ;;
+esac
+ls -la "$OUT"
