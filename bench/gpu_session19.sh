@@ -7,6 +7,8 @@
 # r: bench/rasterizer.py with interleaved rounds: the three random configurations (the first again at the end), then
 #    fern's baseline trained (3 views, 3000 it, frustum start) and its Gaussians at 1x, 2x and 3x the test view.
 # u: bench/suite.py's full preset (the speed-against-accuracy charts) with this code.
+# f: the full method on fern and DTU 65 (3 views, 3000 it), seed ${SEEDS:-0}: the default against one change at a time
+#    to what the captures' config does (no learning-rate restart, a growth budget, dropout); VARIANTS picks some.
 # s: bench/train_speed.py with DropGaussian on (the LLFF default): the trainer with and without graphs, gsplat.
 set -u
 P=$1; D=$2; R=$3; shift 3; mkdir -p "$R" "$OUT"
@@ -52,6 +54,21 @@ s)
     --repeats ${REPEATS:-1} --loops warpgs_trainer,warpgs_trainer_eager,plain_gsplat \
     --out "$OUT/train_speed_drop_cuda.json" > "$OUT/train_speed_drop.log" 2>&1; echo "train_speed rc=$?"
   tail -10 "$OUT/train_speed_drop.log"
+  ;;
+f)
+  declare -A V=([default]="" [norestart]="full.restart_lr=false" [budget]="full.restart_lr=false full.growth_budget=1.0"
+                [drop]="full.restart_lr=false full.drop_rate=0.2"
+                [captures]="full.restart_lr=false full.growth_budget=1.0 full.drop_rate=0.2")
+  for seed in ${SEEDS:-0}; do for scene in llff dtu; do for v in ${VARIANTS:-default norestart budget drop captures}; do
+    sets=(); for kv in ${V[$v]}; do sets+=(--set "$kv"); done
+    o="$R/f_${scene}_${v}_s$seed"
+    [ -f "$o/metrics.json" ] || timeout ${T:-560} python3 -m warpgs.pipelines.sparse --method full --data $scene \
+      --data-root "$D" --views 3 --iterations 3000 --seed $seed --device cuda --no-progress --out "$o" "${sets[@]}" \
+      > "$OUT/f_${scene}_${v}_s$seed.log" 2>&1 &
+  done; done; done; wait
+  for m in "$R"/f_*/metrics.json; do
+    python3 -c "import json,sys; d=json.load(open(sys.argv[1])); print(sys.argv[1].split('/')[-2], round(d['psnr'],3), d['num_gaussians'], round(d['train_time_s'],1), [round(c['psnr'],2) for c in d.get('curve',[])])" "$m"
+  done | tee "$OUT/full_variants.txt"
   ;;
 esac
 ls -la "$OUT"

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import json
 import time
 
 import numpy as np
@@ -186,6 +187,25 @@ def test_cache_reuse_and_refusal(tmp_path):
     with pytest.raises(SceneError, match="refusing"):
         ensure_synthetic(cfg, other, device="cpu")
     assert sorted(q.name for q in other.iterdir()) == ["precious.txt"]
+
+
+def test_a_parallel_runs_copy_is_kept_and_an_outdated_one_replaced(capture, tmp_path):
+    """Runs started together on a fresh machine each generate the default scene: whichever writes second must not
+    remove the copy the first put in place, which others may be reading (a suite of 8 runs on a GPU lost a depth
+    file that way); a cached scene of another version is replaced, and no temporary folder is left behind."""
+    out = write_dl3dv(capture, tmp_path / "scene")
+    depth = next((out / "depths").iterdir())
+    before = (depth.stat().st_ino, depth.stat().st_mtime_ns)
+    for overwrite in (False, True):  # as ensure_synthetic asks when the cache was empty / outdated at its check
+        assert write_dl3dv(capture, out, overwrite=overwrite) == out
+        assert (depth.stat().st_ino, depth.stat().st_mtime_ns) == before
+    stamp = json.loads((out / "synthetic.json").read_text())
+    (out / "synthetic.json").write_text(json.dumps({**stamp, "format_version": -1}))
+    with pytest.raises(SceneError, match="refusing"):
+        write_dl3dv(capture, out)
+    write_dl3dv(capture, out, overwrite=True)
+    assert json.loads((out / "synthetic.json").read_text()) == stamp
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["scene"]
 
 
 def test_street_has_sky(tmp_path):

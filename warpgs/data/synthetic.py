@@ -403,14 +403,16 @@ def write_dl3dv(capture: SyntheticCapture, out_dir: str | Path, overwrite: bool 
     from .scene import downsample
 
     out = Path(out_dir)
-    if out.exists():
-        if not overwrite:
-            raise SceneError(f"{out}: already exists; refusing to write a synthetic scene over it")
-        shutil.rmtree(out)
+    cfg = capture.config
+    stamp = {"format_version": FORMAT_VERSION, **asdict(cfg)}
+    if out.exists() and _stamp(out) == stamp:  # this very scene (a parallel run wrote it first)
+        return out
+    if out.exists() and not overwrite:
+        raise SceneError(f"{out}: already exists; refusing to write a synthetic scene over it")
     tmp = out.with_name(out.name + f".tmp{os.getpid()}")
     if tmp.exists():
         shutil.rmtree(tmp)
-    cfg, K = capture.config, capture.K
+    K = capture.K
     for sub in ("images", "images_2", "depths", "colmap/sparse/0"):
         (tmp / sub).mkdir(parents=True)
     frames = []
@@ -455,15 +457,34 @@ def write_dl3dv(capture: SyntheticCapture, out_dir: str | Path, overwrite: bool 
     xyz, rgb = sample_points(capture, cfg.num_points, np.random.default_rng([cfg.seed, 2]))
     pts = colmap_io.ColmapPoints(np.arange(1, len(xyz) + 1), xyz, _to_png(rgb), np.full(len(xyz), 0.5), np.zeros(len(xyz), np.int64))
     colmap_io.write_model(tmp / "colmap" / "sparse" / "0", cams, imgs, pts, binary=True)
-    (tmp / "synthetic.json").write_text(json.dumps({"format_version": FORMAT_VERSION, **asdict(cfg)}, indent=1))
+    (tmp / "synthetic.json").write_text(json.dumps(stamp, indent=1))
+    # parallel runs on a fresh machine each generate the scene: the first to finish puts its copy in place and
+    # the others keep it, and a copy some run may be reading is never removed (only an outdated one is replaced)
+    old = None
     try:
-        os.replace(tmp, out)
-    except OSError:
-        # another process (a parallel run) finished the same capture first: keep its copy
-        if not (out / "synthetic.json").is_file():
-            raise
+        if out.exists():
+            if _stamp(out) == stamp:
+                return out
+            old = out.with_name(out.name + f".old{os.getpid()}")
+            os.replace(out, old)
+        try:
+            os.replace(tmp, out)
+        except OSError:
+            if _stamp(out) != stamp:  # not a parallel run's copy of the same scene
+                raise
+        return out
+    finally:
         shutil.rmtree(tmp, ignore_errors=True)
-    return out
+        if old is not None:
+            shutil.rmtree(old, ignore_errors=True)
+
+
+def _stamp(folder: Path) -> dict | None:
+    """The ``synthetic.json`` of a scene folder warpgs wrote (None when there is none or it is unreadable)."""
+    try:
+        return json.loads((Path(folder) / "synthetic.json").read_text())
+    except (OSError, ValueError):
+        return None
 
 
 def sample_points(capture: SyntheticCapture, n: int, rng) -> tuple[np.ndarray, np.ndarray]:
@@ -494,20 +515,16 @@ def ensure_synthetic(config: SyntheticConfig | None = None, out_dir: str | Path 
     """The scene folder for ``config``, generating and writing it first unless a complete copy exists."""
     cfg = config or SyntheticConfig()
     out = Path(out_dir) if out_dir is not None else cache_dir() / "synthetic" / cfg.dirname()
-    stamp = out / "synthetic.json"
-    if stamp.is_file():
-        try:
-            saved = json.loads(stamp.read_text())
-        except Exception:
-            saved = None
-        if saved == {"format_version": FORMAT_VERSION, **asdict(cfg)}:
-            return out
-        if out_dir is not None:
-            raise SceneError(f"{out}: holds a different synthetic scene ({saved}); choose another folder")
-    elif out.exists() and any(out.iterdir()):
+    saved = _stamp(out)
+    if saved == {"format_version": FORMAT_VERSION, **asdict(cfg)}:
+        return out
+    if saved is not None and out_dir is not None:
+        raise SceneError(f"{out}: holds a different synthetic scene ({saved}); choose another folder")
+    if saved is None and out.exists() and any(out.iterdir()):
         raise SceneError(f"{out}: exists and is not a synthetic scene written by warpgs; refusing to write into it")
     out.parent.mkdir(parents=True, exist_ok=True)
-    return write_dl3dv(generate_capture(cfg, device), out, overwrite=out.exists())
+    # overwrite only an outdated scene of the cache; a copy of this one that a parallel run writes meanwhile is kept
+    return write_dl3dv(generate_capture(cfg, device), out, overwrite=saved is not None)
 
 
 def load_synthetic(

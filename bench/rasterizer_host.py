@@ -1,0 +1,69 @@
+"""Host-side cost of one rasterizer call on CUDA: warpgs against gsplat 1.5.3 at the smallest configuration of
+bench/rasterizer.py (138,766 random Gaussians at 648x420), where both are bound by the host.
+
+    python bench/rasterizer_host.py [--gaussians N --width W --height H] > host_profile.txt
+
+For each: the host's time per forward+backward over 100 calls issued without a sync, and the time until the GPU
+has finished them (equal when the GPU keeps up), then a cProfile of 200 calls (warpgs: by own time and by
+cumulative time; gsplat: by own time). Session 19's output: bench/results/s19/host_profile_138k.txt.
+"""
+
+from __future__ import annotations
+
+import argparse
+import cProfile
+import io
+import pstats
+import sys
+import time
+from pathlib import Path
+
+import torch
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "tests"))
+
+from bench.rasterizer import grad_inputs, gsplat_fn, make_inputs, warpgs_fn  # noqa: E402
+
+
+def main(argv=None) -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--gaussians", type=int, default=138_766)
+    ap.add_argument("--width", type=int, default=648)
+    ap.add_argument("--height", type=int, default=420)
+    args = ap.parse_args(argv)
+    n, W, H = args.gaussians, args.width, args.height
+    inp = make_inputs(n, W, H, "cuda")
+    for name, fn in (("warpgs", warpgs_fn(inp, W, H, 0.999)), ("gsplat", gsplat_fn(inp, W, H))):
+        p, w = grad_inputs(inp), inp["w_img"]
+
+        def fb():
+            img = fn(p)
+            (img * w).sum().backward()
+
+        for _ in range(30):
+            fb()
+        torch.cuda.synchronize()
+        t = time.perf_counter()
+        for _ in range(100):
+            fb()
+        host = (time.perf_counter() - t) * 10
+        torch.cuda.synchronize()
+        total = (time.perf_counter() - t) * 10
+        print(f"{name}: host {host:.3f} ms/call, to the end {total:.3f} ms/call", flush=True)
+        prof = cProfile.Profile()
+        prof.enable()
+        for _ in range(200):
+            fb()
+        torch.cuda.synchronize()
+        prof.disable()
+        orders = ("tottime", "cumulative") if name == "warpgs" else ("tottime",)
+        for order in orders:
+            s = io.StringIO()
+            pstats.Stats(prof, stream=s).sort_stats(order).print_stats(30 if order == "tottime" else 35)
+            print(s.getvalue()[-9000:])
+
+
+if __name__ == "__main__":
+    main()
