@@ -9,6 +9,8 @@
 # u: bench/suite.py's full preset (the speed-against-accuracy charts) with this code.
 # f: the full method on fern and DTU 65 (3 views, 3000 it), seed ${SEEDS:-0}: the default against one change at a time
 #    to what the captures' config does (no learning-rate restart, a growth budget, dropout); VARIANTS picks some.
+# e: the shipped defaults end to end with and without the graphs (train.cuda_graph): castle_p30 9 views (images_8,
+#    3000 it; SfM start, far field, path clearance, dropout) baseline and full, fern 3 views baseline: same metrics?
 # s: bench/train_speed.py with DropGaussian on (the LLFF default): the trainer with and without graphs, gsplat.
 set -u
 P=$1; D=$2; R=$3; shift 3; mkdir -p "$R" "$OUT"
@@ -54,6 +56,21 @@ s)
     --repeats ${REPEATS:-1} --loops warpgs_trainer,warpgs_trainer_eager,plain_gsplat \
     --out "$OUT/train_speed_drop_cuda.json" > "$OUT/train_speed_drop.log" 2>&1; echo "train_speed rc=$?"
   tail -10 "$OUT/train_speed_drop.log"
+  ;;
+e)
+  for g in true false; do
+    python3 -m warpgs.pipelines.sparse --method baseline --data dl3dv --scene castle_p30 --data-root "$D" --views 9 \
+      --downscale 8 --iterations 3000 --device cuda --no-progress --set train.cuda_graph=$g --out "$R/e_c9_base_$g" \
+      > "$OUT/e_c9_base_$g.log" 2>&1 &
+    python3 -m warpgs.pipelines.sparse --method full --data dl3dv --scene castle_p30 --data-root "$D" --views 9 \
+      --downscale 8 --iterations 3000 --device cuda --no-progress --set train.cuda_graph=$g --out "$R/e_c9_full_$g" \
+      > "$OUT/e_c9_full_$g.log" 2>&1 &
+    python3 -m warpgs.pipelines.sparse --method baseline --data llff --data-root "$D" --views 3 --iterations 3000 \
+      --device cuda --no-progress --set train.cuda_graph=$g --out "$R/e_fern_base_$g" > "$OUT/e_fern_base_$g.log" 2>&1 &
+  done; wait
+  for m in "$R"/e_*/metrics.json; do
+    python3 -c "import json,sys; d=json.load(open(sys.argv[1])); print(sys.argv[1].split('/')[-2], repr(d['psnr']), d['num_gaussians'], round(d['train_time_s'],1))" "$m"
+  done | tee "$OUT/defaults_graph_vs_eager.txt"
   ;;
 f)
   declare -A V=([default]="" [norestart]="full.restart_lr=false" [budget]="full.restart_lr=false full.growth_budget=1.0"
