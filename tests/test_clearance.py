@@ -93,3 +93,71 @@ def test_view_clearance_removes_what_is_close_in_front_of_a_pose_of_the_path():
     assert clear.inside(pts).tolist() == [True, False, False, False, False]  # radius 0: the view clearance only
     # off without a depth, and the tube alone then decides
     assert not PathClearance.build(V, 0.0, order="capture", K=K, size=(100, 80)).inside(pts).any()
+
+
+def _model(means, scale, opacity=0.9):
+    from warpgs.model import GaussianModel
+
+    n = len(means)
+    quats = torch.zeros(n, 4)
+    quats[:, 0] = 1.0
+    logit = float(np.log(opacity / (1 - opacity)))
+    return GaussianModel(torch.as_tensor(means, dtype=torch.float32), quats, torch.full((n, 3), float(np.log(scale))),
+                         torch.full((n,), logit), torch.zeros(n, 1, 3), torch.zeros(n, 0, 3), max_sh_degree=0)
+
+
+@pytest.mark.skipif("cpu" not in DEVICES, reason="renders on the CPU")
+def test_path_floaters_are_what_a_pose_of_the_path_sees_and_no_input_does():
+    """Three inputs at x = 0, 2, 4 look at a wall 10 m ahead; a small Gaussian 0.8 m in front of the path at x = 1
+    is 51 degrees off every input's axis (outside their 53-degree field of view, its screen box too) and straight
+    ahead of the pose halfway between the first two: it alone is found, the wall (seen by inputs and path alike) is not, and a
+    Gaussian the inputs see as much as the path does is not either."""
+    from types import SimpleNamespace
+
+    from warpgs.clearance import PathFloaters
+
+    xs = (0.0, 2.0, 4.0)
+    V = np.stack([look_at_viewmat((x, 0.0, 0.0), (x, 0.0, 10.0)) for x in xs])
+    K = np.array([[50.0, 0, 25], [0, 50.0, 20], [0, 0, 1]], np.float32)
+    wall = [(x, y, 10.0) for x in np.arange(-4.0, 8.5, 1.0) for y in np.arange(-4.0, 4.5, 1.0)]
+    floater = (1.0, 0.0, 0.8)
+    seen = (1.0, 0.0, 3.0)  # between the first two inputs, 3 m ahead: in all three views
+    model = _model(wall + [floater, seen], scale=0.4)
+    with torch.no_grad():  # the floater small enough that its screen box (3.33 sigma) stays off the inputs' images
+        model.params["scales"][len(wall)] = float(np.log(0.1))
+    inputs = [SimpleNamespace(viewmat=torch.as_tensor(v), K=torch.as_tensor(K), width=50, height=40) for v in V]
+    finder = PathFloaters.build(V, K, (50, 40), ratio=10.0, per_pair=3, order="capture")
+    assert len(finder.poses) == 2 * 3
+    found = finder.find(model, inputs)
+    assert found.tolist() == [False] * len(wall) + [True, False]
+    # the same Gaussian in sight of an input is constrained: nothing is found
+    V2 = np.concatenate([V, look_at_viewmat((1.0, 0.0, -0.5), (1.0, 0.0, 10.0))[None]])
+    inputs2 = inputs + [SimpleNamespace(viewmat=torch.as_tensor(V2[-1]), K=torch.as_tensor(K), width=50, height=40)]
+    assert not finder.find(model, inputs2).any()
+
+
+@pytest.mark.skipif("cpu" not in DEVICES, reason="trains on the CPU (the GPU machine's packed Warp has no CPU compiler)")
+def test_trainer_removes_the_path_floaters_on_its_schedule(tmp_path):
+    from tiny_scene import make_scene, tiny_config
+    from warpgs.clearance import PathFloaters
+    from warpgs.pipelines.full import append_gaussians
+    from warpgs.train import Trainer
+
+    scene = make_scene()
+    V = np.stack([c.viewmat for c in scene.train])
+    counts = {}
+    for ratio in (0.0, 10.0):
+        cfg = tiny_config(21, str(tmp_path / "none.pth"), path_floaters=ratio, path_floaters_every=20)
+        tr = Trainer(cfg, scene)
+        assert (tr.floaters is None) == (ratio == 0)
+        # opaque Gaussians just in front of the poses between neighbouring inputs, 0.3 x the near depth ahead
+        probe = PathFloaters.build(V, scene.train[0].K, (48, 48), 10.0, per_pair=3, order=cfg.pseudo.trajectory.order)
+        c2w = torch.linalg.inv(probe.poses)
+        planted = c2w[:, :3, 3] + 0.3 * float(scene.bounds[0]) * c2w[:, :3, 2]
+        append_gaussians(tr, planted, torch.full((len(planted), 3), 0.1), torch.full((len(planted), 3), 0.05), 0.9)
+        assert not tr.densify_only_updates_state(20) or ratio == 0
+        tr.train(21)  # the floaters' step is 20
+        d = torch.cdist(tr.model.means.detach(), planted).min(0).values
+        counts[ratio] = int((d < 0.02).sum())  # (Adam moves them a little in 21 steps)
+    assert counts[0.0] == len(planted)  # nothing removes them when it is off
+    assert counts[10.0] == 0

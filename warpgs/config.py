@@ -125,6 +125,13 @@ class TrainConfig:
     view_clearance: float = 0.0  # > 0: with the path clearance's schedule, also remove the Gaussians nearer than
     #   this x the near depth in front of any pose of the camera path (the inputs and the poses between them),
     #   inside its image (warpgs/clearance.py); 0: off
+    path_floaters: float = 0.0  # > 0: every path_floaters_every steps, remove the Gaussians that a pose of the camera
+    #   path between neighbouring inputs sees with more than this x their blending weight in all the inputs
+    #   together (and with at least 0.1% of that pose's weight): floaters no input constrains, in front of novel
+    #   views taken from the path (warpgs/clearance.py ``PathFloaters``; bench/floaters.py's test, which used 10
+    #   with the test views); 0: off
+    path_floaters_every: int = 500
+    path_floaters_poses: int = 3  # poses of the path between each pair of neighbouring inputs
     alpha_binary: float = 0.0  # weight of mean(alpha (1 - alpha)) over each input render: every pixel either
     #   covered by Gaussians or showing what is behind them (with a far field, no translucent cover that a novel
     #   view sees at another angle); 0: off
@@ -165,9 +172,9 @@ class TrainConfig:
     #   waits for the device); in between, a step with a non-finite or exploding loss skips its update on the
     #   device and a divergence is acted on at the next read, up to this many steps late. The progress bar's
     #   loss and PSNR are read at the same steps. None: 10 on CUDA, 1 (every step) on the CPU
-    cuda_graph: bool = True  # CUDA: a deferred step that holds nothing a graph cannot (no densification at that
-    #   step, no random draws, no Pearson depth term, no co-regularised pair or far field, the baseline's loss) is
-    #   recorded once as a CUDA graph and replayed (warpgs/graphstep.py): the same numbers, a fraction of the host
+    cuda_graph: bool = True  # CUDA: a deferred step that holds nothing a graph cannot (no densification or
+    #   pruning at that step, no Pearson depth term, no co-regularised pair, the baseline's loss; dropout, opacity
+    #   noise, a random background and the far field are held) is recorded once as a CUDA graph and replayed (warpgs/graphstep.py): the same numbers, a fraction of the host
     #   time; false: every step launches its kernels one by one
     progress: bool = True
 
@@ -176,7 +183,7 @@ class TrainConfig:
               "scale_reg": ">= 0", "scale_reg_ratio": ">= 1", "max_nan_steps": ">= 1",
               "explode_factor": ">= 0", "explode_window": ">= 1", "explode_patience": ">= 1", "snapshot_every": ">= 0",
               "max_recoveries": ">= 0", "recovery_lr_factor": "(0, 1]", "cpu_threads": ">= 0", "sync_every": ">= 1",
-              "far_field": FAR_FIELD_RULE, "far_field_bins": ">= 1", "alpha_binary": ">= 0", "path_clearance": ">= 0", "view_clearance": ">= 0", "co_prune_every": ">= 0", "co_prune_dist": "> 0",
+              "far_field": FAR_FIELD_RULE, "far_field_bins": ">= 1", "alpha_binary": ">= 0", "path_clearance": ">= 0", "view_clearance": ">= 0", "path_floaters": ">= 0", "path_floaters_every": ">= 1", "path_floaters_poses": ">= 1", "co_prune_every": ">= 0", "co_prune_dist": "> 0",
               "co_reg_weight": ">= 0", "co_reg_start": ">= 0", "co_reg_frames": ">= 1"}
 
 

@@ -416,6 +416,14 @@ class Trainer:
                 np.stack([c.viewmat for c in scene.train]), cfg.train.path_clearance * float(scene.bounds[0]),
                 order=cfg.pseudo.trajectory.order, geometry=None if geo is None else geo.xyz, device=self.device,
                 K=c0.K, size=(c0.width, c0.height), view_depth=cfg.train.view_clearance * float(scene.bounds[0]))
+        self.floaters = None  # train.path_floaters: what poses of the camera path see and no input does
+        if cfg.train.path_floaters > 0 and len(scene.train) >= 2:
+            from warpgs.clearance import PathFloaters
+
+            c0 = scene.train[0]
+            self.floaters = PathFloaters.build(
+                np.stack([c.viewmat for c in scene.train]), c0.K, (c0.width, c0.height), cfg.train.path_floaters,
+                per_pair=cfg.train.path_floaters_poses, order=cfg.pseudo.trajectory.order, device=self.device)
         self.view_rng = np.random.default_rng(seed + 2)
         self.order: list[int] = []
         self.optimizer = make_optimizer(self.model, cfg, self.scene_scale)
@@ -651,7 +659,12 @@ class Trainer:
         s = self.strategy
         only = getattr(s, "only_updates_state", None)
         return (only is not None and only(step)
-                and not (self.clearance is not None and step % s.refine_every == 0))
+                and not (self.clearance is not None and step % s.refine_every == 0)
+                and not self._floaters_due(step))
+
+    def _floaters_due(self, step: int) -> bool:
+        """Whether ``densify`` at ``step`` removes the camera path's floaters (``train.path_floaters``)."""
+        return self.floaters is not None and step > 0 and step % self.cfg.train.path_floaters_every == 0
 
     def densify(self, strategy, model: GaussianModel, optimizer, state: dict, step: int, out, cam,
                 generator: torch.Generator) -> dict:
@@ -668,6 +681,16 @@ class Trainer:
 
                 remove(model, optimizer, state, on_path)
                 info["pruned_on_path"] = n
+        if self._floaters_due(step) and model is self.model:
+            found = self.floaters.find(model, self.train_cams, self.background)
+            n = int(found.sum())
+            if 0 < n < len(model):
+                from warpgs.strategy import remove
+
+                remove(model, optimizer, state, found)
+                info["pruned_floaters"] = n
+                self.log(f"warpgs: step {step}: {n} Gaussians removed that poses of the camera path see and no "
+                         f"input does (train.path_floaters)")
         if (s.prune_unseen_when_full and s.max_gaussians > 0 and (info["cloned"] or info["split"] or info["pruned"])
                 and len(model) >= s.max_gaussians):
             # the budget is spent: free what the training views do not use, so growth can go on where it helps
