@@ -11,6 +11,8 @@
 #    to what the captures' config does (no learning-rate restart, a growth budget, dropout); VARIANTS picks some.
 # e: the shipped defaults end to end with and without the graphs (train.cuda_graph): castle_p30 9 views (images_8,
 #    3000 it; SfM start, far field, path clearance, dropout) baseline and full, fern 3 views baseline: same metrics?
+# p: train.path_floaters (RATIO, default 10) against the default on the captures at 384x256, 3000 it, seeds 0-2,
+#    baseline and full (CASES, default castle_p30:9 castle_p30:6 herz_jesus_p25:9): 36 runs, JOBS at a time.
 # s: bench/train_speed.py with DropGaussian on (the LLFF default): the trainer with and without graphs, gsplat.
 set -u
 P=$1; D=$2; R=$3; shift 3; mkdir -p "$R" "$OUT"
@@ -71,6 +73,21 @@ e)
   for m in "$R"/e_*/metrics.json; do
     python3 -c "import json,sys; d=json.load(open(sys.argv[1])); print(sys.argv[1].split('/')[-2], repr(d['psnr']), d['num_gaussians'], round(d['train_time_s'],1))" "$m"
   done | tee "$OUT/defaults_graph_vs_eager.txt"
+  ;;
+p)
+  run_one() {  # scene views method seed ratio
+    local o="$R/p_$1_$2v_$3_s$4_r$5"
+    [ -f "$o/metrics.json" ] || timeout ${T:-560} python3 -m warpgs.pipelines.sparse --method $3 --data dl3dv --scene $1 \
+      --data-root "$D" --views $2 --downscale 8 --iterations 3000 --seed $4 --device cuda --no-progress \
+      --set train.path_floaters=$5 --out "$o" > "$o.log" 2>&1
+  }
+  export -f run_one; export R D T
+  for c in ${CASES:-castle_p30:9 castle_p30:6 herz_jesus_p25:9}; do for m in baseline full; do for s in 0 1 2; do
+    for r in 0 ${RATIO:-10}; do echo "${c%%:*} ${c##*:} $m $s $r"; done; done; done; done \
+    | xargs -P ${JOBS:-12} -L 1 bash -c 'run_one "$@"' _
+  for m in "$R"/p_*/metrics.json; do
+    python3 -c "import json,sys; d=json.load(open(sys.argv[1])); print(sys.argv[1].split('/')[-2], round(d['psnr'],3), d['num_gaussians'])" "$m"
+  done | sort | tee "$OUT/path_floaters.txt"
   ;;
 f)
   declare -A V=([default]="" [norestart]="full.restart_lr=false" [budget]="full.restart_lr=false full.growth_budget=1.0"
