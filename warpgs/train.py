@@ -682,15 +682,7 @@ class Trainer:
                 remove(model, optimizer, state, on_path)
                 info["pruned_on_path"] = n
         if self._floaters_due(step) and model is self.model:
-            found = self.floaters.find(model, self.train_cams, self.background)
-            n = int(found.sum())
-            if 0 < n < len(model):
-                from warpgs.strategy import remove
-
-                remove(model, optimizer, state, found)
-                info["pruned_floaters"] = n
-                self.log(f"warpgs: step {step}: {n} Gaussians removed that poses of the camera path see and no "
-                         f"input does (train.path_floaters)")
+            info["pruned_floaters"] = self.remove_path_floaters(step)
         if (s.prune_unseen_when_full and s.max_gaussians > 0 and (info["cloned"] or info["split"] or info["pruned"])
                 and len(model) >= s.max_gaussians):
             # the budget is spent: free what the training views do not use, so growth can go on where it helps
@@ -1275,6 +1267,23 @@ class Trainer:
                               lpips_weights=self.cfg.eval.lpips_weights, device=self.device, save_dir=save_dir,
                               lpips=lpips)
 
+    def remove_path_floaters(self, step: int) -> int:
+        """``train.path_floaters``: removes the Gaussians that poses of the camera path see and no input does
+        (``warpgs.clearance.PathFloaters``); returns how many. Runs on its schedule in ``densify`` and once more
+        before the final evaluation."""
+        if self.floaters is None:
+            return 0
+        found = self.floaters.find(self.model, self.train_cams, self.background)
+        n = int(found.sum())
+        if not 0 < n < len(self.model):
+            return 0
+        from warpgs.strategy import remove
+
+        remove(self.model, self.optimizer, self.state, found)
+        self.log(f"warpgs: step {step}: {n} Gaussians removed that poses of the camera path see and no input does "
+                 f"(train.path_floaters)")
+        return n
+
     def prune_unseen(self) -> int:
         """The final pruning (``train.prune_unseen_at_end``): drops what no training view uses."""
         if self.n_before_compaction is None:
@@ -1289,6 +1298,7 @@ class Trainer:
         checkpoint, metrics.json, then the method's records and outputs (``baseline``: the baseline run's
         metrics, for its report)."""
         out = self.out
+        self.remove_path_floaters(self.step)
         if self.cfg.train.prune_unseen_at_end:
             removed = self.prune_unseen()
             if removed:
