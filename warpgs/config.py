@@ -128,8 +128,8 @@ class TrainConfig:
     path_floaters: float = 0.0  # > 0: every path_floaters_every steps and before the final evaluation, remove
     #   the Gaussians that a pose of the camera path between neighbouring inputs sees with more than this x
     #   their blending weight in all the inputs together (and with at least 0.1% of that pose's weight):
-    #   floaters no input constrains, in front of novel views taken from the path (warpgs/clearance.py ``PathFloaters``; bench/floaters.py's test, which used 10
-    #   with the test views); 0: off
+    #   floaters no input constrains, in front of novel views taken from the path (warpgs/clearance.py
+    #   ``PathFloaters``; bench/floaters.py's test, which used 10 with the test views); 0: off
     path_floaters_every: int = 500
     path_floaters_poses: int = 3  # poses of the path between each pair of neighbouring inputs
     alpha_binary: float = 0.0  # weight of mean(alpha (1 - alpha)) over each input render: every pixel either
