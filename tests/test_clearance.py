@@ -161,11 +161,14 @@ def test_trainer_removes_the_path_floaters_on_its_schedule(tmp_path):
         counts[ratio] = int((d < 0.02).sum())  # (Adam moves them a little in 21 steps)
     assert counts[0.0] == len(planted)  # nothing removes them when it is off
     assert counts[10.0] == 0
-    # off the schedule (none due in 21 steps), the pass before the final evaluation removes them
-    cfg = tiny_config(21, str(tmp_path / "none.pth"), path_floaters=10.0, path_floaters_every=1000)
-    tr = Trainer(cfg, scene, out_dir=tmp_path / "final")
-    append_gaussians(tr, planted, torch.full((len(planted), 3), 0.1), torch.full((len(planted), 3), 0.05), 0.9)
-    tr.train(21)
-    assert int((torch.cdist(tr.model.means.detach(), planted).min(0).values < 0.02).sum()) == len(planted)
-    tr.finish()
-    assert int((torch.cdist(tr.model.means.detach(), planted).min(0).values < 0.02).sum()) == 0
+    # off the schedule (none due in 21 steps), the pass before the final evaluation removes them, unless it is off
+    for final in (True, False):
+        cfg = tiny_config(21, str(tmp_path / "none.pth"), path_floaters=10.0, path_floaters_every=1000,
+                          path_floaters_final=final)
+        tr = Trainer(cfg, scene, out_dir=tmp_path / f"final_{final}")
+        append_gaussians(tr, planted, torch.full((len(planted), 3), 0.1), torch.full((len(planted), 3), 0.05), 0.9)
+        tr.train(21)
+        assert int((torch.cdist(tr.model.means.detach(), planted).min(0).values < 0.02).sum()) == len(planted)
+        tr.finish()
+        left = int((torch.cdist(tr.model.means.detach(), planted).min(0).values < 0.02).sum())
+        assert left == (0 if final else len(planted))

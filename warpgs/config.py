@@ -131,6 +131,7 @@ class TrainConfig:
     #   floaters no input constrains, in front of novel views taken from the path (warpgs/clearance.py
     #   ``PathFloaters``; bench/floaters.py's test, which used 10 with the test views); 0: off
     path_floaters_every: int = 500
+    path_floaters_final: bool = True  # also the pass before the final evaluation (no training after it)
     path_floaters_poses: int = 3  # poses of the path between each pair of neighbouring inputs
     alpha_binary: float = 0.0  # weight of mean(alpha (1 - alpha)) over each input render: every pixel either
     #   covered by Gaussians or showing what is behind them (with a far field, no translucent cover that a novel

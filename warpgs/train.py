@@ -1298,7 +1298,8 @@ class Trainer:
         checkpoint, metrics.json, then the method's records and outputs (``baseline``: the baseline run's
         metrics, for its report)."""
         out = self.out
-        self.remove_path_floaters(self.step)
+        if self.cfg.train.path_floaters_final:
+            self.remove_path_floaters(self.step)
         if self.cfg.train.prune_unseen_at_end:
             removed = self.prune_unseen()
             if removed:
