@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Sourced by the GPU session scripts (bench/gpu_session14.sh, gpu_session15.sh): one capture run.
+# Sourced by the GPU session scripts (bench/gpu_session14.sh to gpu_session19.sh). one: one capture run.
 #   one NAME METHOD SCENE VIEWS SEED [--set k=v ...]
 # Runs python -m warpgs.pipelines.sparse on the DL3DV-layout scene SCENE under $D into $R/NAME (log: $R/NAME.log),
 # at --downscale ${DS:-8} for ${IT:-3000} iterations, 10 evaluations; skipped when NAME has its metrics, resumed
@@ -17,3 +17,21 @@ one() {
   echo "$name rc=$? $(grep -h 'test: PSNR' "$R/$name.log" | tail -1)"
 }
 export -f one
+
+# rasterizer_runs [bench/rasterizer.py timing arguments ...] (bench/gpu_session18.sh, gpu_session19.sh phase r):
+# gsplat installed from .device/gsplat, then bench/rasterizer.py on the three random configurations (the first again
+# at the end), fern's baseline trained into $R/fern_base unless it is there (3 views, 3000 it, frustum start), and
+# bench/rasterizer.py on its Gaussians at 1x, 2x and 3x the test view; JSON and logs in $OUT.
+rasterizer_runs() {
+  python3 -m pip install -q --no-index --no-deps --target /tmp/site .device/gsplat/*.whl 2>/dev/null
+  timeout ${T:-300} python3 bench/rasterizer.py "$@" --out "$OUT/rasterizer_cuda.json" \
+    --configs 138766x648x420,256000x1280x720,1000000x1920x1080,138766x648x420 2>&1 \
+    | tee "$OUT/rasterizer.log" | grep -E "Gaussians|ratio|wrote"
+  [ -f "$R/fern_base/point_cloud.ply" ] || python3 -m warpgs.pipelines.sparse --method baseline --data llff \
+    --data-root "$D" --iterations 3000 --set model.init=frustum --device cuda --no-progress --out "$R/fern_base" \
+    > "$OUT/fern_base.log" 2>&1
+  tail -2 "$OUT/fern_base.log"
+  timeout ${T:-300} python3 bench/rasterizer.py --ply "$R/fern_base/point_cloud.ply" --data llff --data-root "$D" \
+    --scales 1,2,3 "$@" --out "$OUT/rasterizer_cuda_trained.json" 2>&1 \
+    | tee "$OUT/rasterizer_trained.log" | grep -E "Gaussians|ratio|wrote"
+}

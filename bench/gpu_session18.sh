@@ -13,6 +13,7 @@ set -u
 P=$1; D=$2; R=$3; shift 3; mkdir -p "$R" "$OUT"
 export PYTHONPATH=/tmp/site:$PWD PYTHONUNBUFFERED=1 OMP_NUM_THREADS=1 MKL_NUM_THREADS=1
 export MAX_JOBS=16 TORCH_CUDA_ARCH_LIST=9.0 WARPGS_TEST_DEVICES=cuda
+source "$(dirname "${BASH_SOURCE[0]}")/gpu_one.sh"
 case $P in
 g)
   timeout ${T:-200} python3 -m pytest -q -x tests/test_rasterizer.py tests/test_sync.py -k "cuda or adam or masked or capacity" \
@@ -21,17 +22,7 @@ g)
     --out "$OUT/graph_check_cuda.json" 2>&1 | grep -v "^Module\|^Warp" | tee "$OUT/graph_check.log" | tail -40
   ;;
 r)
-  python3 -m pip install -q --no-index --no-deps --target /tmp/site .device/gsplat/*.whl 2>/dev/null
-  timeout ${T:-300} python3 bench/rasterizer.py --warmup 20 --iters 50 --out "$OUT/rasterizer_cuda.json" \
-    --configs 138766x648x420,256000x1280x720,1000000x1920x1080,138766x648x420 2>&1 \
-    | tee "$OUT/rasterizer.log" | grep -E "Gaussians|ratio|wrote"
-  [ -f "$R/fern_base/point_cloud.ply" ] || python3 -m warpgs.pipelines.sparse --method baseline --data llff \
-    --data-root "$D" --iterations 3000 --set model.init=frustum --device cuda --no-progress --out "$R/fern_base" \
-    > "$OUT/fern_base.log" 2>&1
-  tail -2 "$OUT/fern_base.log"
-  timeout ${T:-300} python3 bench/rasterizer.py --ply "$R/fern_base/point_cloud.ply" --data llff --data-root "$D" \
-    --scales 1,2,3 --warmup 20 --iters 50 --out "$OUT/rasterizer_cuda_trained.json" 2>&1 \
-    | tee "$OUT/rasterizer_trained.log" | grep -E "Gaussians|ratio|wrote"
+  rasterizer_runs --warmup 20 --iters 50
   ;;
 s)
   python3 -m pip install -q --no-index --no-deps --target /tmp/site .device/gsplat/*.whl 2>/dev/null

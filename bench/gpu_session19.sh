@@ -12,12 +12,14 @@
 # e: the shipped defaults end to end with and without the graphs (train.cuda_graph): castle_p30 9 views (images_8,
 #    3000 it; SfM start, far field, path clearance, dropout) baseline and full, fern 3 views baseline: same metrics?
 # p: train.path_floaters (RATIO, default 10) against the default on the captures at 384x256, 3000 it, seeds 0-2,
-#    baseline and full (CASES, default castle_p30:9 castle_p30:6 herz_jesus_p25:9): 36 runs, JOBS at a time.
+#    baseline and full (CASES, default castle_p30:9 castle_p30:6 herz_jesus_p25:9): 36 runs of bench/gpu_one.sh's one
+#    (10 evaluations each, resumed when a call ran out of time), JOBS at a time.
 # s: bench/train_speed.py with DropGaussian on (the LLFF default): the trainer with and without graphs, gsplat.
 set -u
 P=$1; D=$2; R=$3; shift 3; mkdir -p "$R" "$OUT"
 export PYTHONPATH=/tmp/site:$PWD PYTHONUNBUFFERED=1 OMP_NUM_THREADS=1 MKL_NUM_THREADS=1
 export MAX_JOBS=16 TORCH_CUDA_ARCH_LIST=9.0 WARPGS_TEST_DEVICES=cuda
+source "$(dirname "${BASH_SOURCE[0]}")/gpu_one.sh"
 gc() {  # name, then graph_check's arguments
   local n=$1; shift
   timeout ${T:-200} python3 bench/graph_check.py --data-root "$D" --iterations ${ITERS:-1000} --out "$OUT/graph_check_$n.json" "$@" \
@@ -35,17 +37,7 @@ g)
   gc lego_rb --data blender --scene lego --views 8 --set train.drop_rate=0.2
   ;;
 r)
-  python3 -m pip install -q --no-index --no-deps --target /tmp/site .device/gsplat/*.whl 2>/dev/null
-  timeout ${T:-300} python3 bench/rasterizer.py --warmup 10 --iters 20 --rounds 7 --out "$OUT/rasterizer_cuda.json" \
-    --configs 138766x648x420,256000x1280x720,1000000x1920x1080,138766x648x420 2>&1 \
-    | tee "$OUT/rasterizer.log" | grep -E "Gaussians|ratio|wrote"
-  [ -f "$R/fern_base/point_cloud.ply" ] || python3 -m warpgs.pipelines.sparse --method baseline --data llff \
-    --data-root "$D" --iterations 3000 --set model.init=frustum --device cuda --no-progress --out "$R/fern_base" \
-    > "$OUT/fern_base.log" 2>&1
-  tail -2 "$OUT/fern_base.log"
-  timeout ${T:-300} python3 bench/rasterizer.py --ply "$R/fern_base/point_cloud.ply" --data llff --data-root "$D" \
-    --scales 1,2,3 --warmup 10 --iters 20 --rounds 7 --out "$OUT/rasterizer_cuda_trained.json" 2>&1 \
-    | tee "$OUT/rasterizer_trained.log" | grep -E "Gaussians|ratio|wrote"
+  rasterizer_runs --warmup 10 --iters 20 --rounds 7
   ;;
 u)
   timeout ${T:-560} python3 bench/suite.py --device cuda --data-root "$D" --preset full --jobs ${JOBS:-6} \
@@ -75,16 +67,11 @@ e)
   done | tee "$OUT/defaults_graph_vs_eager.txt"
   ;;
 p)
-  run_one() {  # scene views method seed ratio
-    local o="$R/p_$1_$2v_$3_s$4_r$5"
-    [ -f "$o/metrics.json" ] || timeout ${T:-560} python3 -m warpgs.pipelines.sparse --method $3 --data dl3dv --scene $1 \
-      --data-root "$D" --views $2 --downscale 8 --iterations 3000 --seed $4 --device cuda --no-progress \
-      --set train.path_floaters=$5 --out "$o" > "$o.log" 2>&1
-  }
-  export -f run_one; export R D T
+  export R D T
   for c in ${CASES:-castle_p30:9 castle_p30:6 herz_jesus_p25:9}; do for m in baseline full; do for s in 0 1 2; do
-    for r in 0 ${RATIO:-10}; do echo "${c%%:*} ${c##*:} $m $s $r"; done; done; done; done \
-    | xargs -P ${JOBS:-12} -L 1 bash -c 'run_one "$@"' _
+    for r in 0 ${RATIO:-10}; do
+      echo "p_${c%%:*}_${c##*:}v_${m}_s${s}_r$r $m ${c%%:*} ${c##*:} $s --set train.path_floaters=$r"
+    done; done; done; done | xargs -P ${JOBS:-12} -L 1 bash -c 'one "$@"' _
   for m in "$R"/p_*/metrics.json; do
     python3 -c "import json,sys; d=json.load(open(sys.argv[1])); print(sys.argv[1].split('/')[-2], round(d['psnr'],3), d['num_gaussians'])" "$m"
   done | sort | tee "$OUT/path_floaters.txt"

@@ -404,7 +404,7 @@ def write_dl3dv(capture: SyntheticCapture, out_dir: str | Path, overwrite: bool 
 
     out = Path(out_dir)
     cfg = capture.config
-    stamp = {"format_version": FORMAT_VERSION, **asdict(cfg)}
+    stamp = _stamp_of(cfg)
     if out.exists() and _stamp(out) == stamp:  # this very scene (a parallel run wrote it first)
         return out
     if out.exists() and not overwrite:
@@ -479,6 +479,11 @@ def write_dl3dv(capture: SyntheticCapture, out_dir: str | Path, overwrite: bool 
             shutil.rmtree(old, ignore_errors=True)
 
 
+def _stamp_of(cfg: SyntheticConfig) -> dict:
+    """What ``synthetic.json`` holds for a scene of ``cfg`` (its format version and every setting)."""
+    return {"format_version": FORMAT_VERSION, **asdict(cfg)}
+
+
 def _stamp(folder: Path) -> dict | None:
     """The ``synthetic.json`` of a scene folder warpgs wrote (None when there is none or it is unreadable)."""
     try:
@@ -516,7 +521,7 @@ def ensure_synthetic(config: SyntheticConfig | None = None, out_dir: str | Path 
     cfg = config or SyntheticConfig()
     out = Path(out_dir) if out_dir is not None else cache_dir() / "synthetic" / cfg.dirname()
     saved = _stamp(out)
-    if saved == {"format_version": FORMAT_VERSION, **asdict(cfg)}:
+    if saved == _stamp_of(cfg):
         return out
     if saved is not None and out_dir is not None:
         raise SceneError(f"{out}: holds a different synthetic scene ({saved}); choose another folder")
