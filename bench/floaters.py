@@ -11,6 +11,8 @@ worst view's top suspects (distance to the test camera, size, opacity, colour, w
 test view with the suspects of *all* views removed, and with every Gaussian the inputs use less than
 ``--min-input`` pixels removed, and how far the worst view's suspects and every test camera lie from the camera
 path (``warpgs/clearance.py``; ``path_near``: in the run's near depths, as ``train.path_clearance`` counts).
+``--unseen-sweep 0.05,1,5``: also each view's PSNR without the Gaussians below each of those input weights
+(what ``train.prune_unseen_at_end`` with that ``strategy.unseen_min_weight`` would leave).
 Writes ``floaters.json`` in each run folder (or ``--out``).
 """
 
@@ -33,7 +35,8 @@ def psnr(a: torch.Tensor, b: torch.Tensor) -> float:
     return -10 * math.log10(max(float(((a.clamp(0, 1) - b) ** 2).mean()), 1e-12))
 
 
-def diagnose(run: Path, device: str, data_root: str | None, ratio: float, min_input: float, top: int) -> dict:
+def diagnose(run: Path, device: str, data_root: str | None, ratio: float, min_input: float, top: int,
+             sweep: tuple[float, ...] = ()) -> dict:
     from warpgs.config import build_config
     from warpgs.configio import read_yaml
     from warpgs.farfield import ElevationFarField
@@ -83,6 +86,8 @@ def diagnose(run: Path, device: str, data_root: str | None, ratio: float, min_in
     for v, c in zip(views, test):
         v["psnr_without_suspects"] = psnr(render(c, ~suspects), c.image)
         v["psnr_without_unseen"] = psnr(render(c, ~unseen), c.image)
+        # what train.prune_unseen_at_end with strategy.unseen_min_weight t would leave (opacity pruning aside)
+        v["psnr_without_unseen_sweep"] = {str(t): psnr(render(c, w_in >= t), c.image) for t in sweep}
     worst = min(views, key=lambda v: v["psnr"])
     cam = test[views.index(worst)]
     w_t = worst.pop("_w")
@@ -117,6 +122,7 @@ def diagnose(run: Path, device: str, data_root: str | None, ratio: float, min_in
     for v, d in zip(views, segment_distance(centres, path.a, path.b).tolist()):
         v["camera_path_m"] = round(d, 3)
     return {"run": str(run), "gaussians": len(model), "suspects": int(suspects.sum()), "unseen": int(unseen.sum()),
+            "unseen_sweep": {str(t): int((w_in < t).sum()) for t in sweep},
             "scene_bounds": list(map(float, scene.bounds)), "near": near, "median_depth_in_inputs": depths_in,
             "views": views, "worst": worst["name"], "worst_top": rows}
 
@@ -129,11 +135,14 @@ def main(argv=None) -> int:
     p.add_argument("--ratio", type=float, default=10.0, help="suspect: test weight > ratio x input weight")
     p.add_argument("--min-input", type=float, default=1.0, help="unseen: input weight below this (pixels)")
     p.add_argument("--top", type=int, default=12)
+    p.add_argument("--unseen-sweep", default="", help="comma-separated input weights (pixels): each view's PSNR "
+                   "without the Gaussians below each (psnr_without_unseen_sweep)")
     p.add_argument("--out", default=None)
     args = p.parse_args(argv)
     results = []
     for r in args.runs:
-        res = diagnose(Path(r), args.device, args.data_root, args.ratio, args.min_input, args.top)
+        sweep = tuple(float(x) for x in args.unseen_sweep.split(",") if x.strip())
+        res = diagnose(Path(r), args.device, args.data_root, args.ratio, args.min_input, args.top, sweep)
         results.append(res)
         print(f"{r}: {res['gaussians']} Gaussians, {res['suspects']} suspects, {res['unseen']} unseen by the inputs")
         for v in res["views"]:

@@ -73,8 +73,15 @@ p)
       echo "p_${c%%:*}_${c##*:}v_${m}_s${s}_r$r $m ${c%%:*} ${c##*:} $s --set train.path_floaters=$r"
     done; done; done; done | xargs -P ${JOBS:-12} -L 1 bash -c 'one "$@"' _
   for m in "$R"/p_*/metrics.json; do
-    python3 -c "import json,sys; d=json.load(open(sys.argv[1])); print(sys.argv[1].split('/')[-2], round(d['psnr'],3), d['num_gaussians'])" "$m"
+    python3 -c "import json,sys; d=json.load(open(sys.argv[1])); print(sys.argv[1].split('/')[-2], round(d['psnr'],3), d['num_gaussians'], [round(v['psnr'],2) for v in d.get('per_view',[])], [round(c['psnr'],2) for c in d.get('curve',[])])" "$m"
   done | sort | tee "$OUT/path_floaters.txt"
+  # bench/floaters.py on every finished run (FLOATERS=0: not), its summaries in $OUT/floaters/
+  if [ "${FLOATERS:-1}" = 1 ]; then
+    mkdir -p "$OUT/floaters"
+    for m in "$R"/p_*/metrics.json; do n=$(basename "$(dirname "$m")"); [ -f "$OUT/floaters/$n.txt" ] || echo "$n"; done \
+      | xargs -P ${JOBS:-12} -I{} bash -c 'timeout 300 python3 bench/floaters.py "$R/{}" --device cuda --data-root "$D" \
+          --out "$OUT/floaters/{}.json" 2>&1 | grep -v "^Module\|^Warp" > "$OUT/floaters/{}.txt"'
+  fi
   ;;
 f)
   declare -A V=([default]="" [norestart]="full.restart_lr=false" [budget]="full.restart_lr=false full.growth_budget=1.0"
