@@ -162,3 +162,126 @@ def test_threads_launching_one_kernel_at_once_each_get_their_own_arguments():
         sys.setswitchinterval(interval)
     assert not wrong
     assert Launcher.of(_axpy, "cpu") is Launcher.of(_axpy, "cpu")  # one per thread, reused
+
+
+# ----------------------------------------------------------------------------------------------------
+# the host path's shortcuts: device names cached, raw stream handles, the direct CUDA launch and the native
+# stream scope (their CUDA halves are checked here against stand-ins for Warp's native functions; the GPU
+# tests run them for real)
+
+
+def test_device_of_names_cpu_once_and_rejects_other_devices():
+    assert W.device_of(torch.zeros(2)) == "cpu"
+    assert W._DEVICE_NAMES[torch.device("cpu")] == "cpu"  # looked up once, then read from the table
+    with pytest.raises(ValueError, match="cpu or cuda"):
+        W.device_of(torch.zeros(2, device="meta"))
+    assert torch.device("meta") not in W._DEVICE_NAMES
+
+
+def test_launch_stream_is_none_on_the_cpu():
+    assert W.launch_stream(torch.zeros(2)) is None
+
+
+def test_cpu_launcher_takes_none_and_leaves_any_other_stream_to_warp():
+    """A CPU launch ignores its stream as Warp's does: None, or whatever a caller hands it (a handle, an object)."""
+    a, x = torch.rand(4, 3), torch.rand(4, 3)
+    want = 2.0 * x + a + 1
+    for stream in (None, 12345, object()):
+        got = torch.zeros(4, 3)
+        fast_launch(_axpy, (4, 3), "cpu", stream, (a, 2.0), x, 1, got)
+        assert torch.equal(got, want)
+
+
+class _Recorder:
+    def __init__(self):
+        self.calls = []
+
+
+def test_a_cuda_launcher_given_a_handle_calls_the_native_launch_with_the_current_size(monkeypatch):
+    """The direct route of ``Launcher.__call__`` (a CUDA launcher given a raw handle), with the native launch
+    replaced: it gets the launch's thread count after every change of dim and the handle as it is; while a Warp
+    graph capture is under way the launch goes through ``wp.Launch.launch`` with the handle wrapped instead."""
+    launcher = W.Launcher(_axpy, "cpu")  # a launcher of its own: its fields are changed below
+    rec = _Recorder()
+    runtime = type("Runtime", (), {"captures": {}})()
+    launcher.is_cuda, launcher._runtime = True, runtime
+    launcher._native = lambda size, stream: rec.calls.append(("native", size, stream))
+    launcher.cmd.launch = lambda stream=None: rec.calls.append(("warp", stream))
+    monkeypatch.setattr(W, "wp_stream", lambda device, stream: ("wrapped", device, stream))
+    a, x, out = torch.rand(5, 3), torch.rand(5, 3), torch.zeros(5, 3)
+    launcher((5, 3), 77, (a, 1.0), x, 0, out)
+    launcher((5, 3), 78, (a, 1.0), x, 0, out)
+    launcher((2, 3), 79, (a[:2], 1.0), x[:2], 0, out[:2])
+    launcher((0, 3), 80, (a[:0], 1.0), x[:0], 0, out[:0])  # no threads: nothing launched
+    runtime.captures[1] = object()
+    launcher((4, 3), 81, (a[:4], 1.0), x[:4], 0, out[:4])
+    launcher((4, 3), None, (a[:4], 1.0), x[:4], 0, out[:4])  # None / a wp.Stream: Warp's own route
+    assert rec.calls == [("native", 15, 77), ("native", 15, 78), ("native", 6, 79),
+                         ("warp", ("wrapped", "cpu", 81)), ("warp", None)]
+    assert launcher.cmd.bounds.size == 12
+
+
+def test_native_launch_passes_warps_launch_fields_and_raises_warps_error():
+    from types import SimpleNamespace
+
+    hooks = SimpleNamespace(forward="FN", forward_smem_bytes=48, forward_smem_shortfall=None)
+    cmd = SimpleNamespace(device=SimpleNamespace(context="CTX"), hooks=hooks, max_blocks=0, block_dim=256,
+                          grid_stride=True, cluster_dim=1, params_addr="PARAMS", kernel=SimpleNamespace(key="k"))
+    calls, result = [], [0]
+
+    def launch_kernel(*args):
+        calls.append(args)
+        return result[0]
+
+    go = W._native_launch(cmd, launch_kernel)
+    go(1000, 5)
+    assert calls == [("CTX", "FN", 1000, 0, 256, 1, 1, 48, "PARAMS", 5, None)]
+    result[0] = 1  # a failed launch raises Warp's error (here its shared-memory message, which needs no runtime)
+    hooks.forward_smem_shortfall = "more than the device has"
+    with pytest.raises(RuntimeError, match="Error launching kernel: k"):
+        go(10, 5)
+
+
+class _FakeCore:
+    """Warp's native context and stream functions, recording their calls."""
+
+    def __init__(self, log):
+        self.log = log
+
+    def wp_cuda_context_push_current(self, ctx):
+        self.log.append(("push", ctx))
+
+    def wp_cuda_context_pop_current(self):
+        self.log.append(("pop",))
+
+    def wp_cuda_context_get_stream(self, ctx):
+        self.log.append(("get", ctx))
+        return 1111
+
+    def wp_cuda_context_set_stream(self, ctx, stream, sync):
+        self.log.append(("set", ctx, stream, sync))
+
+
+def test_native_on_stream_sets_the_stream_without_a_wait_and_restores_it(monkeypatch):
+    log = []
+    runtime = type("Runtime", (), {"captures": {}, "core": _FakeCore(log)})()
+    monkeypatch.setattr(W, "_native_runtime", lambda: runtime)
+    monkeypatch.setattr(W, "_cuda_context", lambda device: ("CTX", device))
+    ctx = ("CTX", "cuda:3")
+    assert W.native_on_stream("cuda:3", 42, lambda *a: log.append(("fn",) + a), 1, 2)
+    assert log == [("push", ctx), ("get", ctx), ("set", ctx, 42, 0), ("fn", 1, 2), ("set", ctx, 1111, 0), ("pop",)]
+
+    log.clear()
+
+    def boom(*a):
+        raise KeyError("sort failed")
+
+    with pytest.raises(KeyError):
+        W.native_on_stream("cuda:3", 42, boom)
+    assert log == [("push", ctx), ("get", ctx), ("set", ctx, 42, 0), ("set", ctx, 1111, 0), ("pop",)]
+
+    log.clear()
+    assert not W.native_on_stream("cuda:3", None, boom)  # a wp.Stream or None: the caller's ScopedStream
+    runtime.captures[1] = object()
+    assert not W.native_on_stream("cuda:3", 42, boom)  # a Warp capture under way: likewise
+    assert log == []

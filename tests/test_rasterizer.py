@@ -472,3 +472,28 @@ def test_fixed_capacity_render_is_the_counted_one_bit_for_bit(device):
             assert torch.equal(getattr(out, k), getattr(base, k)), k
         for k, g in grads.items():
             assert torch.equal(g, base_grads[k]), k
+
+
+@pytest.mark.parametrize("device", DEVICES)
+def test_default_background_is_a_shared_read_only_zero_and_renders_as_black(device):
+    """``background=None`` reads the per-device zeros of ``_zero_input`` (no allocation per render); the render,
+    and every gradient, is that of an explicit black background, bit for bit, and the shared zeros stay zero
+    (also after the buffer grew for a larger shape, which hands out new views)."""
+    from warpgs import render as R
+
+    scene = make_scene(n=120, width=33, height=19, seed=6, sh_degree=1, spread=0.9)
+    w = torch.rand(19, 33, 3, generator=torch.Generator().manual_seed(2)).to(device)
+    results = []
+    for background in (None, torch.zeros(3, device=device)):
+        out, ins = run_warp(scene, device, grad=True, sh_degree=1, background=background)
+        ((out.image * w).sum() + 0.2 * out.alpha.sum()).backward()  # depth left out: its zeros are read too
+        results.append((out, {k: v.grad for k, v in ins.items()}))
+    (o1, g1), (o2, g2) = results
+    for name in ("image", "depth", "alpha"):
+        assert torch.equal(getattr(o1, name), getattr(o2, name)), name
+    assert all(torch.equal(g1[k], g2[k]) for k in g1)
+    dev = torch.device(device) if device == "cpu" else o1.image.device
+    z = R._zero_input((3,), dev)
+    assert z is R._zero_input((3,), dev)  # the view is made once
+    big = R._zero_input((R._ZERO_INPUTS[dev].numel() + 1,), dev)  # more than the buffer held: a new buffer, new views
+    assert R._zero_input((3,), dev) is not z and not bool(big.any()) and not bool(z.any())

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import functools
+import math
 import os
 import threading
 
@@ -17,6 +18,16 @@ try:  # the class of @wp.struct types (private; the fast launch path needs it to
     from warp._src.codegen import Struct as _WarpStruct
 except ImportError:  # pragma: no cover - other Warp versions
     from warp.codegen import Struct as _WarpStruct
+try:  # Warp's module of the runtime (its ``runtime`` is set by wp.init) and its launch-failure error (private:
+    # the direct CUDA launch below needs them; without them every launch goes through ``wp.Launch.launch``)
+    import warp._src.context as _wp_context
+    from warp._src.context import _raise_cuda_launch_error
+except ImportError:  # pragma: no cover - other Warp versions
+    _wp_context = _raise_cuda_launch_error = None
+
+# torch's current CUDA stream of a device as its raw handle (an int), without building a torch.cuda.Stream
+# (private; CUDA builds of torch only): one call instead of ``torch.cuda.current_stream(...).cuda_stream``
+_current_raw_stream = getattr(torch._C, "_cuda_getCurrentRawStream", None)
 
 from warpgs.console import filtered_stderr
 
@@ -56,14 +67,30 @@ def init() -> None:
     _init()
 
 
+_DEVICE_NAMES: dict = {}  # torch.device -> Warp device name, filled by ``_device_name``
+
+
 def device_of(t: torch.Tensor) -> str:
-    """The Warp device name of a torch tensor ('cpu' or 'cuda:N')."""
+    """The Warp device name of a torch tensor ('cpu' or 'cuda:N'); looked up once per torch device."""
+    d = t.device
+    name = _DEVICE_NAMES.get(d)
+    return _device_name(d) if name is None else name
+
+
+def _device_name(d: torch.device) -> str:
+    """``device_of``'s name of torch device ``d``, remembered (after ``_init``) where it is fixed: every device but
+    a CUDA one without an index (whose name follows torch's current device)."""
     _init()
-    if t.device.type == "cpu":
-        return "cpu"
-    if t.device.type == "cuda":
-        return f"cuda:{t.device.index if t.device.index is not None else torch.cuda.current_device()}"
-    raise ValueError(f"warpgs runs on cpu or cuda tensors, got a tensor on {t.device}")
+    if d.type == "cpu":
+        name = "cpu"
+    elif d.type == "cuda":
+        if d.index is None:
+            return f"cuda:{torch.cuda.current_device()}"
+        name = f"cuda:{d.index}"
+    else:
+        raise ValueError(f"warpgs runs on cpu or cuda tensors, got a tensor on {d}")
+    _DEVICE_NAMES[d] = name
+    return name
 
 
 def stream_of(device: str):
@@ -76,6 +103,82 @@ def stream_of(device: str):
 @functools.lru_cache(maxsize=16)
 def _stream(device: str, handle: int):
     return wp.Stream(device, cuda_stream=handle)
+
+
+def wp_stream(device: str, stream):
+    """``stream`` as Warp's Python API takes it: a raw handle (an int, ``launch_stream``) of CUDA device ``device``
+    as the wp.Stream wrapping it (``stream_of``'s), anything else (None, a wp.Stream) as it is."""
+    return _stream(device, stream) if type(stream) is int else stream
+
+
+def launch_stream(t: torch.Tensor):
+    """The stream argument for ``Launcher``/``fast_launch`` (and ``native_on_stream``) of launches on torch
+    tensor ``t``'s device: None on the CPU; on CUDA, torch's current stream there as its raw handle (an int),
+    which the launcher passes to the driver directly, or, where torch has no raw-handle lookup,
+    ``stream_of``'s wp.Stream. Either way the same stream as ``stream_of(device_of(t))``: one lookup per render
+    serves its forward launches, and kept on the autograd context, its backward's (autograd runs a custom
+    Function's backward on the stream its forward ran on)."""
+    d = t.device
+    if d.type == "cpu":
+        return None
+    if _current_raw_stream is None:  # pragma: no cover - torch builds without CUDA have no CUDA tensors
+        return stream_of(device_of(t))
+    return _current_raw_stream(d.index if d.index is not None else torch.cuda.current_device())
+
+
+def native_on_stream(device: str, stream, fn, *args) -> bool:
+    """Calls the native Warp function ``fn(*args)`` with raw stream handle ``stream`` as the current stream of
+    Warp's context of CUDA device ``device`` (where Warp's native sorts and scans enqueue their work), as
+    ``wp.ScopedStream(stream, sync_enter=False)`` would, without its Python: the device's context is made
+    current, the context's stream set without a wait on the previous one, and both restored afterwards
+    (also on an error; the stream, like ScopedStream's exit, without a wait). Returns False, calling nothing,
+    where that cannot be done this way (``stream`` not an int handle, a Warp graph capture under way, whose
+    bookkeeping needs Warp's own route, or a Warp without these private functions): the caller then uses
+    ``wp.ScopedStream``."""
+    if type(stream) is not int:
+        return False
+    runtime = _native_runtime()
+    if runtime is None or runtime.captures:
+        return False
+    core = runtime.core
+    ctx = _cuda_context(device)
+    core.wp_cuda_context_push_current(ctx)
+    try:
+        previous = core.wp_cuda_context_get_stream(ctx)
+        core.wp_cuda_context_set_stream(ctx, stream, 0)
+        try:
+            fn(*args)
+        finally:
+            core.wp_cuda_context_set_stream(ctx, previous, 0)
+    finally:
+        core.wp_cuda_context_pop_current()
+    return True
+
+
+_NATIVE_NAMES = ("wp_cuda_launch_kernel", "wp_cuda_context_push_current", "wp_cuda_context_pop_current",
+                 "wp_cuda_context_get_stream", "wp_cuda_context_set_stream")
+
+
+@functools.cache
+def _native_runtime():
+    """Warp's runtime where it has everything the direct CUDA paths (``Launcher``, ``native_on_stream``) use:
+    its graph captures (``captures``) and the native functions ``_NATIVE_NAMES``; None otherwise (another Warp
+    version), and those paths go through Warp's Python instead."""
+    _init()
+    if _wp_context is None or _raise_cuda_launch_error is None:  # pragma: no cover - other Warp versions
+        return None
+    runtime = getattr(_wp_context, "runtime", None)
+    core = getattr(runtime, "core", None)
+    if not isinstance(getattr(runtime, "captures", None), dict) or not all(hasattr(core, n) for n in _NATIVE_NAMES):
+        return None  # pragma: no cover - other Warp versions
+    return runtime
+
+
+@functools.cache
+def _cuda_context(device: str):
+    """Warp's CUDA context of ``device`` (its ``Device.context``)."""
+    _init()
+    return wp.get_device(device).context
 
 
 def to_wp(t: torch.Tensor, dtype=None) -> wp.array:
@@ -130,7 +233,13 @@ def _array_setter(label: str, atype, c):
     """Writes a torch tensor into the array descriptor ``c`` (in place) for a kernel argument of Warp
     array type ``atype``: its data pointer, shape and byte strides, after checking that the tensor
     has the argument's scalar type and number of dimensions (trailing ones grouped by a vector or
-    matrix dtype) and is contiguous. A wrong tensor raises a ValueError naming the argument."""
+    matrix dtype) and is contiguous. A wrong tensor raises a ValueError naming the argument.
+
+    The descriptor holds the same numbers as one built from the tensor's own shape and strides, written with
+    fewer calls into torch: of a contiguous tensor whose first dimension has more than one entry, the first
+    stride is the product of the other sizes (torch's contiguity rule; ``inner``, fixed per argument, has no 0),
+    so a one-dimensional array argument reads the stride only where the first size is 0 or 1, and its shape
+    and stride are rewritten only when the first size changed (the descriptor is this launcher's own)."""
     dtype = atype.dtype
     inner = tuple(getattr(dtype, "_shape_", ()))
     scalar = getattr(dtype, "_wp_scalar_type_", dtype)
@@ -146,14 +255,43 @@ def _array_setter(label: str, atype, c):
                          f"{nd} dimension(s)" + (f" followed by {list(inner)}" if inner else "")
                          + f", got {t.dtype} {list(t.shape)}" + ("" if t.is_contiguous() else " (not contiguous)"))
 
-    if nd == 1:
-        def set_array(t):
-            shp = t.shape
-            if t.dtype is not want or len(shp) != full or shp[1:] != inner or not t.is_contiguous():
-                fail(t)
-            c.data = t.data_ptr()
-            shape[0] = shp[0]
-            strides[0] = t.stride(0) * es
+    if nd == 1 and 0 not in inner:
+        row = math.prod(inner) * es  # the first stride's bytes of a contiguous tensor with more than one row
+        written = -1  # the first size that ``shape``/``strides`` hold (-1: none yet, or one of 0 or 1 rows)
+
+        if inner:
+            def set_array(t):
+                nonlocal written
+                shp = t.shape
+                # shp[1:] == inner implies the number of dimensions (a 0-dim tensor's () never equals inner)
+                if t.dtype is not want or shp[1:] != inner or not t.is_contiguous():
+                    fail(t)
+                c.data = t.data_ptr()
+                n = shp[0]
+                if n != written:
+                    shape[0] = n
+                    if n > 1:
+                        strides[0] = row
+                        written = n
+                    else:
+                        strides[0] = t.stride(0) * es
+                        written = -1
+        else:
+            def set_array(t):
+                nonlocal written
+                shp = t.shape
+                if t.dtype is not want or len(shp) != 1 or not t.is_contiguous():
+                    fail(t)
+                c.data = t.data_ptr()
+                n = shp[0]
+                if n != written:
+                    shape[0] = n
+                    if n > 1:
+                        strides[0] = row
+                        written = n
+                    else:
+                        strides[0] = t.stride(0) * es
+                        written = -1
         return set_array
 
     def set_array(t):
@@ -207,7 +345,14 @@ class Launcher:
     only writes pointers, shapes and numbers into the recorded ``wp.Launch``'s parameter block, several
     times cheaper per launch, which is what a training step's dozen launches cost on the host.
     The tensors must stay alive until the call returns (they do: they are its arguments); torch's
-    allocator orders later reuse of their memory after the launch on the stream."""
+    allocator orders later reuse of their memory after the launch on the stream.
+
+    ``stream``: None (the CPU; on CUDA, Warp's current stream of the device), a ``wp.Stream``, or a raw CUDA
+    stream handle (an int, ``launch_stream``). With a handle, a CUDA launch calls Warp's native launch
+    (``wp_cuda_launch_kernel``) directly with the recorded launch's fields, the same call
+    ``wp.Launch.launch`` makes without its per-launch Python (capture look-ups, the stream object); while a
+    Warp graph capture is under way (``wp.capture_begin``), or where this Warp lacks the private names, it
+    goes through ``wp.Launch.launch`` as before."""
 
     _local = threading.local()  # launchers per thread: two threads never share a parameter block
 
@@ -215,14 +360,14 @@ class Launcher:
     def of(cls, kernel, device: str) -> "Launcher":
         """This thread's launcher of ``kernel`` on ``device`` (a viewer serving two clients, or the parts of
         ``launch_parts``, launch from several threads at once)."""
-        cache = getattr(cls._local, "cache", None)
-        if cache is None:
+        try:
+            cache = cls._local.cache
+        except AttributeError:
             cache = cls._local.cache = {}
-        key = (kernel, device)
-        got = cache.get(key)
+        got = cache.get((kernel, device))
         if got is None:
             _init()
-            got = cache[key] = cls(kernel, device)
+            got = cache[(kernel, device)] = cls(kernel, device)
         return got
 
     def __init__(self, kernel, device: str):
@@ -246,23 +391,59 @@ class Launcher:
             else:  # vectors and matrices passed by value: Warp's own packing
                 setters.append(functools.partial(self.cmd.set_param_at_index, i))
         self.setters = setters
+        self.n_args = len(setters)
+        self._runtime = self._native = None
+        self._size = self.cmd.bounds.size
+        self.is_cuda = self.cmd.device.is_cuda
+        if self.is_cuda and not self.cmd.adjoint:
+            self._runtime = _native_runtime()
+            if self._runtime is not None:
+                self._native = _native_launch(self.cmd, self._runtime.core.wp_cuda_launch_kernel)
 
     def __call__(self, dim, stream, *args) -> None:
-        if len(args) != len(self.setters):
-            raise TypeError(f"kernel {self.kernel.key!r} takes {len(self.setters)} arguments, got {len(args)}")
-        if no_threads(dim):
+        if len(args) != self.n_args:
+            raise TypeError(f"kernel {self.kernel.key!r} takes {self.n_args} arguments, got {len(args)}")
+        if (dim == 0) if isinstance(dim, int) else (0 in dim):  # ``no_threads``, inlined
             return
         for set_arg, a in zip(self.setters, args):
             set_arg(a)
         if dim != self.dim:
             self.cmd.set_dim(dim)
             self.dim = dim
+            self._size = self.cmd.bounds.size  # set_dim made new launch bounds (and pointed the parameters at them)
+        if type(stream) is int and self.is_cuda:
+            if self._native is not None and not self._runtime.captures:
+                self._native(self._size, stream)
+                return
+            stream = wp_stream(self.device, stream)  # Warp's own route takes a wp.Stream
         self.cmd.launch(stream)
 
 
+def _native_launch(cmd, launch_kernel):
+    """``f(size, stream)``: what ``cmd.launch(stream)`` (a recorded forward ``wp.Launch`` on a CUDA device) does
+    outside graph captures, for a launch of ``size`` threads (``cmd.bounds.size``) on raw stream handle
+    ``stream``: Warp's native launch with the launch's fields, raising Warp's error if it fails. The fields are
+    read here once: none changes after the launch is made but the bounds, which ``set_dim`` replaces and points
+    the first entry of ``params_addr`` (the same array, changed in place) at; the caller passes their size."""
+    context, hooks = cmd.device.context, cmd.hooks
+    fn, smem = hooks.forward, hooks.forward_smem_bytes
+    max_blocks, block_dim, grid_stride, cluster_dim = cmd.max_blocks, cmd.block_dim, int(cmd.grid_stride), cmd.cluster_dim
+    params_addr = cmd.params_addr
+
+    def launch(size, stream):
+        if launch_kernel(context, fn, size, max_blocks, block_dim, grid_stride, cluster_dim, smem, params_addr,
+                         stream, None):
+            _raise_cuda_launch_error(cmd.kernel, cmd.device, hooks, False)
+    return launch
+
+
 def fast_launch(kernel, dim, device: str, stream, *args) -> None:
-    """``Launcher.of(kernel, device)(dim, stream, *args)``."""
-    Launcher.of(kernel, device)(dim, stream, *args)
+    """``Launcher.of(kernel, device)(dim, stream, *args)`` (this thread's launcher looked up here directly)."""
+    try:
+        launcher = Launcher._local.cache[(kernel, device)]
+    except (AttributeError, KeyError):
+        launcher = Launcher.of(kernel, device)
+    launcher(dim, stream, *args)
 
 
 @functools.cache

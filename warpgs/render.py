@@ -24,7 +24,8 @@ from typing import NamedTuple
 import torch
 import warp as wp
 
-from warpgs._warp import device_of, fast_launch, launch_parts, native_function, stream_of, to_wp
+from warpgs._warp import (device_of, fast_launch, launch_parts, launch_stream, native_function, native_on_stream,
+                          to_wp, wp_stream)
 from warpgs.kernels import binning as kb
 from warpgs.kernels import projection as kp
 from warpgs.kernels import rasterize as kr
@@ -61,17 +62,27 @@ def _grad_or_zeros(g: torch.Tensor | None, shape, device) -> torch.Tensor:
 
 
 _ZERO_INPUTS: dict = {}
+_ZERO_VIEWS: dict = {}  # (device, shape) -> the view ``_zero_input`` gave of the device's current buffer
 
 
 def _zero_input(shape, device) -> torch.Tensor:
     """A float32 zero tensor of ``shape`` for a kernel to read (never to write): a view of a per-device buffer
     that only grows, so a backward pass whose loss leaves out the depth or alpha allocates and clears nothing
-    for their gradients."""
+    for their gradients. The view of a shape is made once (per buffer) and handed out again; nothing writes
+    into it, and none reaches the caller of ``rasterize``."""
+    key = (device, shape)
+    view = _ZERO_VIEWS.get(key)
+    if view is not None:
+        return view
     n = math.prod(shape)
     buf = _ZERO_INPUTS.get(device)
     if buf is None or buf.numel() < n:
         buf = _ZERO_INPUTS[device] = torch.zeros(n, device=device)
-    return buf[:n].view(shape)
+        _ZERO_VIEWS.clear()  # views of the smaller buffer: let it go
+    if len(_ZERO_VIEWS) >= 256:  # many image sizes: keep the table small
+        _ZERO_VIEWS.clear()
+    view = _ZERO_VIEWS[key] = buf[:n].view(shape)
+    return view
 
 
 def _camera(viewmat, K, width, height, eps2d, antialiased):
@@ -80,10 +91,9 @@ def _camera(viewmat, K, width, height, eps2d, antialiased):
     return (viewmat.reshape(1, 4, 4), K.reshape(1, 3, 3), width, height, eps2d, int(antialiased))
 
 
-def _project(means, quats, scales, opacities, viewmat, K, width, height, eps2d, near, far, antialiased):
-    """The projection kernel: (means2d, conics, depths, opac_eff, radii, tiles_touched)."""
-    dev = device_of(means)
-    stream = stream_of(dev)
+def _project(means, quats, scales, opacities, viewmat, K, width, height, eps2d, near, far, antialiased, dev, stream):
+    """The projection kernel on Warp device ``dev`` and ``stream`` (``launch_stream``): (means2d, conics, depths,
+    opac_eff, radii, tiles_touched)."""
     n = means.shape[0]
     ts, tiles_x, tiles_y = _tile_grid(dev, width, height)
     f = dict(device=means.device, dtype=torch.float32)
@@ -102,20 +112,24 @@ def _project(means, quats, scales, opacities, viewmat, K, width, height, eps2d, 
 
 
 class _Project(torch.autograd.Function):
+    # dev, stream: the Warp device of the tensors and the stream of the launches (``launch_stream``; looked up here
+    # where not given), kept for the backward, which autograd runs on the forward's stream
     @staticmethod
-    def forward(ctx, means, quats, scales, opacities, viewmat, K, width, height, eps2d, near, far, antialiased):
+    def forward(ctx, means, quats, scales, opacities, viewmat, K, width, height, eps2d, near, far, antialiased,
+                dev=None, stream=None):
+        if dev is None:
+            dev, stream = device_of(means), launch_stream(means)
         means2d, conics, depths, opac_eff, radii, tiles_touched = _project(
-            means, quats, scales, opacities, viewmat, K, width, height, eps2d, near, far, antialiased)
+            means, quats, scales, opacities, viewmat, K, width, height, eps2d, near, far, antialiased, dev, stream)
         ctx.save_for_backward(means, quats, scales, opacities, viewmat, K, radii, conics)
-        ctx.cfg = (width, height, eps2d, antialiased)
+        ctx.cfg = (width, height, eps2d, antialiased, dev, stream)
         ctx.mark_non_differentiable(radii, tiles_touched)
         return means2d, conics, depths, opac_eff, radii, tiles_touched
 
     @staticmethod
     def backward(ctx, v_means2d, v_conics, v_depths, v_opac_eff, _r, _t):
         means, quats, scales, opacities, viewmat, K, radii, conics = ctx.saved_tensors
-        width, height, eps2d, antialiased = ctx.cfg
-        dev = device_of(means)
+        width, height, eps2d, antialiased, dev, stream = ctx.cfg
         n = means.shape[0]
         v_means = torch.empty_like(means)
         v_quats = torch.empty_like(quats)
@@ -124,53 +138,55 @@ class _Project(torch.autograd.Function):
         # the structs are rebuilt from the saved tensors rather than kept on ctx, so that autograd's
         # checks of saved tensors (in-place changes since the forward) cover everything the kernel reads
         fast_launch(
-            kp.project_gaussians_bwd, n, dev, stream_of(dev),
+            kp.project_gaussians_bwd, n, dev, stream,
             (means, quats, scales, opacities), _camera(viewmat, K, width, height, eps2d, antialiased),
             radii, conics, _grad_or_zeros(v_means2d, (n, 2), means.device),
             _grad_or_zeros(v_conics, conics.shape, means.device), _grad_or_zeros(v_depths, (n,), means.device),
             _grad_or_zeros(v_opac_eff, (n,), means.device),
             (v_means, v_quats, v_scales, v_opacities),
         )
-        return v_means, v_quats, v_scales, v_opacities, None, None, None, None, None, None, None, None
+        return v_means, v_quats, v_scales, v_opacities, None, None, None, None, None, None, None, None, None, None
 
 
 class _SHColors(torch.autograd.Function):
     @staticmethod
-    def forward(ctx, coeffs, means, campos, radii, degree):
-        dev = device_of(means)
+    def forward(ctx, coeffs, means, campos, radii, degree, dev=None, stream=None):  # dev, stream: as _Project's
+        if dev is None:
+            dev, stream = device_of(means), launch_stream(means)
         colors = torch.empty(means.shape[0], 3, device=means.device, dtype=torch.float32)
-        fast_launch(ksh.sh_to_color_fwd, means.shape[0], dev, stream_of(dev),
+        fast_launch(ksh.sh_to_color_fwd, means.shape[0], dev, stream,
                     means, campos.reshape(1, 3), coeffs, degree, radii, colors)
         ctx.save_for_backward(coeffs, means, campos, radii, colors)
-        ctx.degree = degree
+        ctx.cfg = (degree, dev, stream)
         return colors
 
     @staticmethod
     def backward(ctx, v_colors):
         coeffs, means, campos, radii, colors = ctx.saved_tensors
-        dev = device_of(means)
-        stream = stream_of(dev)
+        degree, dev, stream = ctx.cfg
         v_coeffs = torch.empty_like(coeffs)
         v_means = torch.empty_like(means)
         v_colors = v_colors.contiguous()
         campos = campos.reshape(1, 3)
         fast_launch(ksh.sh_coeffs_bwd, coeffs.shape[0] * coeffs.shape[1], dev, stream,
-                    means, campos, ctx.degree, radii, colors, v_colors, v_coeffs)
+                    means, campos, degree, radii, colors, v_colors, v_coeffs)
         fast_launch(ksh.sh_dir_bwd, means.shape[0], dev, stream,
-                    means, campos, coeffs, ctx.degree, radii, colors, v_colors, v_means)
-        return v_coeffs, v_means, None, None, None
+                    means, campos, coeffs, degree, radii, colors, v_colors, v_means)
+        return v_coeffs, v_means, None, None, None, None, None
 
 
-def _bin_gaussians(means2d, radii, depths, tiles_touched, tiles_x, tiles_y, capacity: int | None = None):
+def _bin_gaussians(means2d, radii, depths, tiles_touched, tiles_x, tiles_y, capacity: int | None = None,
+                   dev: str | None = None, stream=None):
     """Sorted Gaussian ids per tile: returns (ranges [tiles, 2] int32, gauss_ids [total] int32, total).
 
     ``capacity``: the key buffers hold that many entries whatever the count, so nothing is read on the host
     (a CUDA graph can hold the render; ``warpgs.graphstep``): the unused entries are padding keys that sort
     after every real one (a tile past the grid), the sort is torch's stable one (the same order as Warp's
     radix sort of the real keys), and ``total`` is the capacity. The caller guarantees that the count fits
-    (``count_intersections``); the kernel writes no entry past the buffers either way."""
-    dev = device_of(means2d)
-    stream = stream_of(dev)
+    (``count_intersections``); the kernel writes no entry past the buffers either way. ``dev``, ``stream``: the Warp
+    device and the stream of the launches (``launch_stream``), looked up where not given."""
+    if dev is None:
+        dev, stream = device_of(means2d), launch_stream(means2d)
     n_tiles = tiles_x * tiles_y
     ranges = torch.zeros(n_tiles, 2, device=means2d.device, dtype=torch.int32)
     n = means2d.shape[0]
@@ -190,7 +206,7 @@ def _bin_gaussians(means2d, radii, depths, tiles_touched, tiles_x, tiles_y, capa
                 keys, values)
     if capacity is None:
         tile_bits = int(math.floor(math.log2(n_tiles))) + 1
-        _sort_pairs(keys, values, count, 32 + tile_bits, stream)
+        _sort_pairs(keys, values, count, 32 + tile_bits, stream, dev)
     else:
         keys, order = torch.sort(keys, stable=True)
         values = values[order]
@@ -202,17 +218,24 @@ def _bin_gaussians(means2d, radii, depths, tiles_touched, tiles_x, tiles_y, capa
 _PADDING_KEY = (1 << 63) - 1
 
 
-def _sort_pairs(keys: torch.Tensor, values: torch.Tensor, count: int, end_bit: int, stream) -> None:
+def _sort_pairs(keys: torch.Tensor, values: torch.Tensor, count: int, end_bit: int, stream,
+                dev: str | None = None) -> None:
     """Warp's radix sort of the first ``count`` (int64 key, int32 value) pairs by the key bits below ``end_bit``
-    (both buffers hold 2 x count: the sort's double buffer), on ``stream`` (None: the CPU). On CUDA the
-    native sort is called directly on the torch tensors' memory, under a stream scope that does not make the
-    stream wait for Warp's previous one (torch's stream already orders it): ``wp.utils.radix_sort_pairs``'s
-    checks, its two array wrappers and the scope's event cost more host time than the sort's launches."""
+    (both buffers hold 2 x count: the sort's double buffer), on ``stream`` (None: the CPU; else a raw handle
+    or a wp.Stream of CUDA device ``dev``). On CUDA the native sort is called directly on the torch tensors'
+    memory, with the stream as the current one of Warp's context and no wait on Warp's previous stream (torch's
+    stream already orders it): ``wp.utils.radix_sort_pairs``'s checks, its two array wrappers and the scope's
+    event cost more host time than the sort's launches. A raw handle is made current natively
+    (``native_on_stream``: no Python scope objects); a wp.Stream, or a handle during a Warp graph capture, goes
+    through ``wp.ScopedStream`` as before."""
     if stream is None:
         wp.utils.radix_sort_pairs(to_wp(keys), to_wp(values), count, 0, end_bit)
         return
     native = native_function("wp_radix_sort_pairs_int64_device")
-    with wp.ScopedStream(stream, sync_enter=False):
+    if native is not None and native_on_stream(dev, stream, native, keys.data_ptr(), values.data_ptr(), count, 0,
+                                               end_bit, 4):
+        return
+    with wp.ScopedStream(wp_stream(dev, stream), sync_enter=False):
         if native is None:  # pragma: no cover - other Warp versions
             wp.utils.radix_sort_pairs(to_wp(keys), to_wp(values), count, 0, end_bit)
         else:
@@ -222,9 +245,9 @@ def _sort_pairs(keys: torch.Tensor, values: torch.Tensor, count: int, end_bit: i
 class _Composite(torch.autograd.Function):
     @staticmethod
     def forward(ctx, means2d, conics, opac_eff, colors, depths, background, ranges, gauss_ids,
-                width, height, alpha_max, deterministic):
-        dev = device_of(means2d)
-        stream = stream_of(dev)
+                width, height, alpha_max, deterministic, dev=None, stream=None):  # dev, stream: as _Project's
+        if dev is None:
+            dev, stream = device_of(means2d), launch_stream(means2d)
         tiles_x = _tile_grid(dev, width, height)[1]
         n_threads = kr.compositing_threads(dev, ranges.shape[0])
         f = dict(device=means2d.device, dtype=torch.float32)
@@ -242,7 +265,7 @@ class _Composite(torch.autograd.Function):
         else:
             fast_launch(kr.rasterize_fwd_cuda, n_threads, dev, stream, *args, 0, 1)
         ctx.save_for_backward(splats, background, ranges, gauss_ids, depth, alpha, last)
-        ctx.cfg = (width, height, alpha_max, deterministic)
+        ctx.cfg = (width, height, alpha_max, deterministic, dev, stream)
         # an output the loss does not use gets None in backward, not a zero tensor: no allocation, and a
         # loss without the depth skips its terms in the kernel
         ctx.set_materialize_grads(False)
@@ -251,8 +274,7 @@ class _Composite(torch.autograd.Function):
     @staticmethod
     def backward(ctx, v_color, v_depth, v_alpha):
         splats, background, ranges, gauss_ids, depth, alpha, last = ctx.saved_tensors
-        width, height, alpha_max, deterministic = ctx.cfg
-        dev = device_of(splats)
+        width, height, alpha_max, deterministic, dev, stream = ctx.cfg
         tiles_x = _tile_grid(dev, width, height)[1]
         n = splats.shape[0]
         # the CPU backend runs one thread, so its float sums are deterministic already
@@ -265,7 +287,6 @@ class _Composite(torch.autograd.Function):
 
         grads = grad_buffers(torch.empty if fixed else torch.zeros)
         v_fixed, v_means2d, v_conics, v_opac, v_colors, v_depths = grads
-        stream = stream_of(dev)
         with_depth = int(v_depth is not None)  # a loss without the depth skips its (zero) terms
         args = (ranges, gauss_ids, splats, background.reshape(1, 3), width, height, tiles_x, alpha_max,
                 depth.view(-1), alpha.view(-1), last.view(-1),
@@ -285,7 +306,7 @@ class _Composite(torch.autograd.Function):
             fast_launch(kernel, n_threads, dev, stream, *args, *grads, 0, 1)
         if fixed and n:
             fast_launch(kr.fixed_to_grads, n, dev, stream, v_fixed, v_means2d, v_conics, v_opac, v_colors, v_depths)
-        return v_means2d, v_conics, v_opac, v_colors, v_depths, None, None, None, None, None, None, None
+        return v_means2d, v_conics, v_opac, v_colors, v_depths, None, None, None, None, None, None, None, None, None
 
 
 # ----------------------------------------------------------------------------------------------------
@@ -299,13 +320,23 @@ def _fail(name: str, problem: str):
 def _check_tensor(name, t, shape, device):
     if not isinstance(t, torch.Tensor):
         _fail(name, f"must be a torch.Tensor, got {type(t).__name__}")
-    if t.dim() != len(shape) or any(s is not None and s != d for s, d in zip(shape, t.shape)):
+    if not _shape_matches(t.shape, shape):
         want = "[" + ", ".join("*" if s is None else str(s) for s in shape) + "]"
         _fail(name, f"must have shape {want}, got {list(t.shape)}")
     if not t.is_floating_point():
         _fail(name, f"must be a floating-point tensor, got {t.dtype}")
     if t.device != device:
         _fail(name, f"is on {t.device} but means is on {device}")
+
+
+def _shape_matches(got, shape) -> bool:
+    """Whether tensor shape ``got`` is ``shape`` (None: any size there)."""
+    if len(got) != len(shape):
+        return False
+    for s, d in zip(shape, got):
+        if s is not None and s != d:
+            return False
+    return True
 
 
 def _check_finite(named: dict[str, torch.Tensor]):
@@ -380,14 +411,14 @@ def rasterize(
     _check_tensor("viewmat", viewmat, (4, 4), device)
     _check_tensor("K", K, (3, 3), device)
     if background is None:
-        background = torch.zeros(3, device=device)
+        background = _zero_input((3,), device)  # read only (the kernels', and no gradient flows to it)
     for name, v in (("width", width), ("height", height)):
         if not isinstance(v, int) or v <= 0:
             _fail(name, f"must be a positive int, got {v!r}")
     backdrop = None  # a per-pixel background, composited after the kernels (which take one colour)
     if isinstance(background, torch.Tensor) and background.dim() == 3:
         _check_tensor("background", background, (height, width, 3), device)
-        backdrop, background = background, torch.zeros(3, device=device)
+        backdrop, background = background, _zero_input((3,), device)
     _check_tensor("background", background, (3,), device)
     if not (0.0 < alpha_max < 1.0):
         _fail("alpha_max", f"must lie in (0, 1), got {alpha_max}")
@@ -404,23 +435,26 @@ def rasterize(
         if n and bool((quats.detach().norm(dim=-1) == 0).any()):
             _fail("quats", "contains a zero quaternion, which has no rotation")
 
-    _, tiles_x, tiles_y = _tile_grid(device_of(means), width, height)
+    dev = device_of(means)
+    stream = launch_stream(means)  # torch's current stream: every launch of the render, its backward's too
+    _, tiles_x, tiles_y = _tile_grid(dev, width, height)
     means2d, conics, depths, opac_eff, radii, tiles_touched = _Project.apply(
-        means, quats, scales, opacities, viewmat, K, width, height, eps2d, near_plane, far_plane, antialiased
+        means, quats, scales, opacities, viewmat, K, width, height, eps2d, near_plane, far_plane, antialiased,
+        dev, stream
     )
     if means2d.requires_grad:
         means2d.retain_grad()
     if sh_degree is not None:
         R, t = viewmat[:3, :3], viewmat[:3, 3]
         campos = -(R.T @ t)
-        rgb = _SHColors.apply(colors, means, campos.contiguous(), radii, sh_degree)
+        rgb = _SHColors.apply(colors, means, campos.contiguous(), radii, sh_degree, dev, stream)
     else:
         rgb = colors
     ranges, gauss_ids, total = _bin_gaussians(means2d.detach(), radii, depths.detach(), tiles_touched,
-                                              tiles_x, tiles_y, isect_capacity)
+                                              tiles_x, tiles_y, isect_capacity, dev, stream)
     image, depth, alpha = _Composite.apply(
         means2d, conics, opac_eff, rgb, depths, background, ranges, gauss_ids, width, height, alpha_max,
-        deterministic
+        deterministic, dev, stream
     )
     if backdrop is not None:
         image = image + (1.0 - alpha)[..., None] * backdrop.float()
@@ -439,7 +473,7 @@ def count_intersections(means, quats, scales, opacities, viewmat, K, width: int,
         if means.shape[0] == 0:
             return 0
         tiles_touched = _project(means, quats, scales, opacities, viewmat, K, width, height, eps2d, near_plane,
-                                 far_plane, antialiased)[5]
+                                 far_plane, antialiased, device_of(means), launch_stream(means))[5]
         return int(tiles_touched.sum())
 
 
