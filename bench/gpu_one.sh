@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Sourced by the GPU session scripts (bench/gpu_session14.sh to gpu_session19.sh). one: one capture run.
+# Sourced by the GPU session scripts (bench/gpu_session14.sh to gpu_session20.sh). one: one capture run.
 #   one NAME METHOD SCENE VIEWS SEED [--set k=v ...]
 # Runs python -m warpgs.pipelines.sparse on the DL3DV-layout scene SCENE under $D into $R/NAME (log: $R/NAME.log),
 # at --downscale ${DS:-8} for ${IT:-3000} iterations, 10 evaluations; skipped when NAME has its metrics, resumed
@@ -34,4 +34,12 @@ rasterizer_runs() {
   timeout ${T:-300} python3 bench/rasterizer.py --ply "$R/fern_base/point_cloud.ply" --data llff --data-root "$D" \
     --scales 1,2,3 "$@" --out "$OUT/rasterizer_cuda_trained.json" 2>&1 \
     | tee "$OUT/rasterizer_trained.log" | grep -E "Gaussians|ratio|wrote"
+}
+
+# session_env PHASE D RUNS (bench/gpu_session20.sh on): makes RUNS and $OUT, exports the environment of the GPU runs
+# (the packed wheels in /tmp/site first, one thread per process for OpenMP/MKL, CUDA tests and builds for sm_90).
+session_env() {
+  mkdir -p "$3" "$OUT"
+  export PYTHONPATH=/tmp/site:$PWD PYTHONUNBUFFERED=1 OMP_NUM_THREADS=1 MKL_NUM_THREADS=1
+  export MAX_JOBS=16 TORCH_CUDA_ARCH_LIST=9.0 WARPGS_TEST_DEVICES=cuda
 }

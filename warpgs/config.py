@@ -136,7 +136,9 @@ class TrainConfig:
     alpha_binary: float = 0.0  # weight of mean(alpha (1 - alpha)) over each input render: every pixel either
     #   covered by Gaussians or showing what is behind them (with a far field, no translucent cover that a novel
     #   view sees at another angle); 0: off
-    prune_unseen_at_end: bool = False  # at the end, drop Gaussians no training view needs (costs novel-view PSNR)
+    prune_unseen_at_end: bool = False  # at the end, drop Gaussians no training view needs (the captures' default since
+    #   session 20: a Gaussian no input sees can only stand in front of a novel view; on scenes whose test views see
+    #   what the inputs do not, it can cost novel-view PSNR)
     # CoR-GS (Zhang et al., ECCV 2024; warpgs/coreg.py): a second model trained beside the first from the same
     # initial Gaussians, on the same views, with its own random streams; twice the training cost. The first model
     # is the one evaluated and exported

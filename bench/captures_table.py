@@ -1,0 +1,85 @@
+"""The README's capture table of session 20, generated from the GPU runs' summaries (not typed by hand).
+
+    python bench/captures_table.py [--results bench/results/s20]
+
+Reads ``path_floaters.txt`` (the previous default, ``_r0``, and with ``train.path_floaters`` 10, ``_r10``) and
+``captures_d.txt`` (the default after this session: the path floaters and ``train.prune_unseen_at_end``), lines
+``NAME PSNR GAUSSIANS [per-view PSNRs] [curve]`` as ``bench/gpu_session19.sh p`` / ``gpu_session20.sh c`` print
+them, and prints a markdown table of medians [min, max] over the seeds per scene, views and method, with the full
+method's gain over the baseline and the collapses (a run over 2 dB below its column's median).
+"""
+
+from __future__ import annotations
+
+import argparse
+import re
+import statistics
+from pathlib import Path
+
+NAME = re.compile(r"^(?P<prefix>[a-z]+)_(?P<scene>\w+?_p\d+)_(?P<views>\d+)v_(?P<method>baseline|full)_s(?P<seed>\d+)"
+                  r"(?:_r(?P<ratio>\d+))?$")
+
+
+def load(path: Path, prefix: str, ratio: str | None = None) -> dict:
+    """{(scene, views, method): {seed: psnr}} of the runs named ``prefix_...`` (and ``_r{ratio}`` where given)."""
+    runs: dict = {}
+    for line in path.read_text().splitlines():
+        parts = line.split()
+        m = NAME.match(parts[0]) if parts else None
+        if m is None or m["prefix"] != prefix or m["ratio"] != ratio:
+            continue
+        runs.setdefault((m["scene"], int(m["views"]), m["method"]), {})[int(m["seed"])] = float(parts[1])
+    return runs
+
+
+def cell(seeds: dict) -> str:
+    v = list(seeds.values())
+    return f"{statistics.median(v):.2f} [{min(v):.2f}, {max(v):.2f}]" if v else "-"
+
+
+def table(columns: list[tuple[str, dict]]) -> list[str]:
+    keys = sorted({(s, n) for _, runs in columns for (s, n, _) in runs})
+    head = ["scene", "views"] + [f"{label} {m}" for label, _ in columns for m in ("baseline", "full")]
+    head += [f"full - baseline ({columns[-1][0]})"]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    gains, collapses = [], []
+    for s, n in keys:
+        row = [s, str(n)]
+        for label, runs in columns:
+            for m in ("baseline", "full"):
+                seeds = runs.get((s, n, m), {})
+                row.append(cell(seeds))
+                if seeds:
+                    med = statistics.median(seeds.values())
+                    collapses += [f"{label} {s} {n}v {m} seed {k}: {v:.2f} (median {med:.2f})"
+                                  for k, v in seeds.items() if v < med - 2]
+        last = columns[-1][1]
+        b, f = last.get((s, n, "baseline")), last.get((s, n, "full"))
+        g = statistics.median(f.values()) - statistics.median(b.values()) if b and f else None
+        row.append("-" if g is None else f"{g:+.2f}")
+        if g is not None:
+            gains.append(g)
+        lines.append("| " + " | ".join(row) + " |")
+    if gains:
+        lines.append("")
+        lines.append(f"- full - baseline ({columns[-1][0]}, medians): mean {sum(gains) / len(gains):+.2f} dB, "
+                     f"worst {min(gains):+.2f} dB over {len(gains)} cases")
+    lines.append(f"- collapses (more than 2 dB below the column's median): {len(collapses)}"
+                 + "".join(f"\n  - {c}" for c in collapses))
+    return lines
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--results", default=str(Path(__file__).resolve().parent / "results" / "s20"))
+    args = ap.parse_args(argv)
+    r = Path(args.results)
+    cols = [("session 19 default", load(r / "path_floaters.txt", "p", "0")),
+            ("+ path floaters", load(r / "path_floaters.txt", "p", "10")),
+            ("session 20 default", load(r / "captures_d.txt", "d"))]
+    print("\n".join(table(cols)))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
