@@ -43,3 +43,14 @@ session_env() {
   export PYTHONPATH=/tmp/site:$PWD PYTHONUNBUFFERED=1 OMP_NUM_THREADS=1 MKL_NUM_THREADS=1
   export MAX_JOBS=16 TORCH_CUDA_ARCH_LIST=9.0 WARPGS_TEST_DEVICES=cuda
 }
+
+# gc NAME [graph_check arguments ...] (bench/gpu_session19.sh g, gpu_session20.sh h): bench/graph_check.py on $D with
+# ${ITERS:-1000} iterations into $OUT/graph_check_NAME.json and .log, then its verdict: whether the parameters and
+# losses with the graphs equal those without, bit for bit, and the speed-up.
+gc() {  # name, then graph_check's arguments
+  local n=$1; shift
+  timeout ${T:-200} python3 bench/graph_check.py --data-root "$D" --iterations ${ITERS:-1000} --out "$OUT/graph_check_$n.json" "$@" \
+    2>&1 | grep -v "^Module\|^Warp" > "$OUT/graph_check_$n.log"
+  echo "== $n"; grep -E "^(eager|graph|graph_again) |CUDA graphs off|Error|error" "$OUT/graph_check_$n.log" | cut -c1-400
+  python3 -c "import json,sys; t=json.load(open(sys.argv[1]))['trainer']; print({k: (t[k].get('params_bit_equal'), t[k].get('losses_equal')) for k in ('graph','graph_again')}, 'speedup', t['speedup'])" "$OUT/graph_check_$n.json" 2>&1 | tail -1
+}

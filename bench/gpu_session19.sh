@@ -20,13 +20,6 @@ P=$1; D=$2; R=$3; shift 3; mkdir -p "$R" "$OUT"
 export PYTHONPATH=/tmp/site:$PWD PYTHONUNBUFFERED=1 OMP_NUM_THREADS=1 MKL_NUM_THREADS=1
 export MAX_JOBS=16 TORCH_CUDA_ARCH_LIST=9.0 WARPGS_TEST_DEVICES=cuda
 source "$(dirname "${BASH_SOURCE[0]}")/gpu_one.sh"
-gc() {  # name, then graph_check's arguments
-  local n=$1; shift
-  timeout ${T:-200} python3 bench/graph_check.py --data-root "$D" --iterations ${ITERS:-1000} --out "$OUT/graph_check_$n.json" "$@" \
-    2>&1 | grep -v "^Module\|^Warp" > "$OUT/graph_check_$n.log"
-  echo "== $n"; grep -E "^(eager|graph|graph_again) |CUDA graphs off|Error|error" "$OUT/graph_check_$n.log" | cut -c1-400
-  python3 -c "import json,sys; t=json.load(open(sys.argv[1]))['trainer']; print({k: (t[k].get('params_bit_equal'), t[k].get('losses_equal')) for k in ('graph','graph_again')}, 'speedup', t['speedup'])" "$OUT/graph_check_$n.json" 2>&1 | tail -1
-}
 case $P in
 g)
   timeout ${T:-200} python3 -m pytest -q -x tests/test_rasterizer.py tests/test_sync.py -k "cuda or adam or masked or capacity" \

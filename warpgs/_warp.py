@@ -259,39 +259,21 @@ def _array_setter(label: str, atype, c):
         row = math.prod(inner) * es  # the first stride's bytes of a contiguous tensor with more than one row
         written = -1  # the first size that ``shape``/``strides`` hold (-1: none yet, or one of 0 or 1 rows)
 
-        if inner:
-            def set_array(t):
-                nonlocal written
-                shp = t.shape
-                # shp[1:] == inner implies the number of dimensions (a 0-dim tensor's () never equals inner)
-                if t.dtype is not want or shp[1:] != inner or not t.is_contiguous():
-                    fail(t)
-                c.data = t.data_ptr()
-                n = shp[0]
-                if n != written:
-                    shape[0] = n
-                    if n > 1:
-                        strides[0] = row
-                        written = n
-                    else:
-                        strides[0] = t.stride(0) * es
-                        written = -1
-        else:
-            def set_array(t):
-                nonlocal written
-                shp = t.shape
-                if t.dtype is not want or len(shp) != 1 or not t.is_contiguous():
-                    fail(t)
-                c.data = t.data_ptr()
-                n = shp[0]
-                if n != written:
-                    shape[0] = n
-                    if n > 1:
-                        strides[0] = row
-                        written = n
-                    else:
-                        strides[0] = t.stride(0) * es
-                        written = -1
+        def set_array(t):
+            nonlocal written
+            shp = t.shape
+            if t.dtype is not want or len(shp) != full or shp[1:] != inner or not t.is_contiguous():
+                fail(t)
+            c.data = t.data_ptr()
+            n = shp[0]
+            if n != written:
+                shape[0] = n
+                if n > 1:
+                    strides[0] = row
+                    written = n
+                else:
+                    strides[0] = t.stride(0) * es
+                    written = -1
         return set_array
 
     def set_array(t):
