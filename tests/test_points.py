@@ -144,9 +144,11 @@ def test_trainer_starts_from_the_points_and_records_them(room, tmp_path, monkeyp
     cfg.train.device, cfg.train.iterations, cfg.train.progress = "cpu", 5, False
     cfg.eval.fps_repeats = 1
     cfg.eval.lpips_weights = str(tmp_path / "none.pth")
+    cfg.train.hold_geometry = "stereo"  # the captures' default: points from stereo alone hold the geometry
     t = Trainer(cfg, room, tmp_path / "run", log=lambda m: None)
     geo = room.geometry
     assert geo.method == "stereo" and len(t.model) == len(geo.xyz)
+    assert t.held["mode"] == "stereo" and t.strategy.refine_stop_iter == 0 and t.cfg.optim.means_lr < cfg.optim.means_lr
     assert room.bounds == geo.bounds and room.metadata["loader_bounds"] == loader_bounds
     t.train()
     m = t.finish()
@@ -154,6 +156,7 @@ def test_trainer_starts_from_the_points_and_records_them(room, tmp_path, monkeyp
     assert m["stage_times_s"]["init_stereo_s"] > 0 and m["stage_times_s"]["train_s"] > 0
     saved = json.loads((tmp_path / "run" / "metrics.json").read_text())
     assert saved["init"]["notes"] and (tmp_path / "run" / "init_points.ply").is_file()
+    assert saved["hold_geometry"]["mode"] == "stereo" and len(t.model) == len(geo.xyz)
 
 
 @pytest.mark.skipif(not (SHARED / "castle_p30").is_dir(), reason="../shared/data/castle_p30 is not here")

@@ -136,6 +136,14 @@ class TrainConfig:
     alpha_binary: float = 0.0  # weight of mean(alpha (1 - alpha)) over each input render: every pixel either
     #   covered by Gaussians or showing what is behind them (with a far field, no translucent cover that a novel
     #   view sees at another angle); 0: off
+    hold_geometry: str = "off"  # off | on | stereo: train the colours and opacities at full rate and hold the initial
+    #   geometry: no densification or pruning by the strategy (strategy.refine_stop_iter 0) and the means', scales'
+    #   and rotations' learning rates x the hold_* factors below; stereo: only when the initial points came from
+    #   plane-sweep stereo alone (model.init sfm falling back to stereo on wide baselines, or stereo): a dense
+    #   cloud that growth would only bend towards the few inputs (warpgs.train.hold_geometry)
+    hold_means_lr: float = 0.1
+    hold_scales_lr: float = 0.2
+    hold_quats_lr: float = 0.1
     prune_unseen_at_end: bool = False  # at the end, drop Gaussians no training view needs (the captures' default since
     #   session 20: a Gaussian no input sees can only stand in front of a novel view; on scenes whose test views see
     #   what the inputs do not, it can cost novel-view PSNR)
@@ -186,7 +194,8 @@ class TrainConfig:
               "scale_reg": ">= 0", "scale_reg_ratio": ">= 1", "max_nan_steps": ">= 1",
               "explode_factor": ">= 0", "explode_window": ">= 1", "explode_patience": ">= 1", "snapshot_every": ">= 0",
               "max_recoveries": ">= 0", "recovery_lr_factor": "(0, 1]", "cpu_threads": ">= 0", "sync_every": ">= 1",
-              "far_field": FAR_FIELD_RULE, "far_field_bins": ">= 1", "alpha_binary": ">= 0", "path_clearance": ">= 0", "view_clearance": ">= 0", "path_floaters": ">= 0", "path_floaters_every": ">= 1", "path_floaters_poses": ">= 1", "co_prune_every": ">= 0", "co_prune_dist": "> 0",
+              "far_field": FAR_FIELD_RULE, "hold_geometry": "{off, on, stereo}", "hold_means_lr": "> 0",
+              "hold_scales_lr": "> 0", "hold_quats_lr": "> 0", "far_field_bins": ">= 1", "alpha_binary": ">= 0", "path_clearance": ">= 0", "view_clearance": ">= 0", "path_floaters": ">= 0", "path_floaters_every": ">= 1", "path_floaters_poses": ">= 1", "co_prune_every": ">= 0", "co_prune_dist": "> 0",
               "co_reg_weight": ">= 0", "co_reg_start": ">= 0", "co_reg_frames": ">= 1"}
 
 

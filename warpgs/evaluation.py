@@ -90,6 +90,8 @@ def run_metrics(trainer, ev: dict, train_ev: dict, fps: float) -> dict:
         metrics["init"] = geo.summary()
     metrics["stage_times_s"] = {**{f"init_{k}": round(v, 2) for k, v in (geo.times.items() if geo else [])},
                                 "train_s": round(tr.train_time, 2)}
+    if getattr(tr, "held", None):
+        metrics["hold_geometry"] = tr.held
     if tr.stopped_early:
         metrics["stopped_early"] = tr.stopped_early
     if "lpips_missing" in ev:

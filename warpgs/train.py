@@ -223,6 +223,29 @@ def prepare_geometry(cfg: Config, scene, log=None):
     return geo
 
 
+def hold_geometry(cfg: Config, geo) -> tuple[Config, dict | None]:
+    """``train.hold_geometry``: the run's configuration with the initial geometry held (no densification or
+    pruning by the strategy; the means', scales' and rotations' learning rates x ``train.hold_*``), and a
+    record of why (None: not held). ``stereo`` holds it only when ``geo`` (``prepare_geometry``'s points)
+    came from plane-sweep stereo alone. At 3 views of a walk-around capture SfM finds too few points and the
+    run starts from the stereo cloud; growth then bends it towards the inputs and the test views get worse
+    than at step 300 (session 21, castle_p30 / herz_jesus_p25, 384x256, seeds 0-2: 13.62 / 17.28 with growth,
+    14.35 / 17.89 held; bench/results/s21)."""
+    t = cfg.train
+    mode = t.hold_geometry
+    if mode not in ("off", "on", "stereo"):
+        raise ValueError(f"train.hold_geometry must be off, on or stereo, got {mode!r}")
+    if mode == "off" or (mode == "stereo" and (geo is None or geo.method != "stereo")):
+        return cfg, None
+    o = cfg.optim
+    optim = dataclasses.replace(o, means_lr=o.means_lr * t.hold_means_lr, means_lr_final=o.means_lr_final * t.hold_means_lr,
+                                scales_lr=o.scales_lr * t.hold_scales_lr, quats_lr=o.quats_lr * t.hold_quats_lr)
+    held = dataclasses.replace(cfg, optim=optim, strategy=dataclasses.replace(cfg.strategy, refine_stop_iter=0))
+    why = "train.hold_geometry=on" if mode == "on" else "the initial points came from stereo"
+    return held, {"mode": mode, "why": why, "means_lr": t.hold_means_lr, "scales_lr": t.hold_scales_lr,
+                  "quats_lr": t.hold_quats_lr}
+
+
 def init_model(cfg: Config, scene, generator: torch.Generator) -> GaussianModel:
     """The initial Gaussians (on the CPU) as ``cfg.model.init`` says."""
     m = cfg.model
@@ -392,10 +415,16 @@ class Trainer:
         # fitted on the training views only, deterministic: a resumed run computes the same one
         self.far_field = make_far_field(cfg.train.far_field, self.train_cams, cfg.train.far_field_bins, self.background)
         self.scene_scale = cfg.optim.scene_scale or scene_scale_of(scene.train)
-        self.strategy = cfg.strategy
         seed = cfg.train.seed
         torch.manual_seed(seed)
         np.random.seed(seed % 2**32)
+        # the initial points (found here or earlier, then kept on the scene) decide train.hold_geometry
+        cfg, self.held = hold_geometry(cfg, prepare_geometry(cfg, scene, self.log))
+        if self.held is not None:
+            self.cfg = cfg
+            self.log(f"warpgs: geometry held ({self.held['why']}): no densification; means / scales / rotations "
+                     f"learning rates x {self.held['means_lr']:g} / {self.held['scales_lr']:g} / {self.held['quats_lr']:g}")
+        self.strategy = cfg.strategy
         init_gen = torch.Generator().manual_seed(seed)
         self.model = init_model(cfg, scene, init_gen).to(self.device)
         self.split_gen = torch.Generator(device=self.device).manual_seed(seed + 1)

@@ -1,0 +1,88 @@
+#!/usr/bin/env bash
+# GPU runs of session 21 (issue 13: the captures at 3 views, where training lowers the test PSNR below its value
+# at step 300), after the packed wheels are installed in /tmp/site and the scenes copied to $D.
+#   T=seconds bash bench/gpu_session21.sh PHASE D RUNS
+# v: the baseline at 3 views (castle_p30, herz_jesus_p25; 384x256, 3000 it, seeds 0-2) under one change each of
+#    the captures' default: no densification (strategy.refine_stop_iter 0), SH degree 0, a 10x smaller means
+#    learning rate, DropGaussian 0.5, a 5x smaller scales learning rate, and those three geometry changes together.
+#    VARIANTS picks a subset (names), JOBS runs at a time; a summary line per run in $OUT/variants.txt.
+#    VIEWS (default 3) and METHODS (default baseline) widen it.
+# d: the captures' default (now with train.hold_geometry stereo) at 3 views, baseline and full, seeds 0-2 (prefix d).
+# o: DTU scan65 and LLFF fern at 3 views (3000 it, seeds 0-2, baseline and full), their default and
+#    train.hold_geometry=on (their points come from sfm+stereo): SCENES picks dtu and/or llff.
+# w: the variants named by VARIANTS on all six cases, baseline and full, seeds 0-2 (is it a default?).
+set -u
+source "$(dirname "${BASH_SOURCE[0]}")/gpu_one.sh"
+session_env "$@"; P=$1; D=$2; R=$3; shift 3
+export R D T
+declare -A SET=(
+  [nogrow]="--set strategy.refine_stop_iter=0"
+  [sh0]="--set model.sh_degree=0"
+  [mlr]="--set optim.means_lr=1.6e-5 --set optim.means_lr_final=1.6e-7"
+  [drop5]="--set train.drop_rate=0.5"
+  [slr]="--set optim.scales_lr=1e-3"
+  [geo]="--set strategy.refine_stop_iter=0 --set optim.means_lr=1.6e-5 --set optim.means_lr_final=1.6e-7 --set optim.scales_lr=1e-3"
+  [nogrow_sh0]="--set strategy.refine_stop_iter=0 --set model.sh_degree=0"
+  [geo_sh0]="--set strategy.refine_stop_iter=0 --set optim.means_lr=1.6e-5 --set optim.means_lr_final=1.6e-7 --set optim.scales_lr=1e-3 --set model.sh_degree=0"
+  [geo_is2]="--set strategy.refine_stop_iter=0 --set optim.means_lr=1.6e-5 --set optim.means_lr_final=1.6e-7 --set optim.scales_lr=1e-3 --set model.init_scale=2.0"
+  [geo_m0]="--set strategy.refine_stop_iter=0 --set optim.means_lr=1.6e-7 --set optim.means_lr_final=1.6e-8 --set optim.scales_lr=1e-3"
+  [geo_grow]="--set optim.means_lr=1.6e-5 --set optim.means_lr_final=1.6e-7 --set optim.scales_lr=1e-3"
+  [geo_d0]="--set strategy.refine_stop_iter=0 --set optim.means_lr=1.6e-5 --set optim.means_lr_final=1.6e-7 --set optim.scales_lr=1e-3 --set train.drop_rate=0"
+  [geo_q]="--set strategy.refine_stop_iter=0 --set optim.means_lr=1.6e-5 --set optim.means_lr_final=1.6e-7 --set optim.scales_lr=1e-3 --set optim.quats_lr=1e-4"
+  [ss]="--set model.init=sfm+stereo"
+  [ss_geo]="--set model.init=sfm+stereo --set strategy.refine_stop_iter=0 --set optim.means_lr=1.6e-5 --set optim.means_lr_final=1.6e-7 --set optim.scales_lr=1e-3"
+  [geo_rand]="--set strategy.refine_stop_iter=0 --set optim.means_lr=1.6e-5 --set optim.means_lr_final=1.6e-7 --set optim.scales_lr=1e-3 --set model.init_random=20000"
+)
+summary() {  # metrics of the runs $R/$1* into $OUT/$2
+  for m in "$R"/$1*/metrics.json; do
+    python3 -c "import json,sys; d=json.load(open(sys.argv[1])); print(sys.argv[1].split('/')[-2], round(d['psnr'],3), d['num_gaussians'], [round(v['psnr'],2) for v in d.get('per_view',[])], [round(c['psnr'],2) for c in d.get('curve',[])])" "$m"
+  done | sort | tee "$OUT/$2"
+}
+other() {  # NAME METHOD DATASET SCENE VIEWS SEED [--set k=v ...]: like gpu_one.sh's one, on a named dataset
+  local name=$1 method=$2 data=$3 scene=$4 views=$5 seed=$6; shift 6
+  [ -f "$R/$name/metrics.json" ] && return 0
+  local resume=(); [ -f "$R/$name/config.yaml" ] && resume=(--resume)
+  local t=${T:-540}; [ -n "${END:-}" ] && t=$((END - $(date +%s)))
+  [ "$t" -lt 20 ] && { echo "$name: no time left in this call"; return 0; }
+  timeout -s INT "$t" python3 -m warpgs.pipelines.sparse --method "$method" --data "$data" --scene "$scene" \
+    --views "$views" --iterations 3000 --device cuda --no-progress --seed "$seed" --data-root "$D" \
+    --set train.eval_every=300 --out "$R/$name" "${resume[@]}" "$@" >> "$R/$name.log" 2>&1
+  echo "$name rc=$?"
+}
+export -f other
+case $P in
+d)
+  for c in castle_p30 herz_jesus_p25; do for m in baseline full; do for s in 0 1 2; do
+    echo "d_${c}_3v_${m}_s$s $m $c 3 $s"
+  done; done; done | xargs -P ${JOBS:-12} -L 1 bash -c 'one "$@"' _ | grep -v "rc=0"
+  summary d_ default3.txt
+  ;;
+o)
+  for c in ${SCENES:-dtu llff}; do sc=scan65; [ $c = llff ] && sc=fern
+    for v in default hold; do a=""; [ $v = hold ] && a="--set train.hold_geometry=on"
+      for m in baseline full; do for s in 0 1 2; do
+        echo "o_${c}_${v}_${m}_s$s $m $c $sc 3 $s $a"
+      done; done
+    done
+  done | xargs -P ${JOBS:-12} -L 1 bash -c 'other "$@"' _ | grep -v "rc=0"
+  summary o_ other.txt
+  ;;
+v)
+  for v in ${VARIANTS:-nogrow sh0 mlr drop5 slr geo}; do
+    for c in castle_p30 herz_jesus_p25; do for n in ${VIEWS:-3}; do for m in ${METHODS:-baseline}; do for s in 0 1 2; do
+      echo "v_${v}_${c}_${n}v_${m}_s$s $m $c $n $s ${SET[$v]}"
+    done; done; done; done
+  done | xargs -P ${JOBS:-12} -L 1 bash -c 'one "$@"' _ | grep -v "rc=0"
+  summary v_ variants.txt
+  ;;
+w)
+  for v in ${VARIANTS}; do
+    for c in castle_p30:3 castle_p30:6 castle_p30:9 herz_jesus_p25:3 herz_jesus_p25:6 herz_jesus_p25:9; do
+      for m in baseline full; do for s in 0 1 2; do
+        echo "w_${v}_${c%%:*}_${c##*:}v_${m}_s$s $m ${c%%:*} ${c##*:} $s ${SET[$v]}"
+      done; done
+    done
+  done | xargs -P ${JOBS:-12} -L 1 bash -c 'one "$@"' _ | grep -v "rc=0"
+  summary w_ wide.txt
+  ;;
+esac
