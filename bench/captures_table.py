@@ -1,12 +1,15 @@
-"""The README's capture table of session 20, generated from the GPU runs' summaries (not typed by hand).
+"""The README's capture tables of sessions 20 and 21, generated from the GPU runs' summaries (not typed by hand).
 
-    python bench/captures_table.py [--results bench/results/s20]
+    python bench/captures_table.py [--session 21] [--results bench/results]
 
-Reads ``path_floaters.txt`` (the previous default, ``_r0``, and with ``train.path_floaters`` 10, ``_r10``) and
-``captures_d.txt`` (the default after this session: the path floaters and ``train.prune_unseen_at_end``), lines
-``NAME PSNR GAUSSIANS [per-view PSNRs] [curve]`` as ``bench/gpu_session19.sh p`` / ``gpu_session20.sh c`` print
-them, and prints a markdown table of medians [min, max] over the seeds per scene, views and method, with the full
-method's gain over the baseline and the collapses (a run over 2 dB below its column's median).
+Lines ``NAME PSNR GAUSSIANS [per-view PSNRs] [curve]`` as ``bench/gpu_session19.sh p`` / ``gpu_session20.sh c`` /
+``gpu_session21.sh`` print them; a markdown table of medians [min, max] over the seeds per scene, views and
+method, with the full method's gain over the baseline and the collapses (a run over 2 dB below its column's
+median).
+- session 20: ``s20/path_floaters.txt`` (the previous default, ``_r0``, and with ``train.path_floaters`` 10,
+  ``_r10``) and ``s20/captures_d.txt`` (with the path floaters and ``train.prune_unseen_at_end``);
+- session 21: that default, then the one with ``train.hold_geometry: stereo`` (``s21/captures_default3.txt``,
+  the 3-view runs it changes, and ``s21/captures_default69.txt``, the 6- and 9-view runs repeated with it).
 """
 
 from __future__ import annotations
@@ -69,14 +72,27 @@ def table(columns: list[tuple[str, dict]]) -> list[str]:
     return lines
 
 
+def merged(*parts: dict) -> dict:
+    out: dict = {}
+    for runs in parts:
+        for key, seeds in runs.items():
+            out.setdefault(key, {}).update(seeds)
+    return out
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--results", default=str(Path(__file__).resolve().parent / "results" / "s20"))
+    ap.add_argument("--results", default=str(Path(__file__).resolve().parent / "results"))
+    ap.add_argument("--session", type=int, choices=(20, 21), default=21)
     args = ap.parse_args(argv)
-    r = Path(args.results)
-    cols = [("session 19 default", load(r / "path_floaters.txt", "p", "0")),
-            ("+ path floaters", load(r / "path_floaters.txt", "p", "10")),
-            ("session 20 default", load(r / "captures_d.txt", "d"))]
+    r20, r21 = Path(args.results) / "s20", Path(args.results) / "s21"
+    s20 = ("session 20 default", load(r20 / "captures_d.txt", "d"))
+    if args.session == 20:
+        cols = [("session 19 default", load(r20 / "path_floaters.txt", "p", "0")),
+                ("+ path floaters", load(r20 / "path_floaters.txt", "p", "10")), s20]
+    else:
+        cols = [s20, ("session 21 default", merged(load(r21 / "captures_default3.txt", "d"),
+                                                   load(r21 / "captures_default69.txt", "d")))]
     print("\n".join(table(cols)))
     return 0
 

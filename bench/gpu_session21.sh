@@ -8,6 +8,9 @@
 #    VARIANTS picks a subset (names), JOBS runs at a time; a summary line per run in $OUT/variants.txt.
 #    VIEWS (default 3) and METHODS (default baseline) widen it.
 # d: the captures' default (now with train.hold_geometry stereo) at 3 views, baseline and full, seeds 0-2 (prefix d).
+# e: the captures' default at 6 and 9 views (prefix d; SfM's points start those runs, so the hold does not apply and
+#    they should repeat bench/results/s20/captures_d.txt to the last digit), beside the four 3-view runs at 768x512,
+#    10,000 it, seed 0 (prefix a; issue 13: every images_4 run completes).
 # o: DTU scan65 and LLFF fern at 3 views (3000 it, seeds 0-2, baseline and full), their default and
 #    train.hold_geometry=on (their points come from sfm+stereo): SCENES picks dtu and/or llff.
 # w: the variants named by VARIANTS on all six cases, baseline and full, seeds 0-2 (is it a default?).
@@ -57,11 +60,21 @@ d)
   done; done; done | xargs -P ${JOBS:-12} -L 1 bash -c 'one "$@"' _ | grep -v "rc=0"
   summary d_ default3.txt
   ;;
+e)
+  for c in castle_p30 herz_jesus_p25; do
+    for m in baseline full; do echo "a_${c}_3v_${m}_s0 $m $c 3 0"; done | DS=4 IT=10000 xargs -P 4 -L 1 bash -c 'one "$@"' _ > "$OUT/a768.log" &
+  done
+  for c in castle_p30 herz_jesus_p25; do for n in 6 9; do for m in baseline full; do for s in 0 1 2; do
+    echo "d_${c}_${n}v_${m}_s$s $m $c $n $s"
+  done; done; done; done | xargs -P ${JOBS:-12} -L 1 bash -c 'one "$@"' _ | grep -v "rc=0"
+  wait
+  summary d_ default69.txt > /dev/null; summary a_ a768.txt
+  ;;
 o)
   for c in ${SCENES:-dtu llff}; do sc=scan65; [ $c = llff ] && sc=fern
     for v in default hold; do a=""; [ $v = hold ] && a="--set train.hold_geometry=on"
       for m in baseline full; do for s in 0 1 2; do
-        echo "o_${c}_${v}_${m}_s$s $m $c $sc 3 $s $a"
+        echo "o_${c}_${v}_${m}_s$s $m $c $sc 3 $s${a:+ $a}"  # no trailing blank: xargs -L would join the next line
       done; done
     done
   done | xargs -P ${JOBS:-12} -L 1 bash -c 'other "$@"' _ | grep -v "rc=0"

@@ -24,3 +24,11 @@ def test_table_takes_medians_per_case_and_the_full_methods_gain(tmp_path):
     assert "mean +0.00 dB, worst +0.00 dB over 1 cases" in out
     assert "collapses (more than 2 dB below the column's median): 1" in out
     assert "x castle_p30 9v full seed 2: 17.00 (median 21.00)" in out
+
+
+def test_merged_joins_cases_and_seeds_from_several_files():
+    a = {("castle_p30", 3, "baseline"): {0: 14.0}}
+    b = {("castle_p30", 3, "baseline"): {1: 15.0}, ("castle_p30", 6, "full"): {0: 19.0}}
+    m = ct.merged(a, b)
+    assert m == {("castle_p30", 3, "baseline"): {0: 14.0, 1: 15.0}, ("castle_p30", 6, "full"): {0: 19.0}}
+    assert a == {("castle_p30", 3, "baseline"): {0: 14.0}}  # the inputs stay as they were

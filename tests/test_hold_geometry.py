@@ -4,6 +4,7 @@ moving about as much less as their learning rate is smaller)."""
 
 from __future__ import annotations
 
+from pathlib import Path
 from types import SimpleNamespace
 
 import pytest
@@ -36,6 +37,16 @@ def test_held_config_scales_the_geometry_rates_and_stops_the_strategy(mode, meth
     assert (h.opacities_lr, h.sh0_lr, h.shN_lr) == (o.opacities_lr, o.sh0_lr, o.shN_lr)  # colours train as before
     assert held.strategy.refine_stop_iter == 0 and cfg.strategy.refine_stop_iter == Config().strategy.refine_stop_iter
     assert held.strategy.prune_opa == cfg.strategy.prune_opa and held.train == cfg.train  # nothing else moves
+
+
+def test_on_and_off_read_as_words_from_yaml_and_the_command_line():
+    from warpgs.config import load_config
+
+    assert load_config(overrides=["train.hold_geometry=on"]).train.hold_geometry == "on"  # YAML 1.1: True
+    assert load_config(overrides=["train.hold_geometry=off"]).train.hold_geometry == "off"
+    assert load_config([Path(__file__).resolve().parents[1] / "configs" / "dl3dv.yaml"]).train.hold_geometry == "stereo"  # the captures' default
+    with pytest.raises(ValueError, match="far_field"):  # a boolean where on / off mean nothing stays an error
+        load_config(overrides=["train.far_field=on"])
 
 
 def test_a_bad_mode_is_named():

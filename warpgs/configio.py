@@ -53,6 +53,8 @@ def _type_ok(value, tp) -> tuple[bool, Any]:
                 return False, value
         return False, value
     if base is str:
+        if isinstance(value, bool):  # YAML 1.1 reads on / off (and yes / no) as booleans: an option's words
+            return True, "on" if value else "off"
         return isinstance(value, str), value
     if base is list:
         if isinstance(value, (list, tuple)):
