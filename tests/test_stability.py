@@ -402,3 +402,34 @@ def test_the_guard_judges_against_the_median_of_its_phase():
     g.healthy()
     assert not g.skipped() and not g.skipped() and g.skipped()
     assert (g.nan_steps, g.explode_steps) == (3, 0)
+
+
+def test_out_of_memory_writes_the_last_good_state_in_one_paragraph(tmp_path, capsys, monkeypatch):
+    """A device that runs out of memory mid-run (session 21: 16 runs sharing one GPU) stops the run with one
+    paragraph, and its metrics, renders and PLY are those of the last good state, as after a divergence."""
+    import torch
+
+    from warpgs.pipelines.sparse import main
+    from warpgs.train import Trainer
+
+    real = Trainer.compute_loss
+
+    def oom_from_step_12(self, out, cam):
+        if self.step >= 12:
+            raise torch.OutOfMemoryError("CUDA out of memory. Tried to allocate 28.00 MiB.")
+        return real(self, out, cam)
+
+    monkeypatch.setattr(Trainer, "compute_loss", oom_from_step_12)
+    data = write_nerfstudio(tmp_path / "scene")
+    out = tmp_path / "out"
+    rc = main(["--data", str(data), "--views", "3", "--device", "cpu", "--no-progress", "--method", "baseline",
+               "--set", "model.init=box", "--set", "model.init_box=[-1.2,-1.2,-1.2,1.2,1.2,1.2]",
+               "--set", "model.init_num=200", "--set", "train.snapshot_every=5", "--iterations", "30", "--out", str(out)])
+    raw = capsys.readouterr().err
+    err = " ".join(raw.split())
+    assert rc == 1 and "Traceback" not in raw
+    assert "the baseline run stopped early: cpu ran out of memory at step 12" in err and "step 10" in err
+    m = json.loads((out / "metrics.json").read_text())
+    assert m["stopped_early"] == {"reason": "out_of_memory", "step": 12, "restored_step": 10}
+    assert m["psnr"] is not None and np.isfinite(m["psnr"]) and (out / "point_cloud.ply").is_file()
+    assert any((out / "test").glob("*.png"))

@@ -1076,6 +1076,19 @@ class Trainer:
         self.guard.healthy()
         return self.step
 
+    def after_out_of_memory(self) -> int | None:
+        """After the device ran out of memory in a step (another process took it, or the model outgrew it):
+        drops the step's gradients and the step graph, frees the allocator's cache and puts the last good state
+        back; returns its step, or None when there is none (the model then stays as the failed step left it)."""
+        for opt in self.optimizers:
+            opt.zero_grad(set_to_none=True)
+        self.graph = None  # a capture or replay cut short is not replayed again
+        if self.device.type == "cuda":
+            torch.cuda.empty_cache()
+        if self._snapshot is None:
+            return None
+        return self.restore_snapshot()
+
     def apply_lr_scale(self) -> None:
         """Sets every group's learning rate to its base rate x ``lr_scale`` (the means' is set each step)."""
         base = base_learning_rates(self.cfg, self.scene_scale)

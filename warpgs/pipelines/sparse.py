@@ -228,9 +228,11 @@ class RunStopped(Exception):
 
 def run_method(method: str, cfg, scene, out: Path, resume: bool, baseline_metrics: dict | None = None,
                resume_hint: str | None = None) -> dict:
-    """Trains one method into ``out``; returns its metrics (``stopped_early`` set when it diverged and the
-    last good state's were written). Raises ``RunStopped`` when it ends without them: bad settings, Ctrl-C,
+    """Trains one method into ``out``; returns its metrics (``stopped_early`` set when it diverged or the device
+    ran out of memory, and the last good state's were written). Raises ``RunStopped`` when it ends without them: bad settings, Ctrl-C,
     a checkpoint that cannot be read or written, outputs that cannot be written (each said in one line)."""
+    import torch
+
     from warpgs.train import CHECKPOINT, PREVIOUS_CHECKPOINT, CheckpointError, TrainingDiverged, TrainingInterrupted
 
     cfg = copy.deepcopy(cfg)
@@ -262,6 +264,14 @@ def run_method(method: str, cfg, scene, out: Path, resume: bool, baseline_metric
         # the model is at its last good state: its metrics, renders and PLY are written all the same
         print("\n" + diverged_message(method, e, out), file=sys.stderr)
         trainer.stopped_early = {"reason": "diverged", "step": e.step, "cause": e.cause}
+    except torch.OutOfMemoryError as e:
+        # the metrics, renders and PLY of the last good state are written all the same (issue 13: whatever happens)
+        step = trainer.step
+        back = trainer.after_out_of_memory()
+        print("\n" + memory_message(method, step, back, trainer.device, out, resume_hint), file=sys.stderr)
+        if back is None:
+            raise RunStopped(2) from e
+        trainer.stopped_early = {"reason": "out_of_memory", "step": step, "restored_step": back}
     except CheckpointError as e:
         full = "space" in str(e).lower()  # ENOSPC, EDQUOT
         print(f"error: {e}" + ("" if "cannot write" not in str(e) else
@@ -277,8 +287,25 @@ def run_method(method: str, cfg, scene, out: Path, resume: bool, baseline_metric
         fix = "free space, then " if "space" in what.lower() else ""
         print(f"error: {what}; the outputs in {out} are incomplete ({fix}run again with {resume_hint})", file=sys.stderr)
         raise RunStopped(2) from e
+    except torch.OutOfMemoryError as e:
+        print(f"error: {trainer.device} ran out of memory while evaluating; the outputs in {out} are incomplete "
+              f"(free the device, then run again with {resume_hint})", file=sys.stderr)
+        raise RunStopped(2) from e
     print_metrics(metrics, out)
     return metrics
+
+
+def memory_message(method: str, step: int, back: int | None, device, out: Path, resume_hint: str) -> str:
+    """One paragraph (no traceback) for a run whose device ran out of memory at ``step``."""
+    import textwrap
+
+    what = (f"its outputs in {out} (metrics.json with 'stopped_early', renders, point_cloud.ply) are those of the "
+            f"last good state, step {back}" if back is not None else
+            "no good state was kept in memory yet, so it writes no results")
+    return textwrap.fill(f"warpgs: the {method} run stopped early: {device} ran out of memory at step {step}; {what}. "
+                         "Free the device (other processes on it), lower the image size (--downscale) or cap the "
+                         f"model (strategy.max_gaussians), then continue with {resume_hint} from the last checkpoint.",
+                         width=100, break_long_words=False, break_on_hyphens=False)
 
 
 def diverged_message(method: str, e, out: Path) -> str:
