@@ -54,6 +54,8 @@ class ModelConfig:
     init: str = "frustum"  # sfm | stereo | sfm+stereo (points found between the training views, warpgs/points)
     #   | box | hull | frustum | points | ply (hull: the box carved by the inputs' alpha)
     init_num: int = 100_000  # random Gaussians for box / frustum
+    init_fill: int = 0  # sfm / stereo: also a point per empty init_fill x init_fill pixel block of each training view
+    #   (no point projects there: what only that view sees), at the nearest point's depth (warpgs/points/fill.py); 0: off
     init_random: int = 0  # sfm / stereo: this many random Gaussians in the training frusta besides the points
     init_box: list | None = None  # [xmin, ymin, zmin, xmax, ymax, zmax]; None: the training frusta's bounding box
     init_depth: list | None = None  # [near, far] for frustum / the automatic box; None: the scene's bounds
@@ -63,7 +65,7 @@ class ModelConfig:
     drop_invalid: bool = False  # init ply: drop points with non-finite values (one warning) instead of refusing the file
 
     LIMITS = {"sh_degree": "[0, 3]", "init": "{sfm, stereo, sfm+stereo, box, hull, frustum, points, ply}",
-              "init_num": ">= 1", "init_random": ">= 0", "init_depth": "> 0", "init_opacity": "(0, 1)",
+              "init_num": ">= 1", "init_random": ">= 0", "init_fill": ">= 0", "init_depth": "> 0", "init_opacity": "(0, 1)",
               "init_scale": "> 0"}
 
 

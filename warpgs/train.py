@@ -255,7 +255,13 @@ def init_model(cfg: Config, scene, generator: torch.Generator) -> GaussianModel:
     if geo is not None:
         if len(geo.xyz) == 0:  # nothing found (said in one line): random points between the measured bounds
             return init_model(dataclasses.replace(cfg, model=dataclasses.replace(m, init="frustum")), scene, generator)
-        model = GaussianModel.from_points(geo.xyz, geo.rgb, **kw)
+        xyz, rgb = geo.xyz, geo.rgb
+        if m.init_fill > 0:  # what only one view sees: a point per empty block, at the nearest point's depth
+            from warpgs.points.fill import fill_points
+
+            fx, fc = fill_points(scene.train, xyz, m.init_fill)
+            xyz, rgb = np.concatenate([xyz, fx]), np.concatenate([rgb, fc])
+        model = GaussianModel.from_points(xyz, rgb, **kw)
         if m.init_random > 0:  # plus random Gaussians in the frusta, for what no method matched (sky, blank walls)
             extra = init_model(dataclasses.replace(cfg, model=dataclasses.replace(m, init="frustum", init_num=m.init_random)),
                                scene, generator)
