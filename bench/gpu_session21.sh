@@ -11,6 +11,8 @@
 # e: the captures' default at 6 and 9 views (prefix d; SfM's points start those runs, so the hold does not apply and
 #    they should repeat bench/results/s20/captures_d.txt to the last digit), beside the four 3-view runs at 768x512,
 #    10,000 it, seed 0 (prefix a; issue 13: every images_4 run completes).
+# f: model.init_fill 8 and 4 at 3 views (castle_p30, herz_jesus_p25), baseline, seeds 0-2, on the captures' default.
+#    (Not run in session 21: the device time was spent; bench/results/s21/cpu/init_fill_cpu.txt has the CPU runs.)
 # o: DTU scan65 and LLFF fern at 3 views (3000 it, seeds 0-2, baseline and full), their default and
 #    train.hold_geometry=on (their points come from sfm+stereo): SCENES picks dtu and/or llff.
 # w: the variants named by VARIANTS on all six cases, baseline and full, seeds 0-2 (is it a default?).
@@ -69,6 +71,12 @@ e)
   done; done; done; done | xargs -P ${JOBS:-12} -L 1 bash -c 'one "$@"' _ | grep -v "rc=0"
   wait
   summary d_ default69.txt > /dev/null; summary a_ a768.txt
+  ;;
+f)
+  for f in 8 4; do for c in castle_p30 herz_jesus_p25; do for s in 0 1 2; do
+    echo "f${f}_${c}_3v_baseline_s$s baseline $c 3 $s --set model.init_fill=$f"
+  done; done; done | xargs -P 12 -L 1 bash -c 'one "$@"' _ | grep -v "rc=0"
+  summary f fill.txt
   ;;
 o)
   for c in ${SCENES:-dtu llff}; do sc=scan65; [ $c = llff ] && sc=fern
