@@ -1,22 +1,37 @@
 #!/usr/bin/env bash
-# Sourced by the GPU session scripts (bench/gpu_session14.sh to gpu_session20.sh). one: one capture run.
-#   one NAME METHOD SCENE VIEWS SEED [--set k=v ...]
-# Runs python -m warpgs.pipelines.sparse on the DL3DV-layout scene SCENE under $D into $R/NAME (log: $R/NAME.log),
-# at --downscale ${DS:-8} for ${IT:-3000} iterations, 10 evaluations; skipped when NAME has its metrics, resumed
-# when it has started (a run stopped before its first checkpoint resumes from the start); stopped at the
-# deadline $END (epoch seconds), or after ${T:-540} s without one.
-one() {
-  local name=$1 method=$2 scene=$3 views=$4 seed=$5; shift 5
+# Sourced by the GPU session scripts (bench/gpu_session14.sh to gpu_session21.sh).
+# sparse_run NAME [python -m warpgs.pipelines.sparse arguments ...]: one run on the GPU into $R/NAME (log: $R/NAME.log),
+# on the scenes under $D; skipped when NAME has its metrics, resumed when it has started (a run stopped before its
+# first checkpoint resumes from the start); stopped at the deadline $END (epoch seconds), or after ${T:-540} s
+# without one. Prints NAME, the exit code and the run's last test PSNR line.
+sparse_run() {
+  local name=$1; shift
   [ -f "$R/$name/metrics.json" ] && return 0
   local resume=(); [ -f "$R/$name/config.yaml" ] && resume=(--resume)
   local t=${T:-540}; [ -n "${END:-}" ] && t=$((END - $(date +%s)))
   [ "$t" -lt 20 ] && { echo "$name: no time left in this call"; return 0; }
-  timeout -s INT "$t" python3 -m warpgs.pipelines.sparse --method "$method" --data dl3dv --scene "$scene" \
-    --views "$views" --downscale "${DS:-8}" --iterations "${IT:-3000}" --device cuda --no-progress --seed "$seed" \
-    --data-root "$D" --set train.eval_every=$(( ${IT:-3000} / 10 )) --out "$R/$name" "${resume[@]}" "$@" >> "$R/$name.log" 2>&1
+  timeout -s INT "$t" python3 -m warpgs.pipelines.sparse "$@" --device cuda --no-progress --data-root "$D" \
+    --out "$R/$name" "${resume[@]}" >> "$R/$name.log" 2>&1
   echo "$name rc=$? $(grep -h 'test: PSNR' "$R/$name.log" | tail -1)"
 }
+export -f sparse_run
+
+# one NAME METHOD SCENE VIEWS SEED [--set k=v ...]: sparse_run of the DL3DV-layout scene SCENE at --downscale ${DS:-8}
+# for ${IT:-3000} iterations, 10 evaluations.
+one() {
+  local name=$1 method=$2 scene=$3 views=$4 seed=$5; shift 5
+  sparse_run "$name" --method "$method" --data dl3dv --scene "$scene" --views "$views" --downscale "${DS:-8}" \
+    --iterations "${IT:-3000}" --seed "$seed" --set train.eval_every=$(( ${IT:-3000} / 10 )) "$@"
+}
 export -f one
+
+# summary PREFIX FILE: one line per run $R/PREFIX*/metrics.json (name, test PSNR, Gaussians, per-view PSNRs, the
+# curve's PSNRs), sorted, into $OUT/FILE and on stdout.
+summary() {
+  for m in "$R"/$1*/metrics.json; do
+    python3 -c "import json,sys; d=json.load(open(sys.argv[1])); print(sys.argv[1].split('/')[-2], round(d['psnr'],3), d['num_gaussians'], [round(v['psnr'],2) for v in d.get('per_view',[])], [round(c['psnr'],2) for c in d.get('curve',[])])" "$m"
+  done | sort | tee "$OUT/$2"
+}
 
 # rasterizer_runs [bench/rasterizer.py timing arguments ...] (bench/gpu_session18.sh, gpu_session19.sh phase r):
 # gsplat installed from .device/gsplat, then bench/rasterizer.py on the three random configurations (the first again

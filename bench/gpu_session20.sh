@@ -29,9 +29,7 @@ c)
   for c in castle_p30:3 castle_p30:6 castle_p30:9 herz_jesus_p25:3 herz_jesus_p25:6 herz_jesus_p25:9; do
     for m in baseline full; do for s in 0 1 2; do echo "${PREFIX:-c}_${c%%:*}_${c##*:}v_${m}_s$s $m ${c%%:*} ${c##*:} $s"; done; done
   done | xargs -P ${JOBS:-12} -L 1 bash -c 'one "$@"' _
-  for m in "$R"/${PREFIX:-c}_*/metrics.json; do
-    python3 -c "import json,sys; d=json.load(open(sys.argv[1])); print(sys.argv[1].split('/')[-2], round(d['psnr'],3), d['num_gaussians'], [round(v['psnr'],2) for v in d.get('per_view',[])], [round(c['psnr'],2) for c in d.get('curve',[])])" "$m"
-  done | sort | tee "$OUT/captures_${PREFIX:-c}.txt"
+  summary "${PREFIX:-c}_" "captures_${PREFIX:-c}.txt"
   if [ "${FLOATERS:-1}" = 1 ]; then
     mkdir -p "$OUT/floaters"
     for m in "$R"/${PREFIX:-c}_*/metrics.json; do n=$(basename "$(dirname "$m")"); [ -f "$OUT/floaters/$n.json" ] || echo "$n"; done \

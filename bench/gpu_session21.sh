@@ -38,21 +38,10 @@ declare -A SET=(
   [ss_geo]="--set model.init=sfm+stereo --set strategy.refine_stop_iter=0 --set optim.means_lr=1.6e-5 --set optim.means_lr_final=1.6e-7 --set optim.scales_lr=1e-3"
   [geo_rand]="--set strategy.refine_stop_iter=0 --set optim.means_lr=1.6e-5 --set optim.means_lr_final=1.6e-7 --set optim.scales_lr=1e-3 --set model.init_random=20000"
 )
-summary() {  # metrics of the runs $R/$1* into $OUT/$2
-  for m in "$R"/$1*/metrics.json; do
-    python3 -c "import json,sys; d=json.load(open(sys.argv[1])); print(sys.argv[1].split('/')[-2], round(d['psnr'],3), d['num_gaussians'], [round(v['psnr'],2) for v in d.get('per_view',[])], [round(c['psnr'],2) for c in d.get('curve',[])])" "$m"
-  done | sort | tee "$OUT/$2"
-}
-other() {  # NAME METHOD DATASET SCENE VIEWS SEED [--set k=v ...]: like gpu_one.sh's one, on a named dataset
+other() {  # NAME METHOD DATASET SCENE VIEWS SEED [--set k=v ...]: sparse_run on a named dataset, 3000 it
   local name=$1 method=$2 data=$3 scene=$4 views=$5 seed=$6; shift 6
-  [ -f "$R/$name/metrics.json" ] && return 0
-  local resume=(); [ -f "$R/$name/config.yaml" ] && resume=(--resume)
-  local t=${T:-540}; [ -n "${END:-}" ] && t=$((END - $(date +%s)))
-  [ "$t" -lt 20 ] && { echo "$name: no time left in this call"; return 0; }
-  timeout -s INT "$t" python3 -m warpgs.pipelines.sparse --method "$method" --data "$data" --scene "$scene" \
-    --views "$views" --iterations 3000 --device cuda --no-progress --seed "$seed" --data-root "$D" \
-    --set train.eval_every=300 --out "$R/$name" "${resume[@]}" "$@" >> "$R/$name.log" 2>&1
-  echo "$name rc=$?"
+  sparse_run "$name" --method "$method" --data "$data" --scene "$scene" --views "$views" --iterations 3000 \
+    --seed "$seed" --set train.eval_every=300 "$@"
 }
 export -f other
 case $P in

@@ -425,9 +425,9 @@ class Trainer:
         torch.manual_seed(seed)
         np.random.seed(seed % 2**32)
         # the initial points (found here or earlier, then kept on the scene) decide train.hold_geometry
-        cfg, self.held = hold_geometry(cfg, prepare_geometry(cfg, scene, self.log))
+        cfg, self.held = hold_geometry(cfg, prepare_geometry(cfg, scene, self.log))  # the same cfg when not held
+        self.cfg = cfg
         if self.held is not None:
-            self.cfg = cfg
             self.log(f"warpgs: geometry held ({self.held['why']}): no densification; means / scales / rotations "
                      f"learning rates x {self.held['means_lr']:g} / {self.held['scales_lr']:g} / {self.held['quats_lr']:g}")
         self.strategy = cfg.strategy

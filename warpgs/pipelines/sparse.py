@@ -295,26 +295,27 @@ def run_method(method: str, cfg, scene, out: Path, resume: bool, baseline_metric
     return metrics
 
 
-def memory_message(method: str, step: int, back: int | None, device, out: Path, resume_hint: str) -> str:
-    """One paragraph (no traceback) for a run whose device ran out of memory at ``step``."""
+def _paragraph(text: str) -> str:
+    """``text`` wrapped at 100 columns without breaking paths or hyphenated words: a stop's one paragraph."""
     import textwrap
 
+    return textwrap.fill(text, width=100, break_long_words=False, break_on_hyphens=False)
+
+
+def memory_message(method: str, step: int, back: int | None, device, out: Path, resume_hint: str) -> str:
+    """One paragraph (no traceback) for a run whose device ran out of memory at ``step``."""
     what = (f"its outputs in {out} (metrics.json with 'stopped_early', renders, point_cloud.ply) are those of the "
             f"last good state, step {back}" if back is not None else
             "no good state was kept in memory yet, so it writes no results")
-    return textwrap.fill(f"warpgs: the {method} run stopped early: {device} ran out of memory at step {step}; {what}. "
-                         "Free the device (other processes on it), lower the image size (--downscale) or cap the "
-                         f"model (strategy.max_gaussians), then continue with {resume_hint} from the last checkpoint.",
-                         width=100, break_long_words=False, break_on_hyphens=False)
+    return _paragraph(f"warpgs: the {method} run stopped early: {device} ran out of memory at step {step}; {what}. "
+                      "Free the device (other processes on it), lower the image size (--downscale) or cap the "
+                      f"model (strategy.max_gaussians), then continue with {resume_hint} from the last checkpoint.")
 
 
 def diverged_message(method: str, e, out: Path) -> str:
     """One paragraph (no traceback) for a run that stopped because training diverged (``TrainingDiverged``)."""
-    import textwrap
-
-    return textwrap.fill(f"warpgs: the {method} run stopped early: {e} Its outputs in {out} (metrics.json with "
-                         "'stopped_early', renders, point_cloud.ply) are those of the last good state.", width=100,
-                         break_long_words=False, break_on_hyphens=False)
+    return _paragraph(f"warpgs: the {method} run stopped early: {e} Its outputs in {out} (metrics.json with "
+                      "'stopped_early', renders, point_cloud.ply) are those of the last good state.")
 
 
 def print_side_by_side(base: dict, full: dict, out: Path) -> None:

@@ -39,11 +39,11 @@ def fill_points(cameras, xyz: np.ndarray, stride: int = 8, default_depth: float 
         empty = ~np.isfinite(depth)
         if not empty.any():
             continue
-        full = np.argwhere(~empty).astype(np.float32)
+        full = np.argwhere(~empty)  # row-major, the order of depth[~empty]
         holes = np.argwhere(empty)
         if len(full):
-            d = torch.cdist(torch.from_numpy(holes.astype(np.float32)), torch.from_numpy(full))
-            z = depth[tuple(full[d.argmin(1).numpy()].astype(int).T)]
+            d = torch.cdist(torch.from_numpy(holes.astype(np.float32)), torch.from_numpy(full.astype(np.float32)))
+            z = depth[~empty][d.argmin(1).numpy()]
         elif default_depth is not None:
             z = np.full(len(holes), float(default_depth))
         else:
