@@ -188,3 +188,67 @@ def test_trainer_fits_the_far_field_on_training_views_only_and_resumes_exactly(t
     second.train()
     assert same_params(param_copy(straight), param_copy(second))
     assert straight.losses == second.losses
+
+
+def _loo_oracle(views, up, bins, blur):
+    """Leave-one-out squared error of the far field of ``blur``, pixel by pixel: each left-out pixel against
+    the Gaussian-weighted mean (over band distance) of the other views' pixels, unseen bands taking the
+    nearest seen band."""
+    data = []
+    for v in views:
+        e = (ray_directions(v.viewmat, v.K, v.width, v.height) @ up).reshape(-1).double()
+        data.append((((e + 1) * 0.5 * bins).long().clamp(0, bins - 1), v.image.reshape(-1, 3).double()))
+    total = 0.0
+    for i, (b_out, c_out) in enumerate(data):
+        b = torch.cat([d[0] for j, d in enumerate(data) if j != i])
+        c = torch.cat([d[1] for j, d in enumerate(data) if j != i])
+        colours = []
+        for band in range(bins):
+            w = torch.exp(-0.5 * ((band - b.double()) / blur) ** 2) if blur > 0 else (b == band).double()
+            colours.append((w[:, None] * c).sum(0) / w.sum() if float(w.sum()) > 1e-9 else None)
+        seen = [k for k in range(bins) if colours[k] is not None]
+        table = torch.stack([colours[min(seen, key=lambda s: abs(s - k))] for k in range(bins)])
+        total += float(((table[b_out] - c_out) ** 2).sum())
+    return total
+
+
+def test_auto_blur_is_the_leave_one_out_choice_of_a_pixel_oracle():
+    """Views that agree on the elevation profile: the sharp far field (blur 0) predicts each from the others
+    exactly. Views whose profiles are shifted in elevation against each other: a blurred one predicts better,
+    and the width chosen is the one the pixel-level oracle finds best."""
+    from warpgs.farfield import BLUR_CHOICES
+
+    bins = 16
+    colours = torch.rand(bins, 3, generator=torch.Generator().manual_seed(5))
+    agree = _banded_views(colours, bins, yaws=[0, 120, 240], size=(32, 28))
+    ff = ElevationFarField.fit(agree, bins, "auto")
+    assert ff.blur == 0.0
+    shifted = [_banded_views(torch.roll(colours, k, 0), bins, yaws=[y], size=(32, 28))[0]
+               for k, y in zip((-2, 0, 2, 1), (0, 90, 180, 270))]
+    ff = ElevationFarField.fit(shifted, bins, "auto")
+    errors = {b: _loo_oracle(shifted, ff.up, bins, b) for b in BLUR_CHOICES}
+    assert ff.blur == min(errors, key=errors.get)
+    assert ff.blur > 0
+    assert ElevationFarField.fit(shifted[:1], bins, "auto").blur == 0.0  # one view: nothing to leave out
+    with pytest.raises(ValueError, match="blur"):
+        ElevationFarField.fit(shifted, bins, -1.0)
+
+
+def test_blurred_far_field_is_the_kernel_weighted_band_mean_and_round_trips(tmp_path):
+    bins = 8
+    colours = torch.rand(bins, 3, generator=torch.Generator().manual_seed(9))
+    views = _banded_views(colours, bins, yaws=[0, 150], size=(24, 20))
+    ff = ElevationFarField.fit(views, bins, 1.5)
+    sums, counts = torch.zeros(bins, 3, dtype=torch.float64), torch.zeros(bins, dtype=torch.float64)
+    for v in views:
+        b = ((ray_directions(v.viewmat, v.K, v.width, v.height) @ ff.up + 1) * 0.5 * bins).long().clamp(0, bins - 1)
+        for band, c in zip(b.reshape(-1).tolist(), v.image.reshape(-1, 3).double()):
+            sums[band] += c
+            counts[band] += 1
+    for j in range(bins):
+        w = torch.tensor([math.exp(-0.5 * ((j - k) / 1.5) ** 2) for k in range(bins)], dtype=torch.float64)
+        assert_close(ff.colors[j].double(), (w[:, None] * sums).sum(0) / (w * counts).sum(), 1e-6, what=f"band {j}")
+    ff.save(tmp_path / "ff.json")
+    back = ElevationFarField.load(tmp_path / "ff.json")
+    assert back.blur == 1.5
+    assert_close(back.colors, ff.colors, 1e-6, what="colours after the round trip")

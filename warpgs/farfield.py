@@ -41,44 +41,95 @@ def ray_directions(viewmat: torch.Tensor, K: torch.Tensor, width: int, height: i
     return d / d.norm(dim=-1, keepdim=True)
 
 
+BLUR_CHOICES = (0.0, 0.5, 1.0, 2.0, 4.0, 8.0)  # ``blur="auto"`` picks among these widths (in bands)
+
+
+def _band_stats(cam, viewmat: torch.Tensor, up: torch.Tensor, bins: int):
+    """A view's per-band pixel sums [bins, 3], pixel counts [bins] and sums of squares [bins] (float64)."""
+    dev = viewmat.device
+    img = torch.as_tensor(cam.image, dtype=torch.float32, device=dev).reshape(-1, 3).double()
+    e = ray_directions(viewmat, torch.as_tensor(cam.K, device=dev), cam.width, cam.height) @ up
+    b = ((e.reshape(-1) + 1) * 0.5 * bins).long().clamp(0, bins - 1)
+    sums = torch.zeros(bins, 3, dtype=torch.float64, device=dev).index_add_(0, b, img)
+    counts = torch.zeros(bins, dtype=torch.float64, device=dev).index_add_(0, b, torch.ones_like(b, dtype=torch.float64))
+    squares = torch.zeros(bins, dtype=torch.float64, device=dev).index_add_(0, b, (img * img).sum(1))
+    return sums, counts, squares
+
+
+def band_colours(sums: torch.Tensor, counts: torch.Tensor, blur: float) -> torch.Tensor:
+    """[bins, 3] colours from per-band pixel sums and counts: with ``blur`` > 0 each band averages the pixels
+    of all bands weighted by a Gaussian of their distance (in bands); bands with no pixel take the nearest
+    seen band's colour."""
+    bins = counts.shape[0]
+    idx = torch.arange(bins, device=counts.device, dtype=torch.float64)
+    if blur > 0:
+        k = torch.exp(-0.5 * ((idx[:, None] - idx[None]) / blur) ** 2)
+        sums, counts = k @ sums, k @ counts
+    seen = torch.nonzero(counts > 1e-9).flatten()
+    colors = sums / counts.clamp(min=1e-9)[:, None]
+    if len(seen) < bins:  # unseen bands: the nearest seen band's colour
+        near = seen[(idx[:, None] - idx[seen][None]).abs().argmin(1)]
+        colors = colors[near]
+    return colors
+
+
+def choose_blur(stats: list, choices=BLUR_CHOICES) -> float:
+    """The blur of ``choices`` whose far field, fitted on all views but one, predicts the left-out view's pixels
+    with the least squared error, summed over the views (``stats``: ``_band_stats`` of each). What no input
+    sees is a guess from the others: how sharply the colours of the inputs' elevation bands carry over to a
+    view they did not see is measured on the inputs themselves. 0 with a single view."""
+    if len(stats) < 2:
+        return 0.0
+    sums = sum(s for s, _, _ in stats)
+    counts = sum(n for _, n, _ in stats)
+    errors = []
+    for blur in choices:
+        err = 0.0
+        for s, n, q in stats:
+            c = band_colours(sums - s, counts - n, blur)
+            err += float((q - 2 * (c * s).sum(1) + n * (c * c).sum(1)).sum())
+        errors.append(err)
+    return float(choices[min(range(len(choices)), key=errors.__getitem__)])
+
+
 class ElevationFarField:
     """A colour per elevation band (module docstring). ``up`` [3] unit vector, ``colors`` [bins, 3]."""
 
-    def __init__(self, up: torch.Tensor, colors: torch.Tensor):
+    def __init__(self, up: torch.Tensor, colors: torch.Tensor, blur: float = 0.0):
         self.up = up.float()
         self.colors = colors.float()
+        self.blur = blur
 
     @property
     def bins(self) -> int:
         return int(self.colors.shape[0])
 
     @classmethod
-    def fit(cls, cameras, bins: int = 16) -> "ElevationFarField":
-        """From ``cameras`` (``CameraTensors`` or ``Camera``s: viewmat, K, width, height, image)."""
+    def fit(cls, cameras, bins: int = 16, blur: float | str = 0.0) -> "ElevationFarField":
+        """From ``cameras`` (``CameraTensors`` or ``Camera``s: viewmat, K, width, height, image). ``blur``: the
+        width (in bands) of a Gaussian kernel over the elevation that each band's colour averages the training
+        pixels with; ``"auto"``: the one of ``BLUR_CHOICES`` that predicts each training view best from the
+        others (leave-one-out; 0 with one view). The chosen width is ``self.blur``."""
         if bins < 1:
             raise ValueError(f"far field: bins must be >= 1, got {bins}")
         if not cameras:
             raise ValueError("far field: no views to fit it on")
         mats = [torch.as_tensor(c.viewmat, dtype=torch.float32) for c in cameras]
-        dev = mats[0].device
         up = -torch.stack([m[1, :3] for m in mats]).mean(0)
         if float(up.norm()) < 1e-6:  # up axes that cancel out (cameras rolled all around): the first one's
             up = -mats[0][1, :3]
         up = up / up.norm()
-        sums = torch.zeros(bins, 3, dtype=torch.float64, device=dev)
-        counts = torch.zeros(bins, dtype=torch.float64, device=dev)
-        for c, m in zip(cameras, mats):
-            img = torch.as_tensor(c.image, dtype=torch.float32, device=dev).reshape(-1, 3).double()
-            e = ray_directions(m, torch.as_tensor(c.K, device=dev), c.width, c.height) @ up
-            b = ((e.reshape(-1) + 1) * 0.5 * bins).long().clamp(0, bins - 1)
-            sums.index_add_(0, b, img)
-            counts.index_add_(0, b, torch.ones_like(b, dtype=torch.float64))
-        seen = torch.nonzero(counts > 0).flatten()
-        colors = sums / counts.clamp(min=1)[:, None]
-        if len(seen) < bins:  # unseen bands: the nearest seen band's colour
-            near = seen[(torch.arange(bins, device=dev)[:, None] - seen[None]).abs().argmin(1)]
-            colors = colors[near]
-        return cls(up, colors.float())
+        stats = [_band_stats(c, m, up, bins) for c, m in zip(cameras, mats)]
+        if blur == "auto":
+            blur = choose_blur(stats)
+        blur = float(blur)
+        if blur < 0:
+            raise ValueError(f"far field: blur must be >= 0 or 'auto', got {blur}")
+        sums = sum(s for s, _, _ in stats)
+        counts = sum(n for _, n, _ in stats)
+        ff = cls(up, band_colours(sums, counts, blur).float())
+        ff.blur = blur
+        return ff
 
     def elevation_coordinate(self, dirs: torch.Tensor) -> torch.Tensor:
         """Continuous band coordinate of unit directions: band i's centre is at i."""
@@ -94,12 +145,13 @@ class ElevationFarField:
         return colors[i0] * (1 - w) + colors[i1] * w
 
     def to_dict(self) -> dict:
-        return {"kind": "elevation", "up": [float(v) for v in self.up.cpu()],
+        return {"kind": "elevation", "blur": self.blur, "up": [float(v) for v in self.up.cpu()],
                 "colors": [[round(float(v), 6) for v in row] for row in self.colors.cpu()]}
 
     @classmethod
     def from_dict(cls, d: dict) -> "ElevationFarField":
-        return cls(torch.tensor(d["up"], dtype=torch.float32), torch.tensor(d["colors"], dtype=torch.float32))
+        return cls(torch.tensor(d["up"], dtype=torch.float32), torch.tensor(d["colors"], dtype=torch.float32),
+                   float(d.get("blur", 0.0)))
 
     def save(self, path: str | Path) -> Path:
         path = Path(path)
@@ -112,14 +164,14 @@ class ElevationFarField:
         return cls.from_dict(json.loads(Path(path).read_text()))
 
 
-def make_far_field(kind: str, cameras, bins: int, background=None) -> ElevationFarField | None:
+def make_far_field(kind: str, cameras, bins: int, background=None, blur: float | str = 0.0) -> ElevationFarField | None:
     """The far field ``train.far_field`` asks for, fitted on ``cameras`` (the training views); None for none.
     ``sky``: the bands above the horizon only; below it, ``background`` (default black): the ground is
     geometry for the Gaussians, not a backdrop."""
     if kind == "none":
         return None
     if kind in ("elevation", "sky"):
-        ff = ElevationFarField.fit(cameras, bins)
+        ff = ElevationFarField.fit(cameras, bins, blur)
         if kind == "sky":
             below = (torch.arange(ff.bins, dtype=torch.float32) + 0.5) / ff.bins * 2 - 1 < 0
             bg = torch.zeros(3) if background is None else torch.as_tensor(background, dtype=torch.float32).cpu()

@@ -419,7 +419,10 @@ class Trainer:
         self.test_cams = [c.to_torch(self.device) for c in scene.test]
         self.background = torch.tensor(background_colour(cfg, scene), dtype=torch.float32, device=self.device)
         # fitted on the training views only, deterministic: a resumed run computes the same one
-        self.far_field = make_far_field(cfg.train.far_field, self.train_cams, cfg.train.far_field_bins, self.background)
+        self.far_field = make_far_field(cfg.train.far_field, self.train_cams, cfg.train.far_field_bins, self.background,
+                                        cfg.train.far_field_blur)
+        if self.far_field is not None and cfg.train.far_field_blur == "auto":
+            self.log(f"far field: elevation blur {self.far_field.blur:g} bands, chosen leave-one-out over the inputs")
         self.scene_scale = cfg.optim.scene_scale or scene_scale_of(scene.train)
         seed = cfg.train.seed
         torch.manual_seed(seed)

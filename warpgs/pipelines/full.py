@@ -96,7 +96,7 @@ class FullMethod(Method):
             trainer.drop_rate = self.settings.drop_rate
         if self.settings.far_field is not None:
             trainer.far_field = make_far_field(self.settings.far_field, trainer.train_cams, cfg.train.far_field_bins,
-                                               trainer.background)
+                                               trainer.background, cfg.train.far_field_blur)
         self.pseudo_cams: list = []
         self.pseudo_order: list[int] = []
         self.pseudo_rng = np.random.default_rng(cfg.train.seed + 3)

@@ -1,0 +1,46 @@
+#!/usr/bin/env bash
+# GPU runs of session 22 (issue 13: the full method on the captures, where it adds little at castle_p30 3 / 6 views and
+# herz_jesus_p25 3 views), after the packed wheels are installed in /tmp/site and the scenes copied to $D.
+#   T=seconds bash bench/gpu_session22.sh PHASE D RUNS
+# x: the variants named by VARIANTS (default: all of SET's full-method ones) on the three weak cases (castle_p30 3 and
+#    6 views, herz_jesus_p25 3 views; 384x256, 3000 it, seeds 0-2), full method; the variants in BOTH also run the
+#    baseline. A summary line per run in $OUT/weak.txt; the default's runs are in bench/results/s21.
+# w: the variants named by VARIANTS on all six cases, baseline and full (METHODS narrows), seeds 0-2 (is it a default?),
+#    in $OUT/wide.txt. combo: the three full-method changes of x that helped castle_p30 together.
+set -u
+source "$(dirname "${BASH_SOURCE[0]}")/gpu_one.sh"
+session_env "$@"; P=$1; D=$2; R=$3; shift 3
+export R D T
+declare -A SET=(
+  [pw02]="--set full.pseudo_weight=0.2"
+  [pw05]="--set full.pseudo_weight=0.5"
+  [rel]="--set full.pseudo_mask=reliable"
+  [nodens]="--set full.densify=false"
+  [bf06]="--set full.baseline_fraction=0.6"
+  [cyc1]="--set full.cycles=1"
+  [ffauto]="--set train.far_field_blur=auto"
+  [combo]="--set full.pseudo_weight=0.2 --set full.pseudo_mask=reliable --set full.baseline_fraction=0.6"
+  [default]=""
+)
+BOTH=" ffauto default "
+case $P in
+x)
+  for v in ${VARIANTS:-pw02 pw05 rel nodens bf06 cyc1 ffauto}; do
+    ms=full; [[ $BOTH == *" $v "* ]] && ms="baseline full"
+    for c in castle_p30:3 castle_p30:6 herz_jesus_p25:3; do for m in $ms; do for s in 0 1 2; do
+      echo "x_${v}_${c%%:*}_${c##*:}v_${m}_s$s $m ${c%%:*} ${c##*:} $s${SET[$v]:+ ${SET[$v]}}"
+    done; done; done
+  done | xargs -P ${JOBS:-12} -L 1 bash -c 'one "$@"' _ | grep -v "rc=0"
+  summary x_ weak.txt
+  ;;
+w)
+  for v in ${VARIANTS}; do
+    for c in castle_p30:3 castle_p30:6 castle_p30:9 herz_jesus_p25:3 herz_jesus_p25:6 herz_jesus_p25:9; do
+      for m in ${METHODS:-baseline full}; do for s in 0 1 2; do
+        echo "w_${v}_${c%%:*}_${c##*:}v_${m}_s$s $m ${c%%:*} ${c##*:} $s${SET[$v]:+ ${SET[$v]}}"
+      done; done
+    done
+  done | xargs -P ${JOBS:-12} -L 1 bash -c 'one "$@"' _ | grep -v "rc=0"
+  summary w_ wide.txt
+  ;;
+esac
