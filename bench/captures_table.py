@@ -9,7 +9,10 @@ median).
 - session 20: ``s20/path_floaters.txt`` (the previous default, ``_r0``, and with ``train.path_floaters`` 10,
   ``_r10``) and ``s20/captures_d.txt`` (with the path floaters and ``train.prune_unseen_at_end``);
 - session 21: that default, then the one with ``train.hold_geometry: stereo`` (``s21/captures_default3.txt``,
-  the 3-view runs it changes, and ``s21/captures_default69.txt``, the 6- and 9-view runs repeated with it).
+  the 3-view runs it changes, and ``s21/captures_default69.txt``, the 6- and 9-view runs repeated with it);
+- session 22: the full method's variants (``s22/weak_part1.txt``, ``x_VARIANT_...``; ``s22/wide_full.txt``,
+  ``w_VARIANT_...``) against session 21's default: one row per variant, the full method's median per case and its
+  gain over session 21's baseline, the mean and worst gain over the cases measured.
 """
 
 from __future__ import annotations
@@ -33,6 +36,37 @@ def load(path: Path, prefix: str, ratio: str | None = None) -> dict:
             continue
         runs.setdefault((m["scene"], int(m["views"]), m["method"]), {})[int(m["seed"])] = float(parts[1])
     return runs
+
+
+def load_variants(path: Path, prefix: str) -> dict:
+    """{variant: {(scene, views, method): {seed: psnr}}} of runs named ``prefix_VARIANT_scene_...`` (variant names
+    hold no underscore)."""
+    out: dict = {}
+    for (name, views, method), seeds in load(path, prefix).items():
+        variant, _, scene = name.partition("_")
+        out.setdefault(variant, {}).setdefault((scene, views, method), {}).update(seeds)
+    return out
+
+
+def variant_table(default: dict, variants: dict) -> list[str]:
+    """One row per variant: the full method's median per case (its gain over ``default``'s baseline median), then
+    the mean and worst gain over the cases it has; the default's own row first."""
+    cases = sorted({(s, n) for (s, n, _) in default})
+    head = ["variant"] + [f"{s} {n}v" for s, n in cases] + ["mean gain", "worst gain", "cases"]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for name, runs in [("default (session 21)", default)] + sorted(variants.items()):
+        row, gains = [name], []
+        for s, n in cases:
+            f, b = runs.get((s, n, "full")), default.get((s, n, "baseline"))
+            if not f or not b:
+                row.append("-")
+                continue
+            g = statistics.median(f.values()) - statistics.median(b.values())
+            gains.append(g)
+            row.append(f"{statistics.median(f.values()):.2f} ({g:+.2f})")
+        row += [f"{sum(gains) / len(gains):+.2f}", f"{min(gains):+.2f}", str(len(gains))] if gains else ["-"] * 3
+        lines.append("| " + " | ".join(row) + " |")
+    return lines
 
 
 def cell(seeds: dict) -> str:
@@ -83,16 +117,24 @@ def merged(*parts: dict) -> dict:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--results", default=str(Path(__file__).resolve().parent / "results"))
-    ap.add_argument("--session", type=int, choices=(20, 21), default=21)
+    ap.add_argument("--session", type=int, choices=(20, 21, 22), default=21)
     args = ap.parse_args(argv)
     r20, r21 = Path(args.results) / "s20", Path(args.results) / "s21"
     s20 = ("session 20 default", load(r20 / "captures_d.txt", "d"))
+    s21 = merged(load(r21 / "captures_default3.txt", "d"), load(r21 / "captures_default69.txt", "d"))
+    if args.session == 22:
+        r22 = Path(args.results) / "s22"
+        variants = load_variants(r22 / "weak_part1.txt", "x")
+        for v, runs in load_variants(r22 / "wide_full.txt", "w").items():
+            for key, seeds in runs.items():
+                variants.setdefault(v, {}).setdefault(key, {}).update(seeds)
+        print("\n".join(variant_table(s21, variants)))
+        return 0
     if args.session == 20:
         cols = [("session 19 default", load(r20 / "path_floaters.txt", "p", "0")),
                 ("+ path floaters", load(r20 / "path_floaters.txt", "p", "10")), s20]
     else:
-        cols = [s20, ("session 21 default", merged(load(r21 / "captures_default3.txt", "d"),
-                                                   load(r21 / "captures_default69.txt", "d")))]
+        cols = [s20, ("session 21 default", s21)]
     print("\n".join(table(cols)))
     return 0
 

@@ -32,3 +32,22 @@ def test_merged_joins_cases_and_seeds_from_several_files():
     m = ct.merged(a, b)
     assert m == {("castle_p30", 3, "baseline"): {0: 14.0, 1: 15.0}, ("castle_p30", 6, "full"): {0: 19.0}}
     assert a == {("castle_p30", 3, "baseline"): {0: 14.0}}  # the inputs stay as they were
+
+
+def test_variant_table_gives_each_variants_full_median_and_gain_over_the_default_baseline(tmp_path):
+    p = tmp_path / "variants.txt"
+    p.write_text("# a comment line\n"
+                 "w_pw02_castle_p30_3v_full_s0 14.0 10 [1.0] [2.0]\n"
+                 "w_pw02_castle_p30_3v_full_s1 15.0 10 [1.0] [2.0]\n"
+                 "w_pw02_castle_p30_3v_full_s2 14.5 10 [1.0] [2.0]\n"
+                 "w_rel_herz_jesus_p25_9v_full_s0 22.0 10 [1.0] [2.0]\n"
+                 "x_rel_herz_jesus_p25_9v_full_s1 99.0 10\n")  # another prefix
+    variants = ct.load_variants(p, "w")
+    assert variants == {"pw02": {("castle_p30", 3, "full"): {0: 14.0, 1: 15.0, 2: 14.5}},
+                        "rel": {("herz_jesus_p25", 9, "full"): {0: 22.0}}}
+    default = {("castle_p30", 3, "baseline"): {0: 14.0, 1: 14.2}, ("castle_p30", 3, "full"): {0: 13.9},
+               ("herz_jesus_p25", 9, "baseline"): {0: 21.0}, ("herz_jesus_p25", 9, "full"): {0: 21.5}}
+    out = ct.variant_table(default, variants)
+    assert out[2] == "| default (session 21) | 13.90 (-0.20) | 21.50 (+0.50) | +0.15 | -0.20 | 2 |"
+    assert out[3] == "| pw02 | 14.50 (+0.40) | - | +0.40 | +0.40 | 1 |"
+    assert out[4] == "| rel | - | 22.00 (+1.00) | +1.00 | +1.00 | 1 |"
