@@ -248,6 +248,42 @@ def test_cli_prints_the_url_and_serves_the_page(run_dir):
     assert "warpgs.view: open" not in out  # the URL line was printed once
 
 
+def test_ctrl_c_ends_the_command_even_when_the_server_does_not_stop(run_dir, monkeypatch, capsys):
+    """A server whose stop never returns (an open websocket, a thread pool) must not keep the command alive:
+    after Ctrl-C, main waits CLOSE_WAIT_S for it and returns 0."""
+    pytest.importorskip("viser")
+    import warpgs.view as view
+
+    release = threading.Event()
+    closing = threading.Event()
+
+    class StuckViewer:
+        url = "http://127.0.0.1:1"
+
+        def __init__(self, *a, **k):
+            pass
+
+        def close(self):
+            closing.set()
+            release.wait(60)
+
+    def ctrl_c(_seconds):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(view, "Viewer", StuckViewer)
+    monkeypatch.setattr(view, "CLOSE_WAIT_S", 0.3)
+    monkeypatch.setattr(view.time, "sleep", ctrl_c)
+    t0 = time.monotonic()
+    try:
+        assert view.main([str(run_dir), "--device", "cpu"]) == 0
+        elapsed = time.monotonic() - t0
+    finally:
+        release.set()
+    assert closing.is_set()  # the stop was asked for
+    assert elapsed < 20  # loading the run, then 0.3 s for the stop; not the 60 s the stop would take
+    assert "warpgs.view: open http://127.0.0.1:1" in capsys.readouterr().out
+
+
 # ----------------------------------------------------------------------------------------------
 # in a real browser
 

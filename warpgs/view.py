@@ -38,6 +38,7 @@ import contextlib
 import importlib
 import io
 import math
+import os
 import sys
 import threading
 import time
@@ -52,6 +53,7 @@ from warpgs.model import GaussianModel
 from warpgs.viz import ORIGIN_COLORS, ORIGIN_NAMES, default_camera, read_cloud
 
 MODES = ("rgb", "depth", "alpha")
+CLOSE_WAIT_S = 10.0  # seconds Ctrl-C waits for the server to stop before the command ends anyway
 VISER_HINT = "pip install 'viser>=1.0'  (or: pip install -e '.[view]')"
 
 
@@ -600,8 +602,20 @@ def main(argv=None) -> int:
     except KeyboardInterrupt:
         return 0
     finally:
-        viewer.close()
+        # viser's server can take long to stop (an open websocket, its thread pool): Ctrl-C must still end the
+        # command, so the stop gets CLOSE_WAIT_S and the process exits without waiting on its threads (below)
+        closer = threading.Thread(target=viewer.close, daemon=True, name="warpgs.view close")
+        closer.start()
+        closer.join(CLOSE_WAIT_S)
+
+
+def _exit(code: int) -> None:
+    """Ends the command with ``code`` once its output is flushed, without joining the threads viser may leave
+    (interpreter exit joins non-daemon threads and thread pools, which can hang after a Ctrl-C)."""
+    sys.stdout.flush()
+    sys.stderr.flush()
+    os._exit(code)
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    _exit(main())
