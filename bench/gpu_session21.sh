@@ -64,7 +64,7 @@ e)
 f)
   for f in 8 4; do for c in castle_p30 herz_jesus_p25; do for s in 0 1 2; do
     echo "f${f}_${c}_3v_baseline_s$s baseline $c 3 $s --set model.init_fill=$f"
-  done; done; done | xargs -P 12 -L 1 bash -c 'one "$@"' _ | grep -v "rc=0"
+  done; done; done | xargs -P ${JOBS:-12} -L 1 bash -c 'one "$@"' _ | grep -v "rc=0"
   summary f fill.txt
   ;;
 o)

@@ -5,6 +5,9 @@
 # x: the variants named by VARIANTS (default: all of SET's full-method ones) on the three weak cases (castle_p30 3 and
 #    6 views, herz_jesus_p25 3 views; 384x256, 3000 it, seeds 0-2), full method; the variants in BOTH also run the
 #    baseline. A summary line per run in $OUT/weak.txt; the default's runs are in bench/results/s21.
+# s: at 768x512 (images_4, 10,000 it, seed 0) at 3 views, the start from plane-sweep stereo alone (model.init=stereo, so
+#    train.hold_geometry stereo holds it) against session 21's start from SfM's 120 / 373 points, baseline and full
+#    (in $OUT/a768_stereo.txt), beside bench/gpu_session21.sh f (model.init_fill 8 and 4 at 384x256; $OUT/fill.txt).
 # w: the variants named by VARIANTS on all six cases, baseline and full (METHODS narrows), seeds 0-2 (is it a default?),
 #    in $OUT/wide.txt. combo: the three full-method changes of x that helped castle_p30 together.
 set -u
@@ -32,6 +35,14 @@ x)
     done; done; done
   done | xargs -P ${JOBS:-12} -L 1 bash -c 'one "$@"' _ | grep -v "rc=0"
   summary x_ weak.txt
+  ;;
+s)
+  for c in castle_p30 herz_jesus_p25; do for m in baseline full; do
+    echo "s_${c}_3v_${m}_s0 $m $c 3 0 --set model.init=stereo"
+  done; done | DS=4 IT=10000 xargs -P 4 -L 1 bash -c 'one "$@"' _ > "$OUT/a768_stereo.log" &
+  JOBS=8 bash "$(dirname "${BASH_SOURCE[0]}")/gpu_session21.sh" f "$D" "$R"
+  wait
+  summary s_ a768_stereo.txt
   ;;
 w)
   for v in ${VARIANTS}; do
