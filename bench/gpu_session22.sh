@@ -8,6 +8,9 @@
 # s: at 768x512 (images_4, 10,000 it, seed 0) at 3 views, the start from plane-sweep stereo alone (model.init=stereo, so
 #    train.hold_geometry stereo holds it) against session 21's start from SfM's 120 / 373 points, baseline and full
 #    (in $OUT/a768_stereo.txt), beside bench/gpu_session21.sh f (model.init_fill 8 and 4 at 384x256; $OUT/fill.txt).
+# m: at 768x512 (10,000 it) at 3 views, the captures' new geometry.sfm_min_views 4 (stereo, held, its sweep bounded by
+#    SfM's points), baseline and full, seeds 0-2, and the start from SfM's points (geometry.sfm_min_views=0, session
+#    21's default) for seeds 1 and 2 (seed 0: bench/results/s21/a768_10k_3v.txt); $OUT/a768_views.txt.
 # w: the variants named by VARIANTS on all six cases, baseline and full (METHODS narrows), seeds 0-2 (is it a default?),
 #    in $OUT/wide.txt. combo: the three full-method changes of x that helped castle_p30 together.
 set -u
@@ -43,6 +46,13 @@ s)
   JOBS=8 bash "$(dirname "${BASH_SOURCE[0]}")/gpu_session21.sh" f "$D" "$R"
   wait
   summary s_ a768_stereo.txt
+  ;;
+m)
+  for c in castle_p30 herz_jesus_p25; do for m in baseline full; do
+    for s in 0 1 2; do echo "m_${c}_3v_${m}_s$s $m $c 3 $s"; done
+    for s in 1 2; do echo "n_${c}_3v_${m}_s$s $m $c 3 $s --set geometry.sfm_min_views=0"; done
+  done; done | DS=4 IT=10000 xargs -P ${JOBS:-8} -L 1 bash -c 'one "$@"' _ | grep -v "rc=0"
+  summary m_ a768_views.txt; summary n_ a768_sfm.txt
   ;;
 w)
   for v in ${VARIANTS}; do

@@ -186,3 +186,28 @@ def test_sfm_points_match_the_synthetic_rooms_ground_truth_depth(room):
     # the depth map is sampled at the pixel the point falls in: ~1% on surfaces slanted across a pixel
     assert np.median(err) < 0.02, np.median(err)
     assert np.mean(err < 0.05) > 0.9, np.mean(err < 0.05)
+
+
+def test_fewer_views_than_sfm_min_views_start_from_stereo_bounded_by_the_sfm_points(room, monkeypatch):
+    """With 4 training views and sfm_min_views 5, sfm gives way to stereo although SfM found enough points (one
+    line says why), and the sweep's depth range comes from those SfM points; with sfm_min_views 4 the run starts
+    from SfM's points."""
+    import warpgs.points as points
+
+    ranges = []
+    real_stereo = points.stereo_points
+
+    def spy(cameras, options, depth_range, device=None):
+        ranges.append(depth_range)
+        return real_stereo(cameras, options, depth_range, device=device)
+
+    monkeypatch.setattr(points, "stereo_points", spy)
+    opts = dict(min_points=20, stereo=StereoInitOptions(max_width=64))
+    lines = []
+    geo = initial_geometry(room.train, "sfm", GeometryConfig(sfm_min_views=5, **opts), log=lines.append)
+    assert geo.method == "stereo" and len(geo.xyz) >= 100
+    assert len(lines) == 1 and "4 training views, fewer than geometry.sfm_min_views 5; using stereo" in lines[0]
+    sfm_xyz = points.triangulate(room.train, points.SfmOptions(), log=lambda *_: None).xyz
+    assert ranges == [points.depth_bounds(room.train, sfm_xyz, 1.0, 99.0, 0.2)]
+    kept = initial_geometry(room.train, "sfm", GeometryConfig(sfm_min_views=4, **opts), log=lambda m: None)
+    assert kept.method == "sfm" and len(kept.xyz) == len(sfm_xyz)

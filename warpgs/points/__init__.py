@@ -16,7 +16,8 @@ Methods (``model.init``):
 - ``sfm+stereo``: both; the SfM points fix the sweep's depth range, and the two clouds are merged.
 
 A method that finds fewer than ``min_points`` gives way to the next of its chain (sfm+stereo -> stereo,
-sfm -> stereo; after stereo the caller falls back to random points in the frusta), and one line says so. Only the cameras passed in are used: callers
+sfm -> stereo; after stereo the caller falls back to random points in the frusta), and one line says so; so do
+sfm and sfm+stereo with fewer training views than ``sfm_min_views``. Only the cameras passed in are used: callers
 pass the training views, never test views.
 """
 
@@ -37,6 +38,9 @@ CHAIN = {"sfm": ["sfm", "stereo"], "stereo": ["stereo"], "sfm+stereo": ["sfm+ste
 @dataclass
 class GeometryConfig:
     min_points: int = 100  # a method that finds fewer gives way to the next (module docstring)
+    sfm_min_views: int = 0  # with fewer training views, sfm and sfm+stereo give way to stereo whatever they find
+    #   (SfM still runs: its points bound the sweep's depth range). Its few hundred points need growth, and growth
+    #   fits so few inputs (captures' config: 4)
     max_points: int = 150_000  # larger clouds are subsampled to this many (seeded)
     near_percentile: float = 1.0  # per-camera depth percentiles of the points that bound the scene ...
     far_percentile: float = 99.0
@@ -45,7 +49,7 @@ class GeometryConfig:
     sfm: SfmOptions = field(default_factory=SfmOptions)
     stereo: StereoInitOptions = field(default_factory=StereoInitOptions)
 
-    LIMITS = {"min_points": ">= 0", "max_points": ">= 1", "near_percentile": "[0, 100]", "far_percentile": "[0, 100]",
+    LIMITS = {"min_points": ">= 0", "sfm_min_views": ">= 0", "max_points": ">= 1", "near_percentile": "[0, 100]", "far_percentile": "[0, 100]",
               "bounds_margin": "[0, 1)", "seed": ">= 0"}
 
 
@@ -114,11 +118,13 @@ def initial_geometry(cameras, method: str, config: GeometryConfig | None = None,
             try:
                 pts = triangulate(cameras, cfg.sfm, log=lambda *_: None)
                 geo.stats["sfm"] = pts.stats
-                why = f"{len(pts.xyz)} points" if len(pts.xyz) < cfg.min_points else None
+                why = (f"triangulation found too few points ({len(pts.xyz)} points)" if len(pts.xyz) < cfg.min_points
+                       else f"{len(cameras)} training views, fewer than geometry.sfm_min_views {cfg.sfm_min_views}"
+                       if len(cameras) < cfg.sfm_min_views else None)
             except SfmInputError:
                 raise
             except SfmError as e:  # too few matches or points: the next method may do better
-                pts, why = None, str(e)
+                pts, why = None, f"triangulation found too few points ({e})"
             geo.times["sfm_s"] = time.perf_counter() - t0
             sfm_result.extend([pts, why])
         return sfm_result
@@ -138,7 +144,7 @@ def initial_geometry(cameras, method: str, config: GeometryConfig | None = None,
         if m in ("sfm", "sfm+stereo"):
             pts, why = sfm()
             if why is not None:
-                note(f"init {m}: triangulation found too few points ({why}); using stereo")
+                note(f"init {m}: {why}; using stereo")
                 continue
             xyz, rgb = pts.xyz, pts.rgb
             if m == "sfm+stereo":
