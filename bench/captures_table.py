@@ -12,7 +12,9 @@ median).
   the 3-view runs it changes, and ``s21/captures_default69.txt``, the 6- and 9-view runs repeated with it);
 - session 22: the full method's variants (``s22/weak_part1.txt``, ``x_VARIANT_...``; ``s22/wide_full.txt``,
   ``w_VARIANT_...``) against session 21's default: one row per variant, the full method's median per case and its
-  gain over session 21's baseline, the mean and worst gain over the cases measured.
+  gain over session 21's baseline, the mean and worst gain over the cases measured; then 3 views at 768x512
+  (10,000 it) from SfM's points (``s21/a768_10k_3v.txt`` seed 0, ``s22/a768_sfm.txt`` seeds 1-2) and from held
+  stereo (``geometry.sfm_min_views`` 4, ``s22/a768_views.txt``).
 """
 
 from __future__ import annotations
@@ -129,6 +131,10 @@ def main(argv=None) -> int:
             for key, seeds in runs.items():
                 variants.setdefault(v, {}).setdefault(key, {}).update(seeds)
         print("\n".join(variant_table(s21, variants)))
+        print()
+        print("\n".join(table([("SfM start (session 21)", merged(load(r21 / "a768_10k_3v.txt", "a"),
+                                                                 load(r22 / "a768_sfm.txt", "n"))),
+                               ("stereo start, held (session 22)", load(r22 / "a768_views.txt", "m"))])))
         return 0
     if args.session == 20:
         cols = [("session 19 default", load(r20 / "path_floaters.txt", "p", "0")),
