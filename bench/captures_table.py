@@ -126,10 +126,8 @@ def main(argv=None) -> int:
     s21 = merged(load(r21 / "captures_default3.txt", "d"), load(r21 / "captures_default69.txt", "d"))
     if args.session == 22:
         r22 = Path(args.results) / "s22"
-        variants = load_variants(r22 / "weak_part1.txt", "x")
-        for v, runs in load_variants(r22 / "wide_full.txt", "w").items():
-            for key, seeds in runs.items():
-                variants.setdefault(v, {}).setdefault(key, {}).update(seeds)
+        x, w = load_variants(r22 / "weak_part1.txt", "x"), load_variants(r22 / "wide_full.txt", "w")
+        variants = {v: merged(x.get(v, {}), w.get(v, {})) for v in x.keys() | w.keys()}
         print("\n".join(variant_table(s21, variants)))
         print()
         print("\n".join(table([("SfM start (session 21)", merged(load(r21 / "a768_10k_3v.txt", "a"),

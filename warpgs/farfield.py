@@ -127,9 +127,7 @@ class ElevationFarField:
             raise ValueError(f"far field: blur must be >= 0 or 'auto', got {blur}")
         sums = sum(s for s, _, _ in stats)
         counts = sum(n for _, n, _ in stats)
-        ff = cls(up, band_colours(sums, counts, blur).float())
-        ff.blur = blur
-        return ff
+        return cls(up, band_colours(sums, counts, blur).float(), blur)
 
     def elevation_coordinate(self, dirs: torch.Tensor) -> torch.Tensor:
         """Continuous band coordinate of unit directions: band i's centre is at i."""

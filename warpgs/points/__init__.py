@@ -118,9 +118,11 @@ def initial_geometry(cameras, method: str, config: GeometryConfig | None = None,
             try:
                 pts = triangulate(cameras, cfg.sfm, log=lambda *_: None)
                 geo.stats["sfm"] = pts.stats
-                why = (f"triangulation found too few points ({len(pts.xyz)} points)" if len(pts.xyz) < cfg.min_points
-                       else f"{len(cameras)} training views, fewer than geometry.sfm_min_views {cfg.sfm_min_views}"
-                       if len(cameras) < cfg.sfm_min_views else None)
+                why = None
+                if len(pts.xyz) < cfg.min_points:
+                    why = f"triangulation found too few points ({len(pts.xyz)} points)"
+                elif len(cameras) < cfg.sfm_min_views:
+                    why = f"{len(cameras)} training views, fewer than geometry.sfm_min_views {cfg.sfm_min_views}"
             except SfmInputError:
                 raise
             except SfmError as e:  # too few matches or points: the next method may do better
