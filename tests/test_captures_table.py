@@ -51,3 +51,22 @@ def test_variant_table_gives_each_variants_full_median_and_gain_over_the_default
     assert out[2] == "| default (session 21) | 13.90 (-0.20) | 21.50 (+0.50) | +0.15 | -0.20 | 2 |"
     assert out[3] == "| pw02 | 14.50 (+0.40) | - | +0.40 | +0.40 | 1 |"
     assert out[4] == "| rel | - | 22.00 (+1.00) | +1.00 | +1.00 | 1 |"
+
+
+def test_session23_table_gives_each_groups_median_spread_and_gaussians(tmp_path):
+    import session23_table as st
+
+    (tmp_path / "a.txt").write_text("# a comment\n"
+                                    "d_fern_nodepth_s0 21.0 300 [1.0] [2.0]\n"
+                                    "d_fern_nodepth_s1 20.0 100 [1.0] [2.0]\n"
+                                    "l_best_s0 24.0 50 [1.0] [2.0]\n"
+                                    "unknown_group_s0 99.0 1 [1.0] [2.0]\n"
+                                    "syn_nodepth_s0 22.0\n")  # no Gaussians: not a run summary
+    (tmp_path / "b.txt").write_text("d_fern_nodepth_s2 23.0 200 [1.0] [2.0]\n")
+    runs = st.load(tmp_path)
+    assert runs["d_fern_nodepth"] == {0: (21.0, 300), 1: (20.0, 100), 2: (23.0, 200)}
+    assert "syn_nodepth" not in runs
+    out = st.table(runs)
+    assert "| fern 3v | full, no depth terms | 0, 1, 2 | 21.00 [20.00, 23.00] | 200 |" in out
+    assert any(row.startswith("| lego 8v |") and "| 0 | 24.00 | 50 |" in row for row in out)  # one seed: no spread
+    assert not any("99.00" in row for row in out)  # only the named groups, in their order

@@ -317,6 +317,39 @@ def test_consistency_check_against_ground_truth(room):
     assert bool((c2[[0, 1, 3, 4]] == 0).all()) and torch.equal(c2[2], count[2])
 
 
+def test_consistency_min_angle_drops_short_baseline_neighbours(room):
+    """A neighbour counts only where its ray meets the reference's at the point under at least ``min_angle``: the
+    count equals, per pixel, the neighbours that agree on their own and see the (true) point at that angle or more."""
+    _, Ks, vms, gt = room
+    nb = neighbour_views(vms, 3)
+    v, h, w = gt.shape
+    # the angle at each reference pixel's true point between the reference's ray and each neighbour's
+    c2w = torch.linalg.inv(vms.double())
+    centres = c2w[:, :3, 3]
+    ys, xs = torch.meshgrid(torch.arange(h, dtype=torch.float64) + 0.5, torch.arange(w, dtype=torch.float64) + 0.5,
+                            indexing="ij")
+    pix = torch.stack([xs, ys, torch.ones_like(xs)], -1)
+    angles = torch.zeros(v, nb.shape[1], h, w, dtype=torch.float64)
+    for r in range(v):
+        pts = (pix @ torch.linalg.inv(Ks[r].double()).T) * gt[r].double()[..., None]
+        world = pts @ c2w[r, :3, :3].T + c2w[r, :3, 3]
+        ray_r = torch.nn.functional.normalize(world - centres[r], dim=-1)
+        for m, s in enumerate(nb[r].tolist()):
+            ray_s = torch.nn.functional.normalize(world - centres[s], dim=-1)
+            angles[r, m] = torch.rad2deg(torch.acos((ray_r * ray_s).sum(-1).clamp(-1, 1)))
+    valid = gt > 0
+    limit = float(angles.permute(1, 0, 2, 3)[:, valid].median())  # about half the pairs fall below it
+    agree = torch.stack([check_consistency(gt, Ks, vms, nb[:, m:m + 1])[0] for m in range(nb.shape[1])], 1)
+    expected = (agree.bool() & (angles >= limit)).sum(1)
+    count, _ = check_consistency(gt, Ks, vms, nb, StereoConfig(min_angle=limit))
+    near_limit = ((angles - limit).abs() < 1e-3).any(1)  # float32 in the kernel against float64 here
+    assert bool((count[valid & ~near_limit] == expected[valid & ~near_limit].int()).all())
+    assert int(count[valid].sum()) < int(check_consistency(gt, Ks, vms, nb)[0][valid].sum())
+    # 0 checks every neighbour, as before the option
+    assert torch.equal(check_consistency(gt, Ks, vms, nb, StereoConfig(min_angle=0.0))[0],
+                       check_consistency(gt, Ks, vms, nb)[0])
+
+
 def test_fused_cloud_matches_the_depth_maps(room, room_result):
     images, Ks, vms, gt = room
     res = room_result
@@ -342,7 +375,7 @@ def billboard_view(images, Ks, vms, src: int, dst: int, depth: float) -> torch.T
     """View ``dst`` as a generator that trusts a wrong model would fill it: image ``src`` warped as if
     the whole scene were the plane z = ``depth`` in front of ``dst`` (bilinear; black outside)."""
     H, W = images.shape[1:3]
-    K, Kinv = Ks[dst].double(), torch.linalg.inv(Ks[dst].double())
+    Kinv = torch.linalg.inv(Ks[dst].double())
     ii, jj = torch.meshgrid(torch.arange(H, dtype=torch.float64), torch.arange(W, dtype=torch.float64), indexing="ij")
     rays = torch.stack([jj + 0.5, ii + 0.5, torch.ones_like(ii)], -1) @ Kinv.T
     c2w = torch.linalg.inv(vms[dst].double())

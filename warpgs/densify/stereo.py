@@ -19,7 +19,9 @@ Plane sweep (default backend, Warp kernels in ``warpgs.kernels.stereo``):
    the refined minimum is the pixel's photometric score;
 4. geometric consistency: the pixel goes to each neighbour at its depth, picks up the neighbour's
    depth there, comes back, and must land within ``consistency_px`` pixels with a depth within
-   ``consistency_depth`` (relative); the agreeing depths are averaged (the fused depth);
+   ``consistency_depth`` (relative); the agreeing depths are averaged (the fused depth). With
+   ``min_angle`` > 0 a neighbour whose ray meets the reference's at the point under a smaller angle is
+   not checked: two views a few centimetres apart agree on any depth;
 5. a pixel is confident when its score >= ``min_score`` and at least ``min_consistent`` neighbours
    agree; its confidence is clamp(score, 0, 1) x agreeing / checked neighbours.
 
@@ -66,6 +68,9 @@ class StereoConfig:
     consistency_px: float = 1.0  # forward-backward reprojection error bound (pixels)
     consistency_depth: float = 0.01  # relative depth difference bound
     min_consistent: int = 1  # neighbours that must agree
+    min_angle: float = 0.0  # degrees: a neighbour whose ray meets the reference's at a smaller angle at the point
+    #   (too short a baseline to place it in depth) does not count towards min_consistent (COLMAP's patch-match filter
+    #   uses 3); 0: every neighbour counts
     translation_scale: float = 1.0  # pose distance used to pick neighbours (see select.pose_distance)
 
 
@@ -202,11 +207,12 @@ def check_consistency(depths: torch.Tensor, Ks: torch.Tensor, viewmats: torch.Te
     nb = _index_tensor(neighbours).int()
     count = torch.zeros(v, h, w, dtype=torch.int32, device=d.device)
     dsum = d.clone()
+    max_cos = math.cos(math.radians(cfg.min_angle)) if cfg.min_angle > 0 else 1.0
     for r in (range(v) if views is None else [int(x) for x in views]):
         nr = nb[r].to(d.device).contiguous()
         launch(ks.geometric_consistency, (h, w),
                [arg(d), arg(w2c, wp.mat44), arg(c2w, wp.mat44), arg(K, wp.mat33), arg(K_inv, wp.mat33), r, arg(nr),
-                float(cfg.consistency_px), float(cfg.consistency_depth), arg(count[r]), arg(dsum[r])],
+                float(cfg.consistency_px), float(cfg.consistency_depth), max_cos, arg(count[r]), arg(dsum[r])],
                dev, stream)
     fused = dsum / (count.float() + 1.0)
     return count, fused

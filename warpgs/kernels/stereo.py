@@ -202,12 +202,16 @@ def geometric_consistency(
     neighbours: wp.array(dtype=wp.int32),  # [M] views checked against
     max_px: float,  # reprojection error bound in pixels
     max_rel_depth: float,  # relative depth difference bound
+    max_cos_angle: float,  # a neighbour whose ray meets the reference's at a smaller angle (cosine above this) does
+    #                        not count (1: every neighbour counts)
     count: wp.array2d(dtype=wp.int32),  # out: neighbours that agree
     depth_sum: wp.array2d(dtype=float),  # out: sum of the agreeing depths, the reference's own included
 ):
     """Forward-backward check: the reference pixel at its depth goes to the neighbour, picks up the
     neighbour's depth at the nearest pixel there, comes back, and must land within ``max_px`` pixels
-    of where it started with a depth within ``max_rel_depth`` of its own."""
+    of where it started with a depth within ``max_rel_depth`` of its own. A neighbour whose viewing ray meets the
+    reference's at the point under an angle with cosine above ``max_cos_angle`` (too short a baseline to place it in
+    depth) is not checked."""
     i, j = wp.tid()
     h = depth.shape[1]
     w = depth.shape[2]
@@ -224,6 +228,11 @@ def geometric_consistency(
             xs = wp.transform_point(w2c[s], xw)
             if xs[2] <= 0.0:
                 continue
+            if max_cos_angle < 1.0:
+                ray_r = wp.normalize(xw - wp.transform_point(c2w[ref], wp.vec3(0.0)))
+                ray_s = wp.normalize(xw - wp.transform_point(c2w[s], wp.vec3(0.0)))
+                if wp.dot(ray_r, ray_s) > max_cos_angle:
+                    continue
             ps = K[s] @ xs
             us = ps[0] / ps[2]
             vs = ps[1] / ps[2]

@@ -42,6 +42,7 @@ class StereoInitOptions:
     consistency_px: float = 1.5  # forward-backward reprojection bound, pixels (at the downsampled size)
     consistency_depth: float = 0.02  # relative depth bound of that check
     min_consistent: int = 1  # neighbours whose depth must agree
+    min_angle: float = 0.0  # degrees: neighbours that see a point under a smaller triangulation angle do not count
     min_disparity: float = 0.5  # first pass without a depth range: the farthest depth resolved (pixels)
     max_disparity: float = 1.0  # ... and the nearest (fraction of the image width)
     refine_low: float = 1.0  # second pass: the range between these depth percentiles of the first pass ...
@@ -104,7 +105,7 @@ def _sweep(images, Ks, V, depth_range, opts: StereoInitOptions, nb):
     cfg = StereoConfig(planes=opts.planes, patch_radius=opts.patch_radius, neighbours=nb.shape[1],
                        top_k=min(opts.top_k, nb.shape[1]), min_texture=opts.min_texture, min_score=opts.min_score,
                        consistency_px=opts.consistency_px, consistency_depth=opts.consistency_depth,
-                       min_consistent=opts.min_consistent)
+                       min_consistent=opts.min_consistent, min_angle=opts.min_angle)
     return stereo_point_cloud(images, Ks, V, depth_range, cfg, neighbours=nb)
 
 
