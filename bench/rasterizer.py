@@ -337,6 +337,13 @@ def main(argv=None):
             row["ratio_fwd_bwd"] = row["warpgs"]["forward_backward_ms"] / row["gsplat"]["forward_backward_ms"]
             row["ratio_fwd_bwd_vs_rgb_ed"] = (row["warpgs"]["forward_backward_ms"]
                                               / row["gsplat_rgb_ed"]["forward_backward_ms"])
+            # the ratio within each round (the two timed a few ms apart), median and range over the rounds: a slow
+            # stretch of the machine lands on both sides of it
+            paired = [a / b for a, b in zip(row["warpgs"]["rounds_ms"]["forward_backward_ms"],
+                                            row["gsplat"]["rounds_ms"]["forward_backward_ms"])]
+            row["ratio_fwd_bwd_paired"] = {"median": statistics.median(paired), "min": min(paired), "max": max(paired)}
+            print(f"  paired per round: fwd+bwd {row['ratio_fwd_bwd_paired']['median']:.2f} "
+                  f"[{min(paired):.2f}, {max(paired):.2f}]")
             print(f"  ratio warpgs/gsplat: fwd {row['ratio_fwd']:.2f}  fwd+bwd {row['ratio_fwd_bwd']:.2f} "
                   f"(vs RGB+ED {row['ratio_fwd_bwd_vs_rgb_ed']:.2f})  max|RGB diff| {row['max_abs_rgb_diff']:.2e}")
         else:

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import functools
 import math
+import struct
 from typing import NamedTuple
 
 import torch
@@ -175,9 +176,19 @@ class _SHColors(torch.autograd.Function):
         return v_coeffs, v_means, None, None, None, None, None
 
 
-def _bin_gaussians(means2d, radii, depths, tiles_touched, tiles_x, tiles_y, capacity: int | None = None,
-                   dev: str | None = None, stream=None):
-    """Sorted Gaussian ids per tile: returns (ranges [tiles, 2] int32, gauss_ids [total] int32, total).
+def _bin_gaussians(means2d, radii, depths, conics, opac_eff, colors, splats, offsets, ranges, tiles_x, tiles_y,
+                   near: float, capacity: int | None = None, dev: str | None = None, stream=None):
+    """Sorted Gaussian ids per tile: returns (gauss_ids [total] int32, the sorted keys, their shift, total), and
+    packs the Gaussians on screen into ``splats`` [N, 10] as the compositing kernels read them (the same launch).
+    ``offsets``: the inclusive cumulative sum of the Gaussians' tile counts (int32). On the CPU it also fills
+    ``ranges`` [tiles, 2] int32 (zeros on entry) with each tile's [start, end) in the sorted list; on CUDA the
+    forward compositing kernel finds them in the keys itself and writes them there.
+
+    A key is the tile id above the depth's float bits less those of the near plane ``near`` (every depth on screen
+    is at least that), and the one host read of a render takes the largest depth's bits with the count: the
+    shift is the width of that difference (``_key_shift``; 27 bits while the largest depth is below 65,536 times
+    the near plane, instead of 32), so the radix sort passes over fewer key bits (five 8-bit passes instead of six up to 8,192 tiles, a
+    1920x1080 image). The order is the same as with the raw bits, so the render is too.
 
     ``capacity``: the key buffers hold that many entries whatever the count, so nothing is read on the host
     (a CUDA graph can hold the render; ``warpgs.graphstep``): the unused entries are padding keys that sort
@@ -187,12 +198,16 @@ def _bin_gaussians(means2d, radii, depths, tiles_touched, tiles_x, tiles_y, capa
     device and the stream of the launches (``launch_stream``), looked up where not given."""
     if dev is None:
         dev, stream = device_of(means2d), launch_stream(means2d)
-    n_tiles = tiles_x * tiles_y
-    ranges = torch.zeros(n_tiles, 2, device=means2d.device, dtype=torch.int32)
     n = means2d.shape[0]
-    offsets = torch.cumsum(tiles_touched, 0, dtype=torch.int32)
+    shift, base = 32, 0  # a fixed capacity: the depth's raw bits (no host read to size them by)
     if capacity is None:
-        count = int(offsets[-1]) if n else 0  # the one host sync of a render: sizes the key buffers
+        count = 0
+        if n:  # the one host sync of a render: the count sizes the key buffers, the largest depth the keys
+            # (the two int32 read as one int64, low half first: one scalar copy, as int() of the count alone made)
+            both = torch.stack((offsets[-1], depths.view(torch.int32).amax())).view(torch.int64).item()
+            count, top = both & 0xFFFFFFFF, both >> 32
+            base = _float_bits(near)
+            shift = _key_shift(top - base)
         keys = torch.empty(2 * count, device=means2d.device, dtype=torch.int64)  # the sort's double buffer
         values = torch.empty(2 * count, device=means2d.device, dtype=torch.int32)
     else:
@@ -200,18 +215,37 @@ def _bin_gaussians(means2d, radii, depths, tiles_touched, tiles_x, tiles_y, capa
         keys = torch.full((count,), _PADDING_KEY, device=means2d.device, dtype=torch.int64)
         values = torch.zeros(count, device=means2d.device, dtype=torch.int32)
     if n == 0 or count == 0:
-        return ranges, values[:count], count
+        return values[:count], keys, shift, count
     fast_launch(kb.emit_intersections, n, dev, stream,
-                means2d, radii, depths.view(torch.int32), offsets, kr.tile_size_for(dev), tiles_x, tiles_y,
-                keys, values)
+                means2d, radii, depths.view(torch.int32), offsets, kr.tile_size_for(dev), tiles_x, tiles_y, shift,
+                base, keys, values, conics, opac_eff, colors, depths, splats)
     if capacity is None:
-        tile_bits = int(math.floor(math.log2(n_tiles))) + 1
-        _sort_pairs(keys, values, count, 32 + tile_bits, stream, dev)
+        tile_bits = int(math.floor(math.log2(tiles_x * tiles_y))) + 1
+        _sort_pairs(keys, values, count, shift + tile_bits, stream, dev)
     else:
         keys, order = torch.sort(keys, stable=True)
         values = values[order]
-    fast_launch(kb.tile_ranges_from_keys, count, dev, stream, keys, count, ranges)
-    return ranges, values[:count], count
+    if dev == "cpu":
+        fast_launch(kb.tile_ranges_from_keys, count, dev, stream, keys, count, shift, ranges)
+    return values[:count], keys, shift, count
+
+
+def _float_bits(x: float) -> int:
+    """The bits of ``x`` as a float32, read as an int32."""
+    return struct.unpack("<i", struct.pack("<f", x))[0]
+
+
+def _key_shift(span: int) -> int:
+    """The key bits the depth takes when the largest depth's bits exceed the near plane's by ``span``: its width
+    (at least 1). Every depth on screen lies between the two, so its difference fits; a span past 31 bits (no
+    finite positive depth has one) keeps 32."""
+    return min(32, max(1, span.bit_length())) if span > 0 else 1
+
+
+def _unused_grads(device) -> tuple:
+    """Empty read-only stand-ins for the float gradient outputs of the fixed-point CUDA backward, which does not
+    write them: (means2d [0, 2], conics [0, 3], opacities [0], colours [0, 3], depths [0])."""
+    return tuple(_zero_input(shape, device) for shape in ((0, 2), (0, 3), (0,), (0, 3), (0,)))
 
 
 # a key past every tile (tile id 2^31 - 1): the padding of fixed-capacity key buffers, sorted last
@@ -243,27 +277,39 @@ def _sort_pairs(keys: torch.Tensor, values: torch.Tensor, count: int, end_bit: i
 
 
 class _Composite(torch.autograd.Function):
+    # The tile binning runs inside the forward, after the work that does not need the sorted lists (the cumulative
+    # tile counts, the outputs' allocations): the binning's read of the intersection count waits for the GPU, so
+    # what the host does before it overlaps the GPU's work, and what it does after leaves the GPU idle. The launches
+    # are three on CUDA (keys and packed splats, the sort, the compositing, which finds its tile's range in the
+    # keys): each costs the host more than the GPU at 100k-200k Gaussians. ``info``: a list that receives the
+    # intersection count (``RenderOutput.n_intersections``).
     @staticmethod
-    def forward(ctx, means2d, conics, opac_eff, colors, depths, background, ranges, gauss_ids,
-                width, height, alpha_max, deterministic, dev=None, stream=None):  # dev, stream: as _Project's
+    def forward(ctx, means2d, conics, opac_eff, colors, depths, background, radii, tiles_touched, width, height,
+                alpha_max, deterministic, near, capacity, info, dev=None, stream=None):  # dev, stream: as _Project's
         if dev is None:
             dev, stream = device_of(means2d), launch_stream(means2d)
-        tiles_x = _tile_grid(dev, width, height)[1]
-        n_threads = kr.compositing_threads(dev, ranges.shape[0])
+        _, tiles_x, tiles_y = _tile_grid(dev, width, height)
+        n_tiles = tiles_x * tiles_y
+        n_threads = kr.compositing_threads(dev, n_tiles)
+        offsets = torch.cumsum(tiles_touched, 0, dtype=torch.int32)
         f = dict(device=means2d.device, dtype=torch.float32)
         splats = torch.empty(means2d.shape[0], 10, **f)
-        fast_launch(kr.pack_splats, means2d.shape[0], dev, stream,
-                    means2d, conics, opac_eff, colors, depths, splats)
         color = torch.empty(height, width, 3, **f)
         depth = torch.empty(height, width, **f)
         alpha = torch.empty(height, width, **f)
         last = torch.empty(height, width, device=means2d.device, dtype=torch.int32)
-        args = (ranges, gauss_ids, splats, background.reshape(1, 3), width, height, tiles_x, alpha_max,
-                color.view(-1, 3), depth.view(-1), alpha.view(-1), last.view(-1))
+        # written by the CPU's binning (which leaves empty tiles at zero) or by the CUDA forward (every tile)
+        ranges = (torch.zeros if dev == "cpu" else torch.empty)(n_tiles, 2, device=means2d.device, dtype=torch.int32)
+        gauss_ids, keys, shift, total = _bin_gaussians(means2d, radii, depths, conics, opac_eff, colors, splats,
+                                                       offsets, ranges, tiles_x, tiles_y, near, capacity, dev, stream)
+        info.append(total)
+        outputs = (color.view(-1, 3), depth.view(-1), alpha.view(-1), last.view(-1))
         if dev == "cpu":  # the parts write disjoint pixels
+            args = (ranges, gauss_ids, splats, background.reshape(1, 3), width, height, tiles_x, alpha_max) + outputs
             launch_parts(kr.rasterize_fwd_cpu, n_threads, dev, CPU_PARTS, lambda p: args)
         else:
-            fast_launch(kr.rasterize_fwd_cuda, n_threads, dev, stream, *args, 0, 1)
+            fast_launch(kr.rasterize_fwd_cuda, n_threads, dev, stream, keys, total, shift, gauss_ids, splats,
+                        background.reshape(1, 3), width, height, tiles_x, alpha_max, ranges, *outputs)
         ctx.save_for_backward(splats, background, ranges, gauss_ids, depth, alpha, last)
         ctx.cfg = (width, height, alpha_max, deterministic, dev, stream)
         # an output the loss does not use gets None in backward, not a zero tensor: no allocation, and a
@@ -285,8 +331,11 @@ class _Composite(torch.autograd.Function):
             return (torch.zeros(n if fixed else 0, 10, device=splats.device, dtype=torch.int64),
                     make(n, 2, **z), make(n, 3, **z), make(n, **z), make(n, 3, **z), make(n, **z))
 
-        grads = grad_buffers(torch.empty if fixed else torch.zeros)
-        v_fixed, v_means2d, v_conics, v_opac, v_colors, v_depths = grads
+        if fixed and dev != "cpu":
+            v_fixed = torch.zeros(n, 10, device=splats.device, dtype=torch.int64)
+        else:
+            grads = grad_buffers(torch.empty if fixed else torch.zeros)
+            v_fixed, v_means2d, v_conics, v_opac, v_colors, v_depths = grads
         with_depth = int(v_depth is not None)  # a loss without the depth skips its (zero) terms
         args = (ranges, gauss_ids, splats, background.reshape(1, 3), width, height, tiles_x, alpha_max,
                 depth.view(-1), alpha.view(-1), last.view(-1),
@@ -301,12 +350,19 @@ class _Composite(torch.autograd.Function):
             for extra in parts[1:]:
                 for total, t in zip(grads, extra):
                     total += t
+        elif fixed:
+            # the fixed-point variant writes v_fixed alone: its float outputs are empty views, so the float
+            # gradients are made after the launch, while the GPU runs it
+            kernel = kr.rasterize_bwd_cuda[1][with_depth]  # compiled for these two flags
+            fast_launch(kernel, n_threads, dev, stream, *args, v_fixed, *_unused_grads(splats.device), 0, 1)
         else:
-            kernel = kr.rasterize_bwd_cuda[int(fixed)][with_depth]  # compiled for these two flags
-            fast_launch(kernel, n_threads, dev, stream, *args, *grads, 0, 1)
+            fast_launch(kr.rasterize_bwd_cuda[0][with_depth], n_threads, dev, stream, *args, *grads, 0, 1)
+        if fixed and dev != "cpu":
+            v_means2d, v_conics, v_opac = torch.empty(n, 2, **z), torch.empty(n, 3, **z), torch.empty(n, **z)
+            v_colors, v_depths = torch.empty(n, 3, **z), torch.empty(n, **z)
         if fixed and n:
             fast_launch(kr.fixed_to_grads, n, dev, stream, v_fixed, v_means2d, v_conics, v_opac, v_colors, v_depths)
-        return v_means2d, v_conics, v_opac, v_colors, v_depths, None, None, None, None, None, None, None, None, None
+        return (v_means2d, v_conics, v_opac, v_colors, v_depths) + (None,) * 12
 
 
 # ----------------------------------------------------------------------------------------------------
@@ -437,7 +493,6 @@ def rasterize(
 
     dev = device_of(means)
     stream = launch_stream(means)  # torch's current stream: every launch of the render, its backward's too
-    _, tiles_x, tiles_y = _tile_grid(dev, width, height)
     means2d, conics, depths, opac_eff, radii, tiles_touched = _Project.apply(
         means, quats, scales, opacities, viewmat, K, width, height, eps2d, near_plane, far_plane, antialiased,
         dev, stream
@@ -450,12 +505,12 @@ def rasterize(
         rgb = _SHColors.apply(colors, means, campos.contiguous(), radii, sh_degree, dev, stream)
     else:
         rgb = colors
-    ranges, gauss_ids, total = _bin_gaussians(means2d.detach(), radii, depths.detach(), tiles_touched,
-                                              tiles_x, tiles_y, isect_capacity, dev, stream)
+    info: list = []  # receives the intersection count
     image, depth, alpha = _Composite.apply(
-        means2d, conics, opac_eff, rgb, depths, background, ranges, gauss_ids, width, height, alpha_max,
-        deterministic, dev, stream
+        means2d, conics, opac_eff, rgb, depths, background, radii, tiles_touched, width, height, alpha_max,
+        deterministic, near_plane, isect_capacity, info, dev, stream
     )
+    total = info[0]
     if backdrop is not None:
         image = image + (1.0 - alpha)[..., None] * backdrop.float()
     return RenderOutput(image, depth, alpha, means2d, radii, depths, total)

@@ -3,6 +3,9 @@ the [start, end) range of every tile in the sorted list. Only Warp code lives he
 
 import warp as wp
 
+# one Gaussian as the compositing kernels read it (warpgs/kernels/rasterize.py)
+splat = wp.types.vector(length=10, dtype=wp.float32)
+
 wp.set_module_options({"enable_backward": False})
 
 
@@ -15,15 +18,31 @@ def emit_intersections(
     tile_size: int,
     tiles_x: int,
     tiles_y: int,
+    shift: int,
+    base_bits: int,
     keys: wp.array(dtype=wp.int64),
     values: wp.array(dtype=wp.int32),
+    conics: wp.array(dtype=wp.vec3),
+    opacities: wp.array(dtype=float),
+    colors: wp.array(dtype=wp.vec3),
+    depths: wp.array(dtype=float),
+    splats: wp.array(dtype=splat),
 ):
-    """keys = tile id << 32 | depth as float bits (positive floats sort like their bit patterns)."""
+    """keys = tile id << ``shift`` | (depth's float bits - ``base_bits``): positive floats sort like their bit
+    patterns, so within a tile the keys sort by depth; the caller picks ``base_bits`` at most the bits of any
+    depth on screen and ``shift`` above the bits of the largest difference (``rasterize``: the near plane's bits, and
+    the width of the largest depth's difference to them, which the radix sort then need not pass over beyond; or
+    0 and 32). Also the Gaussian as the compositing kernels read it, ``splats[i]`` = (x, y, conic a, b, c, opacity,
+    r, g, b, depth), written for the Gaussians on screen only (no tile list holds another). ``depth_bits`` is
+    ``depths`` viewed as int32."""
     i = wp.tid()
     r = radii[i]
     if r[0] <= 0 and r[1] <= 0:
         return
     m2 = means2d[i]
+    cn = conics[i]
+    c = colors[i]
+    splats[i] = splat(m2[0], m2[1], cn[0], cn[1], cn[2], opacities[i], c[0], c[1], c[2], depths[i])
     ts = float(tile_size)
     rx = float(r[0])
     ry = float(r[1])
@@ -34,38 +53,63 @@ def emit_intersections(
     k = int(0)
     if i > 0:
         k = offsets[i - 1]
-    dbits = wp.int64(depth_bits[i])
+    dbits = wp.int64(depth_bits[i] - base_bits)
+    s64 = wp.int64(shift)
     cap = keys.shape[0]
     for ty in range(ty0, ty1):
         for tx in range(tx0, tx1):
             if k < cap:  # never false when the buffers were sized from the offsets (rasterize's two modes)
                 tile = wp.int64(ty * tiles_x + tx)
-                keys[k] = (tile << wp.int64(32)) | dbits
+                keys[k] = (tile << s64) | dbits
                 values[k] = i
             k += 1
 
 
+@wp.func
+def lower_bound(keys: wp.array(dtype=wp.int64), count: int, v: wp.int64) -> int:
+    """The first index of the sorted ``keys[:count]`` whose key is >= ``v`` (``count`` if none is)."""
+    lo = int(0)
+    hi = count
+    while lo < hi:
+        mid = (lo + hi) / 2
+        if keys[mid] < v:
+            lo = mid + 1
+        else:
+            hi = mid
+    return lo
+
+
+@wp.func
+def tile_range(keys: wp.array(dtype=wp.int64), count: int, shift: int, tile: int):
+    """[start, end) of ``tile``'s entries in the sorted ``keys[:count]`` of ``emit_intersections``'s ``shift`` (two
+    binary searches: what ``tile_ranges_from_keys`` writes for it)."""
+    t = wp.int64(tile)
+    s = wp.int64(shift)
+    return lower_bound(keys, count, t << s), lower_bound(keys, count, (t + wp.int64(1)) << s)
+
+
 @wp.kernel
-def tile_ranges_from_keys(keys: wp.array(dtype=wp.int64), count: int, ranges: wp.array2d(dtype=wp.int32)):
+def tile_ranges_from_keys(keys: wp.array(dtype=wp.int64), count: int, shift: int, ranges: wp.array2d(dtype=wp.int32)):
     """ranges[tile] = [first, last + 1) of the tile's entries in the sorted key list (zeros if empty).
     Each element is written by exactly one thread. Keys of a tile past the grid (``ranges.shape[0]``: the
     padding ``rasterize`` sorts after every real key when its buffers have a fixed capacity) end the range
     before them and are otherwise skipped."""
     k = wp.tid()
-    n_tiles = ranges.shape[0]
-    tile = int(keys[k] >> wp.int64(32))
+    n_tiles = wp.int64(ranges.shape[0])
+    s = wp.int64(shift)
+    tile = keys[k] >> s  # compared as int64: a padding key's tile does not fit an int
     if tile >= n_tiles:
         if k > 0:
-            prev = int(keys[k - 1] >> wp.int64(32))
+            prev = keys[k - 1] >> s
             if prev < n_tiles:
-                ranges[prev, 1] = k
+                ranges[int(prev), 1] = k
         return
     if k == 0:
-        ranges[tile, 0] = 0
+        ranges[int(tile), 0] = 0
     else:
-        prev = int(keys[k - 1] >> wp.int64(32))
+        prev = keys[k - 1] >> s
         if prev != tile:
-            ranges[prev, 1] = k
-            ranges[tile, 0] = k
+            ranges[int(prev), 1] = k
+            ranges[int(tile), 0] = k
     if k == count - 1:
-        ranges[tile, 1] = count
+        ranges[int(tile), 1] = count
