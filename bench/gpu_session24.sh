@@ -9,7 +9,8 @@
 #    1.1M too, 138k again at the end); h: bench/rasterizer_host.py at 138k (host time per call, cProfile).
 # f: bench/rasterizer.py on fern's trained Gaussians (its baseline trained into $R/fern_base unless it is there) at
 #    1x-3x, and bench/graph_check.py on plain fern (with and without CUDA graphs bit for bit).
-# s: bench/train_speed.py on fern 3 views, 3000 it (warpgs's trainer against the gsplat loop).
+# s: bench/train_speed.py on fern 3 views, 3000 it (warpgs's trainer against the gsplat loop); session 24 ran it as
+#    `s D RUNS --set train.drop_rate=0.2 --set model.init=frustum` (the packed wheels there have no pycolmap).
 # (The session's first lease ran t, r and f on a build that kept the Warp-written CUDA forward beside the native one
 # and timed both in the same rounds (bench/rasterizer.py --variants then); bench/results/s24/variants/.)
 set -u

@@ -187,8 +187,8 @@ def _bin_gaussians(means2d, radii, depths, conics, opac_eff, colors, splats, off
     A key is the tile id above the depth's float bits less those of the near plane ``near`` (every depth on screen
     is at least that), and the one host read of a render takes the largest depth's bits with the count: the
     shift is the width of that difference (``_key_shift``; 27 bits while the largest depth is below 65,536 times
-    the near plane, instead of 32), so the radix sort passes over fewer key bits (five 8-bit passes instead of six up to 8,192 tiles, a
-    1920x1080 image). The order is the same as with the raw bits, so the render is too.
+    the near plane, instead of 32), so the radix sort passes over fewer key bits (five 8-bit passes instead of six
+    up to 8,192 tiles, a 1920x1080 image). The order is the same as with the raw bits, so the render is too.
 
     ``capacity``: the key buffers hold that many entries whatever the count, so nothing is read on the host
     (a CUDA graph can hold the render; ``warpgs.graphstep``): the unused entries are padding keys that sort
@@ -239,7 +239,7 @@ def _key_shift(span: int) -> int:
     """The key bits the depth takes when the largest depth's bits exceed the near plane's by ``span``: its width
     (at least 1). Every depth on screen lies between the two, so its difference fits; a span past 31 bits (no
     finite positive depth has one) keeps 32."""
-    return min(32, max(1, span.bit_length())) if span > 0 else 1
+    return min(32, span.bit_length()) if span > 0 else 1
 
 
 def _unused_grads(device) -> tuple:
@@ -327,15 +327,12 @@ class _Composite(torch.autograd.Function):
         fixed = bool(deterministic) and (dev != "cpu" or deterministic == "fixed")
         z = dict(device=splats.device, dtype=torch.float32)
 
-        def grad_buffers(make):  # (v_fixed, v_means2d, v_conics, v_opac, v_colors, v_depths)
-            return (torch.zeros(n if fixed else 0, 10, device=splats.device, dtype=torch.int64),
-                    make(n, 2, **z), make(n, 3, **z), make(n, **z), make(n, 3, **z), make(n, **z))
+        def float_grads(make):  # (v_means2d, v_conics, v_opac, v_colors, v_depths)
+            return make(n, 2, **z), make(n, 3, **z), make(n, **z), make(n, 3, **z), make(n, **z)
 
-        if fixed and dev != "cpu":
-            v_fixed = torch.zeros(n, 10, device=splats.device, dtype=torch.int64)
-        else:
-            grads = grad_buffers(torch.empty if fixed else torch.zeros)
-            v_fixed, v_means2d, v_conics, v_opac, v_colors, v_depths = grads
+        def grad_buffers(make):  # (v_fixed, the float gradients)
+            return (torch.zeros(n if fixed else 0, 10, device=splats.device, dtype=torch.int64),) + float_grads(make)
+
         with_depth = int(v_depth is not None)  # a loss without the depth skips its (zero) terms
         args = (ranges, gauss_ids, splats, background.reshape(1, 3), width, height, tiles_x, alpha_max,
                 depth.view(-1), alpha.view(-1), last.view(-1),
@@ -345,24 +342,26 @@ class _Composite(torch.autograd.Function):
         n_threads = kr.compositing_threads(dev, ranges.shape[0])
         if dev == "cpu":
             # each part adds into buffers of its own (a CPU "atomic" add is a plain one), summed in part order
-            parts = [grads] + [grad_buffers(torch.zeros) for _ in range(CPU_PARTS - 1)]
+            parts = [grad_buffers(torch.empty if fixed else torch.zeros)]
+            parts += [grad_buffers(torch.zeros) for _ in range(CPU_PARTS - 1)]
             launch_parts(kr.rasterize_bwd_cpu, n_threads, dev, CPU_PARTS, lambda p: args + parts[p])
             for extra in parts[1:]:
-                for total, t in zip(grads, extra):
+                for total, t in zip(parts[0], extra):
                     total += t
+            v_fixed, *grads = parts[0]
         elif fixed:
-            # the fixed-point variant writes v_fixed alone: its float outputs are empty views, so the float
+            # the fixed-point variant writes v_fixed alone: its float outputs are empty views, and the float
             # gradients are made after the launch, while the GPU runs it
-            kernel = kr.rasterize_bwd_cuda[1][with_depth]  # compiled for these two flags
-            fast_launch(kernel, n_threads, dev, stream, *args, v_fixed, *_unused_grads(splats.device), 0, 1)
+            v_fixed = torch.zeros(n, 10, device=splats.device, dtype=torch.int64)
+            fast_launch(kr.rasterize_bwd_cuda[1][with_depth], n_threads, dev, stream, *args, v_fixed,
+                        *_unused_grads(splats.device), 0, 1)
+            grads = float_grads(torch.empty)
         else:
-            fast_launch(kr.rasterize_bwd_cuda[0][with_depth], n_threads, dev, stream, *args, *grads, 0, 1)
-        if fixed and dev != "cpu":
-            v_means2d, v_conics, v_opac = torch.empty(n, 2, **z), torch.empty(n, 3, **z), torch.empty(n, **z)
-            v_colors, v_depths = torch.empty(n, 3, **z), torch.empty(n, **z)
+            v_fixed, *grads = grad_buffers(torch.zeros)
+            fast_launch(kr.rasterize_bwd_cuda[0][with_depth], n_threads, dev, stream, *args, v_fixed, *grads, 0, 1)
         if fixed and n:
-            fast_launch(kr.fixed_to_grads, n, dev, stream, v_fixed, v_means2d, v_conics, v_opac, v_colors, v_depths)
-        return (v_means2d, v_conics, v_opac, v_colors, v_depths) + (None,) * 12
+            fast_launch(kr.fixed_to_grads, n, dev, stream, v_fixed, *grads)
+        return tuple(grads) + (None,) * 12
 
 
 # ----------------------------------------------------------------------------------------------------

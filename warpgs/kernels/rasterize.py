@@ -551,14 +551,15 @@ rasterize_bwd_cuda = [[_compositing_kernels(True, f, d)[1] for d in (0, 1)] for 
 
 # ----------------------------------------------------------------------------------------------------
 # The CUDA forward (since session 24; before it, the CUDA variant of ``rasterize_fwd`` above, over ``batch_splat``):
-# a batch of a tile's Gaussians is composited by one native function, laid out for the forward alone. A slot is two shared-memory loads, (x, y, conic a, b) and (conic c, opacity), before
-# the pixel knows whether the Gaussian reaches it; the colour and depth, (r, g, b, z), are a third load made only
-# where it does (most pairs of a tile do not), as gsplat reads its colours only there. The test is gsplat's:
-# alpha = min(alpha_max, opacity exp(-sigma)) is evaluated for every pair, and a pair with sigma < 0 or
-# alpha < 1/255 is skipped; beyond SIGMA_SKIP alpha < 1/255 for any opacity, so it skips what the Warp
-# variant skipped, and the sums are the same floats in the same order (session 24 on an H100: the two variants'
-# images, depths, alphas and gradients were equal bit for bit; the forward took 170 us instead of 263 us at
-# 138,766 Gaussians, 648x420, where gsplat's takes 207 us: bench/results/s24).
+# a batch of a tile's Gaussians is composited by one native function, laid out for the forward alone. A slot is
+# two shared-memory loads, (x, y, conic a, b) and (conic c, opacity), before the pixel knows whether the Gaussian
+# reaches it; the colour and depth, (r, g, b, z), are a third load made only where it does (most pairs of a
+# tile do not), as gsplat reads its colours only there. The test is gsplat's: alpha = min(alpha_max, opacity
+# exp(-sigma)) is evaluated for every pair, and a pair with sigma < 0 or alpha < 1/255 is skipped; beyond
+# SIGMA_SKIP alpha < 1/255 for any opacity, so it skips what the Warp variant skipped, and the sums are the same
+# floats in the same order (session 24 on an H100: the two variants' images, depths, alphas and gradients were
+# equal bit for bit; the forward took 170 us instead of 263 us at 138,766 Gaussians, 648x420, where gsplat's
+# takes 207 us: bench/results/s24).
 # state: (T, colour r, g, b, depth sum, count as int bits, done, 0) in and out.
 fwd_state = wp.types.vector(length=8, dtype=wp.float32)
 
