@@ -479,3 +479,89 @@ def test_learned_stereo_errors_say_what_to_do(tmp_path, monkeypatch):
     with pytest.raises(ValueError, match="backend"):
         stereo_point_cloud(images, torch.eye(3).expand(2, 3, 3), torch.eye(4).expand(2, 4, 4).clone(), (1, 2),
                            StereoConfig(backend="psmnet"))
+
+
+# ----------------------------------------------------------------------------------------------
+# semi-global matching
+
+
+def _sgm_oracle(cost, p1, p2, directions):
+    """The path recursion written pixel by pixel in Python (float64): for each direction, walk every line."""
+    c = cost.double().clone()
+    c[c >= 2.0] = 1.0  # no evidence: neutral on the paths
+    P, H, W = c.shape
+    total = torch.zeros_like(c)
+    for dx, dy in directions:
+        L = torch.zeros_like(c)
+        starts = [(0 if dx > 0 else W - 1, y) for y in range(H)] if dy == 0 else [(x, 0 if dy > 0 else H - 1) for x in range(W)]
+        for x, y in starts:
+            prev = None
+            while 0 <= x < W and 0 <= y < H:
+                if prev is None:
+                    L[:, y, x] = c[:, y, x]
+                else:
+                    lp = L[:, prev[1], prev[0]]
+                    m = float(lp.min())
+                    for p in range(P):
+                        best = min(float(lp[p]), m + p2)
+                        if p > 0:
+                            best = min(best, float(lp[p - 1]) + p1)
+                        if p < P - 1:
+                            best = min(best, float(lp[p + 1]) + p1)
+                        L[p, y, x] = c[p, y, x] + best - m
+                prev = (x, y)
+                x, y = x + dx, y + dy
+        total += L
+    return total / len(directions)
+
+
+@pytest.mark.parametrize("paths", [1, 2, 4])
+def test_sgm_aggregation_matches_the_path_recursion(paths):
+    from warpgs.densify.stereo import SGM_DIRECTIONS, aggregate_costs
+
+    g = torch.Generator().manual_seed(3)
+    cost = torch.rand(6, 5, 7, generator=g) * 2
+    cost[:, 2, 3] = 2.0  # a pixel without evidence
+    cost[4, 0, 1] = 2.0  # a plane no source sees
+    got = aggregate_costs(cost, paths, 0.1, 0.5)
+    want = _sgm_oracle(cost, 0.1, 0.5, SGM_DIRECTIONS[:paths])
+    assert torch.allclose(got.double(), want, atol=1e-5)
+    with pytest.raises(ValueError, match="sgm_p1"):
+        aggregate_costs(cost, 4, 0.5, 0.1)
+
+
+def test_sgm_resolves_a_repeated_pattern_and_keeps_no_evidence_out():
+    """Every pixel of a row matches planes 2 and 7 equally well (a facade's repeated windows), except one
+    whose match is unique (plane 2): winner-take-all picks the first minimum it meets, semi-global matching the
+    plane the unique pixel's neighbours agree on. A pixel with no evidence takes no depth either way."""
+    from warpgs.densify.stereo import select_planes
+
+    P, H, W = 10, 3, 9
+    cost = torch.full((P, H, W), 1.0)
+    cost[2], cost[7] = 0.3, 0.3
+    cost[2, :, 4] = 0.1  # the unique match
+    cost[:, :, 6] = 2.0  # no texture there
+    inv = torch.linspace(1.0, 0.1, P)
+    cost_ambiguous = cost.clone()
+    cost_ambiguous[7, :, :6] = 0.29  # winner-take-all prefers the wrong plane by a hair
+    cost_ambiguous[7, :, 7:] = 0.29
+    plane_of = lambda d: ((1 / d - inv[0]) / (inv[1] - inv[0])).round()  # noqa: E731
+    d0, _ = select_planes(cost_ambiguous, inv, StereoConfig())
+    assert bool((plane_of(d0[:, [0, 1, 2, 3, 5, 7, 8]]) == 7).all())
+    d, score = select_planes(cost_ambiguous, inv, StereoConfig(sgm_paths=4, sgm_p1=0.05, sgm_p2=0.5))
+    found = d > 0
+    assert not bool(found[:, 6].any()) and bool((score[:, 6] == -1).all())
+    assert bool((plane_of(d[found]) == 2).all()) and int(found.sum()) == H * (W - 1)
+    # the score is the pixel's own NCC at the chosen plane, not the aggregate's
+    assert torch.allclose(score[found], 1 - cost_ambiguous[2][found], atol=1e-6)
+
+
+def test_plane_depth_is_recovered_with_sgm():
+    w, h = 64, 48
+    K = intrinsics(w, h)
+    vms = cross_rig(np.eye(3), np.zeros(3), 0.25)
+    rgb, gt = render_plane(vms, K, w, h, (0.25, -0.3, 1), 3.0)
+    images, Ks, V = tensors(rgb, vms, K)
+    res = stereo_point_cloud(images, Ks, V, (1.5, 8.0), StereoConfig(sgm_paths=4))
+    rel = ((res.depth - torch.from_numpy(gt).float()).abs() / torch.from_numpy(gt).float())[res.mask]
+    assert res.mask.float().mean() > 0.8 and rel.median() < 0.01

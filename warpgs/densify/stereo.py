@@ -16,7 +16,9 @@ Plane sweep (default backend, Warp kernels in ``warpgs.kernels.stereo``):
 2. cost = 1 - NCC of a (2 ``patch_radius`` + 1)^2 grey patch against its plane-induced warp into each
    source, the ``top_k`` best sources averaged (occlusion-robust);
 3. winner-take-all, refined by a parabola through the best plane and its two neighbours; the NCC at
-   the refined minimum is the pixel's photometric score;
+   the refined minimum is the pixel's photometric score. With ``sgm_paths`` the plane is picked on the
+   volume aggregated by semi-global matching along image lines (smooth surfaces win over repeated
+   patterns: facade windows), and the score is the raw NCC at that plane;
 4. geometric consistency: the pixel goes to each neighbour at its depth, picks up the neighbour's
    depth there, comes back, and must land within ``consistency_px`` pixels with a depth within
    ``consistency_depth`` (relative); the agreeing depths are averaged (the fused depth). With
@@ -72,6 +74,10 @@ class StereoConfig:
     #   (too short a baseline to place it in depth) does not count towards min_consistent (COLMAP's patch-match filter
     #   uses 3); 0: every neighbour counts
     translation_scale: float = 1.0  # pose distance used to pick neighbours (see select.pose_distance)
+    sgm_paths: int = 0  # semi-global matching: the cost volume aggregated along this many image directions (0: off,
+    #   winner-take-all per pixel; 4: left, right, up, down) before the best plane is picked
+    sgm_p1: float = 0.05  # its penalty for a step to the neighbouring plane (costs are 1 - NCC, in [0, 2])
+    sgm_p2: float = 0.4  # ... and for a larger jump
 
 
 class PointCloud(NamedTuple):
@@ -182,11 +188,53 @@ def winner_take_all(cost: torch.Tensor, inv_depths: torch.Tensor) -> tuple[torch
     return depth, score
 
 
+SGM_DIRECTIONS = ((1, 0), (-1, 0), (0, 1), (0, -1))
+SGM_NEUTRAL = 1.0  # what a plane without evidence (cost BAD_COST: no texture, no source sees it) costs on a path
+
+
+def aggregate_costs(cost: torch.Tensor, paths: int = 4, p1: float = 0.05, p2: float = 0.4) -> torch.Tensor:
+    """[P, H, W] semi-global matching of a plane-sweep cost volume: the mean over ``paths`` image directions of
+    the path costs (``warpgs.kernels.stereo.sgm_path``). A plane without evidence counts as ``SGM_NEUTRAL`` there, so
+    the paths carry the neighbours' planes across untextured pixels."""
+    if paths not in (1, 2, 3, 4):
+        raise ValueError(f"stereo: sgm_paths must be 0 (off) or 1..4 directions, got {paths}")
+    if not (0 <= p1 <= p2):
+        raise ValueError(f"stereo: semi-global matching needs 0 <= sgm_p1 <= sgm_p2, got {p1} and {p2}")
+    cost = cost.float().contiguous()
+    dev = device_of(cost)
+    stream = stream_of(dev)
+    _, h, w = cost.shape
+    total = torch.zeros_like(cost)
+    scratch = torch.empty_like(cost)
+    for dx, dy in SGM_DIRECTIONS[:paths]:
+        launch(ks.sgm_path, h if dy == 0 else w,
+               [arg(cost), dx, dy, float(p1), float(p2), SGM_NEUTRAL, arg(scratch), arg(total)], dev, stream)
+    return total / paths
+
+
+def select_planes(cost: torch.Tensor, inv_depths: torch.Tensor, cfg: StereoConfig) -> tuple[torch.Tensor, torch.Tensor]:
+    """(depth [H, W], score [H, W]) of a cost volume: ``winner_take_all`` of the volume itself, or with
+    ``cfg.sgm_paths`` of its semi-global aggregate; then the score is the NCC of the raw volume at the chosen plane
+    (the photometric evidence of that pixel alone), and pixels with no evidence on any plane get no depth."""
+    if not cfg.sgm_paths:
+        return winner_take_all(cost, inv_depths)
+    depth, _ = winner_take_all(aggregate_costs(cost, cfg.sgm_paths, cfg.sgm_p1, cfg.sgm_p2), inv_depths)
+    n = inv_depths.numel()
+    step = (inv_depths[-1] - inv_depths[0]) / (n - 1)
+    found = depth > 0
+    plane = ((1.0 / depth.clamp_min(1e-12) - inv_depths[0]) / step).round().long().clamp(0, n - 1)
+    raw = cost.gather(0, torch.where(found, plane, torch.zeros_like(plane))[None])[0]
+    found &= (cost < float(ks.BAD_COST)).any(0)
+    return (torch.where(found, depth, torch.zeros_like(depth)),
+            torch.where(found, 1.0 - raw, torch.full_like(depth, -1.0)))
+
+
 def plane_sweep_depth(images: torch.Tensor, Ks: torch.Tensor, viewmats: torch.Tensor, ref: int, sources,
                       depth_range: tuple[float, float], cfg: StereoConfig | None = None) -> tuple[torch.Tensor, torch.Tensor]:
     """(depth [H, W], NCC score [H, W]) of view ``ref`` from the plane sweep against ``sources``."""
+    cfg = cfg or StereoConfig()
     cost, inv = cost_volume(to_gray(images), Ks, viewmats, ref, sources, depth_range, cfg)
-    return winner_take_all(cost, inv)
+    return select_planes(cost, inv, cfg)
 
 
 def check_consistency(depths: torch.Tensor, Ks: torch.Tensor, viewmats: torch.Tensor, neighbours,
@@ -252,7 +300,7 @@ def estimate_depths(images: torch.Tensor, Ks: torch.Tensor, viewmats: torch.Tens
     gray = to_gray(images).contiguous()
     for r in views:
         cost, inv = cost_volume(gray, Ks, viewmats, r, nb[r].tolist(), depth_range, cfg)
-        depth[r], score[r] = winner_take_all(cost, inv)
+        depth[r], score[r] = select_planes(cost, inv, cfg)
     return depth, score, nb
 
 

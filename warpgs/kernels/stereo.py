@@ -192,6 +192,66 @@ def winner_take_all(
 
 
 @wp.kernel
+def sgm_path(
+    cost: wp.array3d(dtype=float),  # [P, H, W] matching cost, BAD_COST = no evidence
+    dx: int,  # the path's step: (1, 0), (-1, 0), (0, 1) or (0, -1)
+    dy: int,
+    p1: float,  # penalty of a step to the neighbouring plane
+    p2: float,  # penalty of a larger jump
+    neutral: float,  # the cost that a plane without evidence takes on the path
+    path: wp.array3d(dtype=float),  # scratch [P, H, W]: this path's aggregated cost
+    total: wp.array3d(dtype=float),  # in/out [P, H, W]: the sum over the paths
+):
+    """One direction of semi-global matching (Hirschmueller 2008) over the planes: along each image line in
+    direction (dx, dy), L(q, p) = C(q, p) + min(L(q', p), L(q', p -+ 1) + p1, min_k L(q', k) + p2) - min_k L(q', k),
+    q' the previous pixel on the line; L is added to ``total``. One thread per line (rows for horizontal paths,
+    columns for vertical ones)."""
+    t = wp.tid()
+    num = cost.shape[0]
+    h = cost.shape[1]
+    w = cost.shape[2]
+    x = int(0)
+    y = int(0)
+    n = int(0)
+    if dy == 0:
+        y = t
+        n = w
+        if dx < 0:
+            x = w - 1
+    else:
+        x = t
+        n = h
+        if dy < 0:
+            y = h - 1
+    px = x
+    py = y
+    for s in range(n):
+        m = float(0.0)
+        if s > 0:
+            m = float(1.0e30)
+            for p in range(num):
+                m = wp.min(m, path[p, py, px])
+        for p in range(num):
+            c = cost[p, y, x]
+            if c >= BAD_COST:
+                c = neutral
+            v = c
+            if s > 0:
+                best = wp.min(path[p, py, px], m + p2)
+                if p > 0:
+                    best = wp.min(best, path[p - 1, py, px] + p1)
+                if p < num - 1:
+                    best = wp.min(best, path[p + 1, py, px] + p1)
+                v = c + best - m
+            path[p, y, x] = v
+            total[p, y, x] = total[p, y, x] + v
+        px = x
+        py = y
+        x = x + dx
+        y = y + dy
+
+
+@wp.kernel
 def geometric_consistency(
     depth: wp.array3d(dtype=float),  # [V, H, W], 0 = no estimate
     w2c: wp.array(dtype=wp.mat44),  # [V]

@@ -48,6 +48,9 @@ class StereoInitOptions:
     refine_low: float = 1.0  # second pass: the range between these depth percentiles of the first pass ...
     refine_high: float = 99.0
     refine_margin: float = 0.25  # ... widened by this fraction on each side (near x (1 - m), far x (1 + m))
+    sgm_paths: int = 0  # semi-global matching of the cost volume along this many directions (0: off; densify.stereo)
+    sgm_p1: float = 0.05
+    sgm_p2: float = 0.4
     filter_neighbors: int = 20  # open3d statistical outlier removal of the fused cloud
     filter_std_ratio: float = 2.0
 
@@ -105,7 +108,8 @@ def _sweep(images, Ks, V, depth_range, opts: StereoInitOptions, nb):
     cfg = StereoConfig(planes=opts.planes, patch_radius=opts.patch_radius, neighbours=nb.shape[1],
                        top_k=min(opts.top_k, nb.shape[1]), min_texture=opts.min_texture, min_score=opts.min_score,
                        consistency_px=opts.consistency_px, consistency_depth=opts.consistency_depth,
-                       min_consistent=opts.min_consistent, min_angle=opts.min_angle)
+                       min_consistent=opts.min_consistent, min_angle=opts.min_angle, sgm_paths=opts.sgm_paths,
+                       sgm_p1=opts.sgm_p1, sgm_p2=opts.sgm_p2)
     return stereo_point_cloud(images, Ks, V, depth_range, cfg, neighbours=nb)
 
 
