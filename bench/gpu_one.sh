@@ -25,6 +25,15 @@ one() {
 }
 export -f one
 
+# named NAME METHOD DATASET SCENE VIEWS SEED [--set k=v ...]: sparse_run on a named dataset (dtu, llff, ...) for
+# 3000 iterations, 10 evaluations.
+named() {
+  local name=$1 method=$2 data=$3 scene=$4 views=$5 seed=$6; shift 6
+  sparse_run "$name" --method "$method" --data "$data" --scene "$scene" --views "$views" --iterations 3000 \
+    --seed "$seed" --set train.eval_every=300 "$@"
+}
+export -f named
+
 # summary PREFIX FILE: one line per run $R/PREFIX*/metrics.json (name, test PSNR, Gaussians, per-view PSNRs, the
 # curve's PSNRs), sorted, into $OUT/FILE and on stdout.
 summary() {

@@ -38,12 +38,6 @@ declare -A SET=(
   [ss_geo]="--set model.init=sfm+stereo --set strategy.refine_stop_iter=0 --set optim.means_lr=1.6e-5 --set optim.means_lr_final=1.6e-7 --set optim.scales_lr=1e-3"
   [geo_rand]="--set strategy.refine_stop_iter=0 --set optim.means_lr=1.6e-5 --set optim.means_lr_final=1.6e-7 --set optim.scales_lr=1e-3 --set model.init_random=20000"
 )
-other() {  # NAME METHOD DATASET SCENE VIEWS SEED [--set k=v ...]: sparse_run on a named dataset, 3000 it
-  local name=$1 method=$2 data=$3 scene=$4 views=$5 seed=$6; shift 6
-  sparse_run "$name" --method "$method" --data "$data" --scene "$scene" --views "$views" --iterations 3000 \
-    --seed "$seed" --set train.eval_every=300 "$@"
-}
-export -f other
 case $P in
 d)
   for c in castle_p30 herz_jesus_p25; do for m in baseline full; do for s in 0 1 2; do
@@ -74,7 +68,7 @@ o)
         echo "o_${c}_${v}_${m}_s$s $m $c $sc 3 $s${a:+ $a}"  # no trailing blank: xargs -L would join the next line
       done; done
     done
-  done | xargs -P ${JOBS:-12} -L 1 bash -c 'other "$@"' _ | grep -v "rc=0"
+  done | xargs -P ${JOBS:-12} -L 1 bash -c 'named "$@"' _ | grep -v "rc=0"
   summary o_ other.txt
   ;;
 v)

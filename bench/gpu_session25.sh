@@ -13,12 +13,6 @@ source "$(dirname "${BASH_SOURCE[0]}")/gpu_one.sh"
 session_env "$@"; P=$1; D=$2; R=$3; shift 3
 export R D T
 SGM="--set geometry.stereo.sgm_paths=${SGM_PATHS:-4}"
-other() {  # NAME METHOD DATASET SCENE VIEWS SEED [--set k=v ...]: sparse_run on a named dataset, 3000 it
-  local name=$1 method=$2 data=$3 scene=$4 views=$5 seed=$6; shift 6
-  sparse_run "$name" --method "$method" --data "$data" --scene "$scene" --views "$views" --iterations 3000 \
-    --seed "$seed" --set train.eval_every=300 "$@"
-}
-export -f other
 case $P in
 g)
   for c in castle_p30 herz_jesus_p25; do for m in baseline full; do for s in 0 1 2; do
@@ -31,7 +25,7 @@ o)
     for m in baseline full; do for s in 0 1 2; do
       echo "o_${c}_${m}_s$s $m $c $sc 3 $s $SGM"
     done; done
-  done | xargs -P ${JOBS:-12} -L 1 bash -c 'other "$@"' _ | grep -v "rc=0"
+  done | xargs -P ${JOBS:-12} -L 1 bash -c 'named "$@"' _ | grep -v "rc=0"
   summary o_ sgm_other.txt
   ;;
 k)  # the 3-view captures without SGM, train.path_clearance x5 (the bounds' near depth moved 3.05 -> 15.1 with SGM)

@@ -93,6 +93,8 @@ def test_config_values_are_checked_in_every_layer_before_anything_runs(tmp_path,
                                                   "must be in [0, 1)"),
         (["--set", "train.drop_rate=.nan"], "train.drop_rate = nan (from --set train.drop_rate=.nan): must be a finite number"),
         (["--set", "strategy.reset_every=0"], "strategy.reset_every = 0 (from --set strategy.reset_every=0): must be >= 1"),
+        (["--set", "geometry.stereo.sgm_paths=8"],
+         "geometry.stereo.sgm_paths = 8 (from --set geometry.stereo.sgm_paths=8): must be in [0, 4]"),
     ]
     for argv, message in cases:
         assert main(["--data", str(tmp_path / "no-such-scene"), "--method", "baseline", "--out", str(out), *argv]) == 2

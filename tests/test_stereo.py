@@ -531,9 +531,10 @@ def test_sgm_aggregation_matches_the_path_recursion(paths):
 
 
 def test_sgm_resolves_a_repeated_pattern_and_keeps_no_evidence_out():
-    """Every pixel of a row matches planes 2 and 7 equally well (a facade's repeated windows), except one
-    whose match is unique (plane 2): winner-take-all picks the first minimum it meets, semi-global matching the
-    plane the unique pixel's neighbours agree on. A pixel with no evidence takes no depth either way."""
+    """Every pixel of a row matches planes 2 and 7 almost equally well, plane 7 better by a hair (a facade's
+    repeated windows), except one whose match at plane 2 is clearly the best: winner-take-all picks plane 7
+    pixel by pixel, semi-global matching the plane that the clear pixel carries along the lines. A pixel with
+    no evidence takes no depth."""
     from warpgs.densify.stereo import select_planes
 
     P, H, W = 10, 3, 9

@@ -79,6 +79,8 @@ class StereoConfig:
     sgm_p1: float = 0.05  # its penalty for a step to the neighbouring plane (costs are 1 - NCC, in [0, 2])
     sgm_p2: float = 0.4  # ... and for a larger jump
 
+    LIMITS = {"min_angle": "[0, 90)", "sgm_paths": "[0, 4]", "sgm_p1": ">= 0", "sgm_p2": ">= 0"}
+
 
 class PointCloud(NamedTuple):
     points: torch.Tensor  # [N, 3] world

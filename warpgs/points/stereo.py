@@ -54,6 +54,8 @@ class StereoInitOptions:
     filter_neighbors: int = 20  # open3d statistical outlier removal of the fused cloud
     filter_std_ratio: float = 2.0
 
+    LIMITS = {"min_angle": "[0, 90)", "sgm_paths": "[0, 4]", "sgm_p1": ">= 0", "sgm_p2": ">= 0"}
+
 
 @dataclass
 class StereoPoints:
