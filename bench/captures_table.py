@@ -14,7 +14,10 @@ median).
   ``w_VARIANT_...``) against session 21's default: one row per variant, the full method's median per case and its
   gain over session 21's baseline, the mean and worst gain over the cases measured; then 3 views at 768x512
   (10,000 it) from SfM's points (``s21/a768_10k_3v.txt`` seed 0, ``s22/a768_sfm.txt`` seeds 1-2) and from held
-  stereo (``geometry.sfm_min_views`` 4, ``s22/a768_views.txt``).
+  stereo (``geometry.sfm_min_views`` 4, ``s22/a768_views.txt``);
+- session 26: session 21's default as recorded then, and the current default re-run (``s26/a3.txt``: 3 views with
+  ``geometry.extend_far``; ``s26/c69.txt``: 6 and 9 views); then ``full.pseudo_mask=reliable`` (``s26/r3.txt``,
+  ``s26/r69.txt``) against the current default.
 """
 
 from __future__ import annotations
@@ -50,13 +53,13 @@ def load_variants(path: Path, prefix: str) -> dict:
     return out
 
 
-def variant_table(default: dict, variants: dict) -> list[str]:
+def variant_table(default: dict, variants: dict, label: str = "default (session 21)") -> list[str]:
     """One row per variant: the full method's median per case (its gain over ``default``'s baseline median), then
     the mean and worst gain over the cases it has; the default's own row first."""
     cases = sorted({(s, n) for (s, n, _) in default})
     head = ["variant"] + [f"{s} {n}v" for s, n in cases] + ["mean gain", "worst gain", "cases"]
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
-    for name, runs in [("default (session 21)", default)] + sorted(variants.items()):
+    for name, runs in [(label, default)] + sorted(variants.items()):
         row, gains = [name], []
         for s, n in cases:
             f, b = runs.get((s, n, "full")), default.get((s, n, "baseline"))
@@ -119,7 +122,7 @@ def merged(*parts: dict) -> dict:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--results", default=str(Path(__file__).resolve().parent / "results"))
-    ap.add_argument("--session", type=int, choices=(20, 21, 22), default=21)
+    ap.add_argument("--session", type=int, choices=(20, 21, 22, 26), default=21)
     args = ap.parse_args(argv)
     r20, r21 = Path(args.results) / "s20", Path(args.results) / "s21"
     s20 = ("session 20 default", load(r20 / "captures_d.txt", "d"))
@@ -133,6 +136,14 @@ def main(argv=None) -> int:
         print("\n".join(table([("SfM start (session 21)", merged(load(r21 / "a768_10k_3v.txt", "a"),
                                                                  load(r22 / "a768_sfm.txt", "n"))),
                                ("stereo start, held (session 22)", load(r22 / "a768_views.txt", "m"))])))
+        return 0
+    if args.session == 26:
+        r26 = Path(args.results) / "s26"
+        s26 = merged(load(r26 / "a3.txt", "a"), load(r26 / "c69.txt", "c"))
+        print("\n".join(table([("session 21 default", s21), ("session 26 default", s26)])))
+        print()
+        rel = merged(load(r26 / "r3.txt", "r"), load(r26 / "r69.txt", "r"))
+        print("\n".join(variant_table(s26, {"pseudo_mask=reliable": rel}, "default (session 26)")))
         return 0
     if args.session == 20:
         cols = [("session 19 default", load(r20 / "path_floaters.txt", "p", "0")),

@@ -188,6 +188,49 @@ def test_sfm_points_match_the_synthetic_rooms_ground_truth_depth(room):
     assert np.mean(err < 0.05) > 0.9, np.mean(err < 0.05)
 
 
+def test_extend_far_reaches_depths_beyond_a_too_near_range(room):
+    """A depth range whose far end cuts the scene (as SfM's few points give it: castle_p30 at 3 views): the sweep
+    stays inside it, and finds nothing beyond; with extend_far the first pass over the resolvable range runs too, the
+    sweep keeps the range's near end and reaches the scene's far surfaces, at their ground-truth depth."""
+    gt = np.concatenate([c.depth[c.depth > 0] for c in room.train])
+    near, cut = float(np.percentile(gt, 1)) * 0.8, float(np.percentile(gt, 50))
+    opts = StereoInitOptions(max_width=128)
+    clipped = stereo_points(room.train, opts, (near, cut))
+    extended = stereo_points(room.train, opts, (near, cut), extend_far=True)
+
+    def far_share(pts):  # points beyond the cut from every view that sees them (a point's own view is one)
+        z = np.full(len(pts.xyz), np.inf)
+        for c in room.train:
+            uv, d = c.project(pts.xyz)
+            ok = (d > 0) & (uv[:, 0] >= 0) & (uv[:, 1] >= 0) & (uv[:, 0] < c.width) & (uv[:, 1] < c.height)
+            z = np.where(ok, np.minimum(z, d), z)
+        return float(np.mean(z > cut * 1.05))
+
+    assert [p["depth_range"] for p in clipped.stats["passes"]] == [(near, cut)]
+    (first, second) = extended.stats["passes"]
+    assert first["depth_range"][1] > 10 * np.max(gt)  # the resolvable range
+    assert second["depth_range"][0] == near and second["depth_range"][1] >= np.percentile(gt, 95)
+    assert far_share(clipped) < 0.02 < 0.2 < far_share(extended), (far_share(clipped), far_share(extended))
+    err = _depth_errors(room.train, extended.xyz)
+    assert np.median(err) < 0.02 and np.mean(err < 0.05) > 0.8, (np.median(err), np.mean(err < 0.05))
+
+
+@pytest.mark.parametrize("extend", [False, True])
+def test_extend_far_applies_when_sfm_finds_too_few_points(room, monkeypatch, extend):
+    """geometry.extend_far reaches stereo_points only when SfM's points, which still give the sweep its range, are
+    fewer than min_points."""
+    import warpgs.points as points
+
+    calls = []
+    monkeypatch.setattr(points, "stereo_points", lambda cameras, options, depth_range, extend_far=False, device=None:
+                        calls.append((depth_range, extend_far)) or stereo_points(cameras, options, depth_range,
+                                                                                 extend_far=extend_far, device=device))
+    cfg = GeometryConfig(min_points=10**6, extend_far=extend, stereo=StereoInitOptions(max_width=64))
+    initial_geometry(room.train, "sfm+stereo", cfg, log=lambda m: None)  # stereo's points count as too few as well
+    assert len(calls) == 1
+    assert calls[0][0] is not None and calls[0][1] is extend
+
+
 def test_fewer_views_than_sfm_min_views_start_from_stereo_bounded_by_the_sfm_points(room, monkeypatch):
     """With 4 training views and sfm_min_views 5, sfm gives way to stereo although SfM found enough points (one
     line says why), and the sweep's depth range comes from those SfM points; with sfm_min_views 4 the run starts
@@ -197,7 +240,8 @@ def test_fewer_views_than_sfm_min_views_start_from_stereo_bounded_by_the_sfm_poi
     ranges = []
     real_stereo = points.stereo_points
 
-    def spy(cameras, options, depth_range, device=None):
+    def spy(cameras, options, depth_range, extend_far=False, device=None):
+        assert not extend_far  # SfM found min_points
         ranges.append(depth_range)
         return real_stereo(cameras, options, depth_range, device=device)
 

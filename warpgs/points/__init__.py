@@ -41,6 +41,10 @@ class GeometryConfig:
     sfm_min_views: int = 0  # with fewer training views, sfm and sfm+stereo give way to stereo whatever they find
     #   (SfM still runs: its points bound the sweep's depth range). Its few hundred points need growth, and growth
     #   fits so few inputs (captures' config: 4)
+    extend_far: bool = False  # when SfM finds fewer than min_points, the sweep's far end is the farther of their far
+    #   bound and a first pass's over the resolvable range: distant points fail SfM's triangulation angle first
+    #   (castle_p30 at 3 views: 16 points, none beyond 37 m; its back facade at 42-50 m). Captures' config: on; off elsewhere
+    #   (DTU scan65, an object on a table, 57 points: its baseline fell from 23.16 to 22.31 with it)
     max_points: int = 150_000  # larger clouds are subsampled to this many (seeded)
     near_percentile: float = 1.0  # per-camera depth percentiles of the points that bound the scene ...
     far_percentile: float = 99.0
@@ -133,11 +137,13 @@ def initial_geometry(cameras, method: str, config: GeometryConfig | None = None,
 
     def stereo():
         pts = sfm_result[0] if sfm_result else None
-        rng = None  # the SfM points, even too few to start from, bound the sweep
+        rng = None  # the SfM points, even too few to start from, bound the sweep ...
         if pts is not None and len(pts.xyz) >= 10:
             rng = depth_bounds(cameras, pts.xyz, cfg.near_percentile, cfg.far_percentile, cfg.bounds_margin)
+        # ... and with extend_far, fewer than min_points do not bound its far end (GeometryConfig.extend_far)
+        few = pts is None or len(pts.xyz) < cfg.min_points
         t0 = time.perf_counter()
-        st = stereo_points(cameras, cfg.stereo, rng, device=device)
+        st = stereo_points(cameras, cfg.stereo, rng, extend_far=cfg.extend_far and few and rng is not None, device=device)
         geo.times["stereo_s"] = time.perf_counter() - t0
         geo.stats["stereo"] = st.stats
         return st

@@ -116,9 +116,12 @@ def _sweep(images, Ks, V, depth_range, opts: StereoInitOptions, nb):
 
 
 def stereo_points(cameras, options: StereoInitOptions | None = None, depth_range: tuple[float, float] | None = None,
-                  *, device=None, log=None) -> StereoPoints:
+                  *, extend_far: bool = False, device=None, log=None) -> StereoPoints:
     """The fused, cleaned cloud of plane-sweep stereo between the ``cameras`` (warpgs ``Camera``s);
-    ``depth_range`` None: two passes, the first over the resolvable range (module docstring)."""
+    ``depth_range`` None: two passes, the first over the resolvable range (module docstring).
+    ``extend_far``: ``depth_range`` was measured on too few points to trust its far end (SfM's
+    triangulation-angle test drops distant points first): the first pass runs as well, and the sweep
+    goes from ``depth_range``'s near to the farther of the two far ends."""
     from warpgs.densify.select import neighbour_views
 
     opts = options or StereoInitOptions()
@@ -130,17 +133,23 @@ def stereo_points(cameras, options: StereoInitOptions | None = None, depth_range
     images, Ks, V = _downsampled(cameras, width, device)
     nb = neighbour_views(V.cpu(), min(opts.neighbours, len(cameras) - 1))
     passes = []
-    if depth_range is None:
+    hint = depth_range if extend_far else None
+    if depth_range is None or hint is not None:
         c_images, c_Ks, _ = _downsampled(cameras, max(32, width // max(1, opts.coarse_factor)), device)
         rng = resolvable_depth_range(c_Ks.cpu().numpy(), V.cpu().numpy(), c_images.shape[2], opts.min_disparity,
                                      opts.max_disparity)
         res = _sweep(c_images, c_Ks, V, rng, opts, nb)
         z = res.depth[res.mask]
         passes.append({"depth_range": rng, "points": int(z.numel())})
-        if z.numel() < 100:
+        if z.numel() < 100 and hint is None:
             return _finish(res, rng, passes, opts, t0)
-        lo, hi = np.percentile(z.cpu().numpy(), [opts.refine_low, opts.refine_high])
-        depth_range = (float(lo) * (1 - opts.refine_margin), float(hi) * (1 + opts.refine_margin))
+        if hint is not None:
+            far = hint[1] if z.numel() < 100 else max(hint[1], float(np.percentile(z.cpu().numpy(), opts.refine_high))
+                                                      * (1 + opts.refine_margin))
+            depth_range = (hint[0], far)
+        else:
+            lo, hi = np.percentile(z.cpu().numpy(), [opts.refine_low, opts.refine_high])
+            depth_range = (float(lo) * (1 - opts.refine_margin), float(hi) * (1 + opts.refine_margin))
     res = _sweep(images, Ks, V, depth_range, opts, nb)
     passes.append({"depth_range": tuple(map(float, depth_range)), "points": int(res.mask.sum())})
     return _finish(res, depth_range, passes, opts, t0)
