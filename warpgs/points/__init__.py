@@ -141,9 +141,9 @@ def initial_geometry(cameras, method: str, config: GeometryConfig | None = None,
         if pts is not None and len(pts.xyz) >= 10:
             rng = depth_bounds(cameras, pts.xyz, cfg.near_percentile, cfg.far_percentile, cfg.bounds_margin)
         # ... and with extend_far, fewer than min_points do not bound its far end (GeometryConfig.extend_far)
-        few = pts is None or len(pts.xyz) < cfg.min_points
+        extend_far = cfg.extend_far and (pts is None or len(pts.xyz) < cfg.min_points)
         t0 = time.perf_counter()
-        st = stereo_points(cameras, cfg.stereo, rng, extend_far=cfg.extend_far and few and rng is not None, device=device)
+        st = stereo_points(cameras, cfg.stereo, rng, extend_far=extend_far, device=device)
         geo.times["stereo_s"] = time.perf_counter() - t0
         geo.stats["stereo"] = st.stats
         return st

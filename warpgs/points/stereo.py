@@ -133,23 +133,21 @@ def stereo_points(cameras, options: StereoInitOptions | None = None, depth_range
     images, Ks, V = _downsampled(cameras, width, device)
     nb = neighbour_views(V.cpu(), min(opts.neighbours, len(cameras) - 1))
     passes = []
-    hint = depth_range if extend_far else None
-    if depth_range is None or hint is not None:
+    if depth_range is None or extend_far:
         c_images, c_Ks, _ = _downsampled(cameras, max(32, width // max(1, opts.coarse_factor)), device)
         rng = resolvable_depth_range(c_Ks.cpu().numpy(), V.cpu().numpy(), c_images.shape[2], opts.min_disparity,
                                      opts.max_disparity)
         res = _sweep(c_images, c_Ks, V, rng, opts, nb)
         z = res.depth[res.mask]
         passes.append({"depth_range": rng, "points": int(z.numel())})
-        if z.numel() < 100 and hint is None:
-            return _finish(res, rng, passes, opts, t0)
-        if hint is not None:
-            far = hint[1] if z.numel() < 100 else max(hint[1], float(np.percentile(z.cpu().numpy(), opts.refine_high))
-                                                      * (1 + opts.refine_margin))
-            depth_range = (hint[0], far)
-        else:
+        if z.numel() >= 100 and depth_range is None:
             lo, hi = np.percentile(z.cpu().numpy(), [opts.refine_low, opts.refine_high])
             depth_range = (float(lo) * (1 - opts.refine_margin), float(hi) * (1 + opts.refine_margin))
+        elif z.numel() >= 100:  # extend_far: keep the given near end
+            far = float(np.percentile(z.cpu().numpy(), opts.refine_high)) * (1 + opts.refine_margin)
+            depth_range = (depth_range[0], max(depth_range[1], far))
+        elif depth_range is None:
+            return _finish(res, rng, passes, opts, t0)
     res = _sweep(images, Ks, V, depth_range, opts, nb)
     passes.append({"depth_range": tuple(map(float, depth_range)), "points": int(res.mask.sum())})
     return _finish(res, depth_range, passes, opts, t0)
