@@ -4,7 +4,9 @@ No tiles lists, no sorting kernels, no hand-written gradients: every Gaussian is
 pixel, Gaussians are composited front to back in depth order with a plain Python loop, and torch's
 autograd gives the gradients. It applies the same rules as the kernels (gsplat 1.5 / 3D-GS): near/far
 culling, 0.3 px dilation, opacity-aware screen box rounded out to 16 px tiles, alpha < 1/255 skipped,
-alpha clamp, stop before T <= 1e-4.
+alpha clamp, stop before T <= 1e-4. One rule is the kernels' own: a pair past the Mahalanobis half-distance
+SIGMA_SKIP is skipped whatever the opacity (it is gsplat's alpha < 1/255 test for opacities up to 1; DropGaussian's
+compensated opacities exceed 1).
 """
 
 from __future__ import annotations
@@ -14,6 +16,7 @@ import math
 import torch
 
 TILE = 16
+SIGMA_SKIP = 5.55  # warpgs.kernels.rasterize.SIGMA_SKIP
 SH_C = [
     0.28209479177387814,
     0.4886025119029199,
@@ -134,7 +137,8 @@ def render(means, quats, scales, opacities, colors, viewmat, K, width, height, *
         dy = means2d[g, 1] - py
         sigma = 0.5 * (conics[g, 0] * dx * dx + conics[g, 2] * dy * dy) + conics[g, 1] * dx * dy
         alpha = torch.clamp(o[g] * torch.exp(-sigma), max=alpha_max)
-        use = mask[g] & (sigma >= 0) & (alpha >= 1 / 255) & ~done
+        # past SIGMA_SKIP (5.55: alpha < 1/255 for any opacity up to 1) a pair is skipped whatever its opacity
+        use = mask[g] & (sigma >= 0) & (sigma <= SIGMA_SKIP) & (alpha >= 1 / 255) & ~done
         next_T = T * (1 - alpha)
         stop = use & (next_T <= 1e-4)
         done = done | stop

@@ -30,14 +30,16 @@ def look_at_viewmat(eye, target, up=(0.0, -1.0, 0.0)):
     return V
 
 
-def make_scene(n=10, width=40, height=28, seed=0, sh_degree=None, scale_range=(0.03, 0.25), spread=0.7):
+def make_scene(n=10, width=40, height=28, seed=0, sh_degree=None, scale_range=(0.03, 0.25), spread=0.7,
+               opacity_range=(0.1, 0.95)):
     g = torch.Generator().manual_seed(seed)
     V = look_at_viewmat((0.3, -0.2, -3.0), (0.0, 0.0, 0.0))
     means = (torch.rand(n, 3, generator=g, dtype=torch.float64) - 0.5) * 2 * spread
     quats = torch.randn(n, 4, generator=g, dtype=torch.float64)
     lo, hi = scale_range
     scales = lo + (hi - lo) * torch.rand(n, 3, generator=g, dtype=torch.float64)
-    opacities = 0.1 + 0.85 * torch.rand(n, generator=g, dtype=torch.float64)
+    lo, hi = opacity_range
+    opacities = lo + (hi - lo) * torch.rand(n, generator=g, dtype=torch.float64)
     if sh_degree is None:
         colors = torch.rand(n, 3, generator=g, dtype=torch.float64)
     else:
@@ -93,6 +95,11 @@ def assert_close(a, b, atol, rtol=0.0, what=""):
         dict(seed=5, sh_degree=1),
         dict(seed=6, sh_degree=2),
         dict(seed=7, sh_degree=3, width=35, height=33),
+        # DropGaussian's survivors (opacity x 1 / (1 - p)) and opacity noise exceed 1: pairs past SIGMA_SKIP whose
+        # alpha is still >= 1/255 are skipped (session 24's CUDA forward composited them, its backward did not;
+        # without the rule 673 pixels here differ by up to 0.008). alpha_max 0.999: at 0.99 many alphas hit the
+        # clamp, and T = 0.01 x 0.01 lands on T_MIN itself, where float32 and the float64 reference round apart
+        dict(seed=8, n=30, opacity_range=(1.0, 1.6), scale_range=(0.1, 0.4), alpha_max=0.999),
     ],
 )
 def test_forward_matches_reference(device, case):
@@ -132,6 +139,7 @@ GRAD_CASES = [
     dict(seed=11, antialiased=True),
     dict(seed=12, sh_degree=3),
     dict(seed=13, sh_degree=1, background=(0.3, 0.1, 0.7), n=20),
+    dict(seed=14, n=20, opacity_range=(0.9, 1.6), scale_range=(0.1, 0.4), alpha_max=0.999),  # opacities above 1
 ]
 
 
@@ -139,9 +147,7 @@ GRAD_CASES = [
 @pytest.mark.parametrize("case", GRAD_CASES)
 def test_gradients_match_reference_autograd(device, case):
     case = dict(case)
-    kw = {}
-    if "antialiased" in case:
-        kw["antialiased"] = case.pop("antialiased")
+    kw = {k: case.pop(k) for k in ("antialiased", "alpha_max") if k in case}
     if "background" in case:
         kw["background"] = torch.tensor(case.pop("background"))
     scene = make_scene(**case)

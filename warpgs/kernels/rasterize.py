@@ -554,12 +554,15 @@ rasterize_bwd_cuda = [[_compositing_kernels(True, f, d)[1] for d in (0, 1)] for 
 # a batch of a tile's Gaussians is composited by one native function, laid out for the forward alone. A slot is
 # two shared-memory loads, (x, y, conic a, b) and (conic c, opacity), before the pixel knows whether the Gaussian
 # reaches it; the colour and depth, (r, g, b, z), are a third load made only where it does (most pairs of a
-# tile do not), as gsplat reads its colours only there. The test is gsplat's: alpha = min(alpha_max, opacity
-# exp(-sigma)) is evaluated for every pair, and a pair with sigma < 0 or alpha < 1/255 is skipped; beyond
-# SIGMA_SKIP alpha < 1/255 for any opacity, so it skips what the Warp variant skipped, and the sums are the same
-# floats in the same order (session 24 on an H100: the two variants' images, depths, alphas and gradients were
-# equal bit for bit; the forward took 170 us instead of 263 us at 138,766 Gaussians, 648x420, where gsplat's
-# takes 207 us: bench/results/s24).
+# tile do not), as gsplat reads its colours only there. alpha = min(alpha_max, opacity exp(-sigma)) is evaluated
+# for every pair, and a pair with sigma < 0, sigma > SIGMA_SKIP or alpha < 1/255 is skipped: the Warp loops' test
+# (the backward's too), so the sums are the same floats in the same order (session 24 on an H100: the forward took
+# 170 us instead of 263 us at 138,766 Gaussians, 648x420, where gsplat's takes 207 us: bench/results/s24).
+# Session 24's version left out the SIGMA_SKIP test (gsplat's, where alpha < 1/255 decides alone): that is the same
+# only for opacities up to 1, and DropGaussian's survivors (opacity x 1 / (1 - p)) and opacity noise exceed 1. Such
+# a pair past SIGMA_SKIP was composited by this forward and skipped by the backward, so their transmittances
+# disagreed; a few pixels per training render differed from the Warp forward's (session 27:
+# bench/rasterizer_commits.py on DTU scan65's training renders, steps 71-75).
 # state: (T, colour r, g, b, depth sum, count as int bits, done, 0) in and out.
 fwd_state = wp.types.vector(length=8, dtype=wp.float32)
 
@@ -586,7 +589,7 @@ fwd_state = wp.types.vector(length=8, dtype=wp.float32)
         const float dy = q.y - py;
         const float sigma = 0.5f * (q.z * dx * dx + o.x * dy * dy) + q.w * dx * dy;
         const float alpha = fminf(alpha_max, o.y * __expf(-sigma));
-        if (sigma < 0.0f || alpha < ALPHA_MIN_F) continue;
+        if (sigma < 0.0f || sigma > SIGMA_SKIP_F || alpha < ALPHA_MIN_F) continue;
         const float next_T = T * (1.0f - alpha);
         if (next_T <= T_MIN_F) { done = true; break; }
         const float4 c = warpgs_fwd_rgbz[t];
@@ -606,7 +609,8 @@ fwd_state = wp.types.vector(length=8, dtype=wp.float32)
 #else
     return state;
 #endif
-""".replace("ALPHA_MIN_F", f"{float(ALPHA_MIN)!r}f").replace("T_MIN_F", f"{float(T_MIN)!r}f")
+""".replace("ALPHA_MIN_F", f"{float(ALPHA_MIN)!r}f").replace("T_MIN_F", f"{float(T_MIN)!r}f").replace(
+    "SIGMA_SKIP_F", f"{float(SIGMA_SKIP)!r}f")
 )
 def composite_batch(load: int, lane: int, s: splat, count: int, k0: int, px: float, py: float, alpha_max: float,
                     state: fwd_state) -> fwd_state: ...
