@@ -17,7 +17,14 @@ median).
   stereo (``geometry.sfm_min_views`` 4, ``s22/a768_views.txt``);
 - session 26: session 21's default as recorded then, and the current default re-run (``s26/a3.txt``: 3 views with
   ``geometry.extend_far``; ``s26/c69.txt``: 6 and 9 views); then ``full.pseudo_mask=reliable`` (``s26/r3.txt``,
-  ``s26/r69.txt``) against the current default.
+  ``s26/r69.txt``) against the current default;
+- session 27 (``bench/gpu_session27.sh``): first the default re-run after the CUDA forward's skip test was fixed
+  (``s27/h.txt``) beside session 26's (measured with session 24's forward); then, all measured with session 24's
+  forward and against session 26's default, the full method's variants
+  ``full.pseudo_mask=all`` (``s27/m3.txt``, ``s27/m369.txt``) and ``full.cycles=1`` (``s27/y369.txt``), then
+  ``train.far_field_blur=1`` for both methods (``s27/f3.txt``, ``s27/f369.txt``; with ``pseudo_mask=all`` at 3 views,
+  ``s27/g3.txt``) and ``train.opacity_noise=0.8`` at 3 views (``s27/n3.txt``); ``s27/k3.txt`` is session 26's
+  castle_p30 3-view baseline seed 0 re-run (the same 14.824).
 """
 
 from __future__ import annotations
@@ -122,7 +129,7 @@ def merged(*parts: dict) -> dict:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--results", default=str(Path(__file__).resolve().parent / "results"))
-    ap.add_argument("--session", type=int, choices=(20, 21, 22, 26), default=21)
+    ap.add_argument("--session", type=int, choices=(20, 21, 22, 26, 27), default=21)
     args = ap.parse_args(argv)
     r20, r21 = Path(args.results) / "s20", Path(args.results) / "s21"
     s20 = ("session 20 default", load(r20 / "captures_d.txt", "d"))
@@ -144,6 +151,25 @@ def main(argv=None) -> int:
         print()
         rel = merged(load(r26 / "r3.txt", "r"), load(r26 / "r69.txt", "r"))
         print("\n".join(variant_table(s26, {"pseudo_mask=reliable": rel}, "default (session 26)")))
+        return 0
+    if args.session == 27:
+        r26, r27 = Path(args.results) / "s26", Path(args.results) / "s27"
+        s26 = merged(load(r26 / "a3.txt", "a"), load(r26 / "c69.txt", "c"))
+        blur = merged(load(r27 / "f3.txt", "f"), load(r27 / "f369.txt", "f"))
+        fixed = load(r27 / "h.txt", "h")
+        print("\n".join(table([("session 26 default (session 24's forward)", s26),
+                               ("session 27 default (forward fixed)", fixed)])))
+        print()
+        variants = {"pseudo_mask=all": merged(load(r27 / "m3.txt", "m"), load(r27 / "m369.txt", "m")),
+                    "cycles=1": load(r27 / "y369.txt", "y")}
+        print("\n".join(variant_table(s26, variants, "default (session 26)")))
+        print()
+        print("\n".join(table([("session 26 default", s26),
+                               ("far_field_blur=1, pseudo_mask=all", load(r27 / "g3.txt", "g")),
+                               ("far_field_blur=1", blur)])))
+        print()
+        print("\n".join(table([("session 26 default", {k: v for k, v in s26.items() if k[1] == 3}),
+                               ("opacity_noise=0.8", load(r27 / "n3.txt", "n"))])))
         return 0
     if args.session == 20:
         cols = [("session 19 default", load(r20 / "path_floaters.txt", "p", "0")),

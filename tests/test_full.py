@@ -2,6 +2,7 @@
 synthetic scene, writes its outputs, resumes, and its switches reach the config."""
 
 import json
+import math
 
 import pytest
 import torch
@@ -110,7 +111,7 @@ def test_compare_in_two_processes_matches_compare_in_turn(tmp_path, capsys):
 
 def test_pseudo_view_masks_follow_the_uncertainty():
     """full.pseudo_mask: 'seen' keeps every pixel an input sees (U < 1), 'reliable' only where guidance was
-    fused (U < delta)."""
+    fused (U < delta), 'all' every pixel."""
     from warpgs.pseudo.views import PseudoSequence
 
     g = torch.Generator().manual_seed(0)
@@ -120,7 +121,10 @@ def test_pseudo_view_masks_follow_the_uncertainty():
     z = torch.zeros(n, h, w, 3)
     seq = PseudoSequence(start=0, end=1, viewmats=torch.eye(4).repeat(n, 1, 1), K=torch.eye(3), width=w, height=h,
                          frames=z, guidance=z, warped=z, uncertainty=u, renders=z, depths=u, sources=u, tau=u[:, 0, 0])
+    u[1, 2, 2] = 7.0  # no input sees it
     seen, rel = seq.pseudo_cameras(), seq.pseudo_cameras(max_uncertainty=0.5)
+    every = seq.pseudo_cameras(max_uncertainty=math.inf)
+    assert all(c.mask is None for c in every) and len(every) == len(seen) and not seen[0].mask[2, 2]
     assert [c.name for c in seen] == ["pseudo_0_1_001", "pseudo_0_1_002"]
     for i, (a, b) in enumerate(zip(seen, rel), start=1):
         assert torch.equal(a.mask, u[i] < 1.0) and torch.equal(b.mask, u[i] < 0.5)
@@ -152,7 +156,7 @@ def test_growth_budget_caps_the_cycles_and_bad_settings_are_named(tmp_path):
     tr.method.apply_growth_budget()
     assert tr.strategy.max_gaussians == len(tr.model)  # never below what the model has
     assert tr.cfg.strategy.max_gaussians == configured  # the config itself is left as it was
-    for bad, msg in (({"pseudo_mask": "all"}, "pseudo_mask"), ({"growth_budget": -1.0}, "growth_budget"),
+    for bad, msg in (({"pseudo_mask": "every"}, "pseudo_mask"), ({"growth_budget": -1.0}, "growth_budget"),
                      ({"drop_rate": 1.0}, "drop_rate")):
         with pytest.raises(ValueError, match=msg):
             check_settings(FullConfig(**bad))

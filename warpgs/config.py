@@ -238,7 +238,8 @@ class FullConfig:
     restart_lr: bool = True  # the means' learning-rate schedule restarts at each pseudo-view update (the paper);
     #   false: one schedule over the whole run, as the baseline's
     pseudo_mask: str = "seen"  # pixels of a pseudo view that supervise: seen (U < 1: an input sees them) |
-    #   reliable (U < the sampler's delta: where guidance was fused)
+    #   reliable (U < the sampler's delta: where guidance was fused) | all (every pixel: what no input sees
+    #   is held to the render the pseudo view was made from)
     growth_budget: float = 0.0  # > 0: at most this x the baseline phase's Gaussians during the cycles (0: no cap)
     drop_rate: float | None = None  # DropGaussian's final rate for this method (train.drop_rate); None: train's
     pseudo_depth_smooth: float = 0.0  # weight of an edge-aware smoothness of the pseudo views' rendered depth
@@ -249,7 +250,7 @@ class FullConfig:
     LIMITS = {"cycles": ">= 0", "baseline_fraction": "[0, 1)", "pseudo_weight": ">= 0", "lpips_weight": ">= 0",
               "ssim_weight": ">= 0", "depth_weight": ">= 0", "input_depth_weight": ">= 0",
               "pseudo_loss": "{lpips, l1}", "guidance": "{warped, render}", "stereo_sources": "{inputs, all}",
-              "init_opacity": "(0, 1)", "max_new": ">= 0", "pseudo_mask": "{seen, reliable}", "growth_budget": ">= 0",
+              "init_opacity": "(0, 1)", "max_new": ">= 0", "pseudo_mask": "{seen, reliable, all}", "growth_budget": ">= 0",
               "drop_rate": "[0, 1)", "pseudo_depth_smooth": ">= 0", "far_field": FAR_FIELD_RULE,
               "flythrough_frames": ">= 0"}
 

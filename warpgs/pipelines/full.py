@@ -194,7 +194,7 @@ class FullMethod(Method):
         seqs = generate_pseudo_views(model_renderer(tr.model, tr.background_for), tr.train_cams, pcfg, device=tr.device)
         times["pseudo_views_s"] = time.perf_counter() - t0
         cams = []
-        limit = pcfg.sampler.delta if self.settings.pseudo_mask == "reliable" else 1.0
+        limit = {"reliable": pcfg.sampler.delta, "all": math.inf}.get(self.settings.pseudo_mask, 1.0)
         for seq in seqs:
             cams += seq.pseudo_cameras(prefix=f"c{cycle}_{seq.start}_{seq.end}", max_uncertainty=limit)
         cycle_dir = tr.out / f"cycle_{cycle}" if tr.out is not None else None

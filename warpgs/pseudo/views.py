@@ -107,13 +107,14 @@ class PseudoSequence:
 
     def pseudo_cameras(self, prefix: str | None = None, max_uncertainty: float = 1.0):
         """The interior frames as ``CameraTensors`` (image = pseudo view, mask = U < ``max_uncertainty``;
-        1: every pixel an input sees) for training."""
+        1: every pixel an input sees; infinite: no mask, every pixel) for training."""
         from warpgs.data.scene import CameraTensors
 
         prefix = prefix or f"pseudo_{self.start}_{self.end}"
         return [
             CameraTensors(name=f"{prefix}_{i:03d}", viewmat=self.viewmats[i], K=self.K, width=self.width,
-                          height=self.height, image=self.frames[i], mask=self.uncertainty[i] < max_uncertainty)
+                          height=self.height, image=self.frames[i],
+                          mask=None if max_uncertainty == float("inf") else self.uncertainty[i] < max_uncertainty)
             for i in range(1, len(self) - 1)
         ]
 
