@@ -39,6 +39,7 @@ import importlib
 import io
 import math
 import os
+import signal
 import sys
 import threading
 import time
@@ -596,12 +597,20 @@ def main(argv=None) -> int:
         print(f"warpgs.view: note: {note}", file=sys.stderr)
     print(f"warpgs.view: open {viewer.url} ({len(run.model):,} Gaussians on {device.type}, {run.summary()}; "
           "Ctrl-C stops)", flush=True)
+    # Ctrl-C (and SIGTERM) by a handler of our own, installed after the libraries are loaded: one of them can
+    # leave SIGINT without Python's KeyboardInterrupt (session 27: in a fresh environment's first CI run the viewer
+    # did not stop within 120 s of Ctrl-C, printing nothing)
+    stop = threading.Event()
+    previous = {sig: signal.signal(sig, lambda *_: stop.set()) for sig in (signal.SIGINT, signal.SIGTERM)}
     try:
-        while True:
-            time.sleep(1.0)
+        while not stop.is_set():
+            time.sleep(0.2)
+        return 0
     except KeyboardInterrupt:
         return 0
     finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
         # viser's server can take long to stop (an open websocket, its thread pool): Ctrl-C must still end the
         # command, so the stop gets CLOSE_WAIT_S and the process exits without waiting on its threads (below)
         closer = threading.Thread(target=viewer.close, daemon=True, name="warpgs.view close")
