@@ -48,15 +48,43 @@ def scenes(device: str):
         yield name, [t.to(device) for t in (means, quats, scales, opac, sh, bg, K, *wts)], w, h
 
 
+def _cpu(v):
+    """A tensor detached and copied to the CPU; anything else as it is."""
+    return v.detach().cpu().clone() if isinstance(v, torch.Tensor) else v
+
+
+def _random_loss(o, g: torch.Generator, alpha: bool):
+    """sum(image x W) + 0.01 sum(depth x W') (+ sum(alpha x W'')), the weights standard normal from ``g``."""
+    h, w = o.image.shape[:2]
+    dev = o.image.device
+    loss = (o.image * torch.randn(h, w, 3, generator=g).to(dev)).sum()
+    loss = loss + (o.depth.reshape(h, w) * torch.randn(h, w, generator=g).to(dev)).sum() * 0.01
+    if alpha:
+        loss = loss + (o.alpha.reshape(h, w) * torch.randn(h, w, generator=g).to(dev)).sum()
+    return loss
+
+
+def _entry(o, grads: dict, **extra) -> dict:
+    """One render's record: its image, intersection count, the outputs in ``extra`` and the gradients ``grads``
+    (name -> tensor or None; None left out)."""
+    return {"image": _cpu(o.image), **{k: _cpu(v) for k, v in extra.items()}, "n_intersections": o.n_intersections,
+            **{f"grad_{k}": _cpu(t) for k, t in grads.items() if t is not None}}
+
+
+def _save(res, out: str, what: str) -> None:
+    import warpgs
+
+    torch.save(res, out)
+    print(f"wrote {out} ({what}; warpgs from {warpgs.__file__})")
+
+
 # (name, SH degree, outputs in the loss, fixed intersection capacity (a CUDA graph's render), background)
 CASES = (("all3", 3, "all", False, "image"), ("image0", 0, "image", False, "colour"),
          ("image3_capacity", 3, "image", True, "colour"), ("all1_capacity", 1, "all", True, "image"))
 
 
 def dump(out: str, device: str) -> None:
-    from warpgs.render import rasterize
-
-    from warpgs.render import count_intersections
+    from warpgs.render import count_intersections, rasterize
 
     res = {}
     for (name, (means, quats, scales, opac, sh, bg, K, w_img, w_dep, w_alp), w, h), (case, degree, use, capacity, bgk) \
@@ -73,15 +101,9 @@ def dump(out: str, device: str) -> None:
         if use == "all":
             loss = loss + (d * w_dep).sum() * 0.01 + (o.alpha.reshape(h, w) * w_alp).sum()
         loss.backward()
-        res[f"{name}/{case}"] = {"image": o.image.detach().cpu(), "depth": d.detach().cpu(), "alpha": o.alpha.detach().cpu(),
-                     "n_intersections": o.n_intersections,
-                     **{f"grad_{k}": p.grad.detach().cpu() for k, p in
-                        zip(("means", "quats", "scales", "opacities", "sh", "background"), params)
-                        if p.grad is not None}}
-    torch.save(res, out)
-    import warpgs
-
-    print(f"wrote {out} (warpgs from {warpgs.__file__})")
+        names = ("means", "quats", "scales", "opacities", "sh", "background")
+        res[f"{name}/{case}"] = _entry(o, {k: p.grad for k, p in zip(names, params)}, depth=d, alpha=o.alpha)
+    _save(res, out, f"{len(res)} renders")
 
 
 def dump_ply(out: str, ply: str, data: str, scene: str, views: int, root: str, device: str) -> None:
@@ -106,17 +128,10 @@ def dump_ply(out: str, ply: str, data: str, scene: str, views: int, root: str, d
             if drop > 0:  # DropGaussian's mask: survivors' opacity x 1 / (1 - p), so some exceed 1
                 scale = ((torch.rand(len(model), generator=g) >= drop).float() / (1 - drop)).to(device)
             o = model.render(vm, K, cam.width, cam.height, sh_degree=degree, opacity_scale=scale)
-            w_img = torch.randn(cam.height, cam.width, 3, generator=g).to(device)
-            w_dep = torch.randn(cam.height, cam.width, generator=g).to(device)
-            loss = (o.image * w_img).sum() + (o.depth.reshape(cam.height, cam.width) * w_dep).sum() * 0.01
-            loss.backward()
-            res[f"{cam.name}/sh{degree}" + (f"_drop{drop}" if drop else "")] = {"image": o.image.detach().cpu(), "n_intersections": o.n_intersections,
-                                             **{f"grad_{k}": p.grad.detach().cpu() for k, p in model.params.items()
-                                                if p.grad is not None}}
-    torch.save(res, out)
-    import warpgs
-
-    print(f"wrote {out} ({len(res)} renders; warpgs from {warpgs.__file__})")
+            _random_loss(o, g, alpha=False).backward()
+            key = f"{cam.name}/sh{degree}" + (f"_drop{drop}" if drop else "")
+            res[key] = _entry(o, {k: p.grad for k, p in model.params.items()})
+    _save(res, out, f"{len(res)} renders")
 
 
 def record(out: str, first: int, last: int, argv: list[str]) -> None:
@@ -131,10 +146,8 @@ def record(out: str, first: int, last: int, argv: list[str]) -> None:
 
     def wrapped(*args, **kwargs):
         if first <= calls[0] <= last:
-            saved.append({"call": calls[0], "args": [a.detach().cpu().clone() if isinstance(a, torch.Tensor) else a
-                                                     for a in args],
-                          "kwargs": {k: v.detach().cpu().clone() if isinstance(v, torch.Tensor) else v
-                                     for k, v in kwargs.items()}})
+            saved.append({"call": calls[0], "args": [_cpu(a) for a in args],
+                          "kwargs": {k: _cpu(v) for k, v in kwargs.items()}})
         calls[0] += 1
         return inner(*args, **kwargs)
 
@@ -144,8 +157,7 @@ def record(out: str, first: int, last: int, argv: list[str]) -> None:
         runpy.run_module("warpgs.pipelines.sparse", run_name="__main__")
     except SystemExit:
         pass
-    torch.save(saved, out)
-    print(f"wrote {out} ({len(saved)} calls of {calls[0]})")
+    _save(saved, out, f"{len(saved)} calls of {calls[0]}")
 
 
 def replay(out: str, recorded: str, device: str) -> None:
@@ -160,16 +172,10 @@ def replay(out: str, recorded: str, device: str) -> None:
                 for a in rec["args"]]
         kwargs = {k: v.to(device) if isinstance(v, torch.Tensor) else v for k, v in rec["kwargs"].items()}
         o = rasterize(*args, **kwargs)
-        h, w = o.image.shape[:2]
-        loss = (o.image * torch.randn(h, w, 3, generator=g).to(device)).sum()
-        loss = loss + (o.depth.reshape(h, w) * torch.randn(h, w, generator=g).to(device)).sum() * 0.01
-        loss = loss + (o.alpha.reshape(h, w) * torch.randn(h, w, generator=g).to(device)).sum()
-        loss.backward()
-        res[f"call{rec['call']}"] = {"image": o.image.detach().cpu(), "n_intersections": o.n_intersections,
-                                     **{f"grad_arg{i}": a.grad.detach().cpu() for i, a in enumerate(args)
-                                        if isinstance(a, torch.Tensor) and a.grad is not None}}
-    torch.save(res, out)
-    print(f"wrote {out} ({len(res)} calls)")
+        _random_loss(o, g, alpha=True).backward()
+        res[f"call{rec['call']}"] = _entry(o, {f"arg{i}": a.grad for i, a in enumerate(args)
+                                              if isinstance(a, torch.Tensor)})
+    _save(res, out, f"{len(res)} calls")
 
 
 def compare(a: str, b: str) -> int:
