@@ -193,13 +193,13 @@ def test_trainer_fits_the_far_field_on_training_views_only_and_resumes_exactly(t
 def _loo_oracle(views, up, bins, blur):
     """Leave-one-out squared error of the far field of ``blur``, pixel by pixel: each left-out pixel against
     the Gaussian-weighted mean (over band distance) of the other views' pixels, unseen bands taking the
-    nearest seen band."""
+    nearest seen band, interpolated between band centres as the far field renders it."""
     data = []
     for v in views:
         e = (ray_directions(v.viewmat, v.K, v.width, v.height) @ up).reshape(-1).double()
-        data.append((((e + 1) * 0.5 * bins).long().clamp(0, bins - 1), v.image.reshape(-1, 3).double()))
+        data.append((((e + 1) * 0.5 * bins).long().clamp(0, bins - 1), v.image.reshape(-1, 3).double(), e))
     total = 0.0
-    for i, (b_out, c_out) in enumerate(data):
+    for i, (b_out, c_out, e_out) in enumerate(data):
         b = torch.cat([d[0] for j, d in enumerate(data) if j != i])
         c = torch.cat([d[1] for j, d in enumerate(data) if j != i])
         colours = []
@@ -208,7 +208,12 @@ def _loo_oracle(views, up, bins, blur):
             colours.append((w[:, None] * c).sum(0) / w.sum() if float(w.sum()) > 1e-9 else None)
         seen = [k for k in range(bins) if colours[k] is not None]
         table = torch.stack([colours[min(seen, key=lambda s: abs(s - k))] for k in range(bins)])
-        total += float(((table[b_out] - c_out) ** 2).sum())
+        # what the far field renders: linear between band centres, the end bands' colour beyond them
+        x = ((e_out + 1) * 0.5 * bins - 0.5).clamp(0, bins - 1)
+        lo = x.floor().long()
+        hi = (lo + 1).clamp(max=bins - 1)
+        w = (x - lo.double())[:, None]
+        total += float(((table[lo] * (1 - w) + table[hi] * w - c_out) ** 2).sum())
     return total
 
 
@@ -252,3 +257,97 @@ def test_blurred_far_field_is_the_kernel_weighted_band_mean_and_round_trips(tmp_
     back = ElevationFarField.load(tmp_path / "ff.json")
     assert back.blur == 1.5
     assert_close(back.colors, ff.colors, 1e-6, what="colours after the round trip")
+
+
+def test_cylinder_directions_are_the_analytic_exit_points():
+    from warpgs.farfield import cylinder_directions
+
+    up, centre = torch.tensor([0.0, 1.0, 0.0]), torch.zeros(3)
+    dirs = torch.nn.functional.normalize(torch.randn(50, 3, generator=torch.Generator().manual_seed(1)), dim=-1)
+    # from the centre, the exit point lies along the ray itself
+    assert_close(cylinder_directions(dirs, centre, up, centre, 10.0), dirs, 1e-6, what="from the centre")
+    # from (5, 0, 0), 45 degrees up towards +x: |5 + t / sqrt 2| = 10 at t = 5 sqrt 2, the point (10, 5, 0)
+    d = torch.tensor([[1.0, 1.0, 0.0]]) / math.sqrt(2)
+    want = torch.tensor([[10.0, 5.0, 0.0]]) / math.sqrt(125.0)
+    assert_close(cylinder_directions(d, torch.tensor([5.0, 0.0, 0.0]), up, centre, 10.0), want, 1e-6, what="exit")
+    # straight up: no crossing, the ray's own direction
+    assert_close(cylinder_directions(torch.tensor([[0.0, 1.0, 0.0]]), torch.tensor([5.0, 0.0, 0.0]), up, centre, 10.0),
+                 torch.tensor([[0.0, 1.0, 0.0]]), 0, what="vertical ray")
+    # from outside, the far crossing: from (-20, 0, 0) along +x, the wall at x = +10
+    assert_close(cylinder_directions(torch.tensor([[1.0, 0.0, 0.0]]), torch.tensor([-20.0, 0.0, 0.0]), up, centre, 10.0),
+                 torch.tensor([[1.0, 0.0, 0.0]]), 1e-6, what="from outside")
+
+
+def _walled_views(colour_of_band, bins, eyes_yaws, radius=10.0, size=(48, 40)):
+    """Cameras at ``eyes_yaws`` ((x, z), yaw) at height 0 inside a vertical wall of ``radius`` around the origin
+    (world up +y) whose colour at a point is ``colour_of_band`` of that point's elevation band seen from the
+    origin: the exit points solved here in numpy, independently of ``cylinder_directions``."""
+    w, h = size
+    K = torch.tensor([[20.0, 0, w / 2], [0, 20.0, h / 2], [0, 0, 1]])
+    views = []
+    for (x, z), yaw in eyes_yaws:
+        a = math.radians(yaw)
+        eye = np.array([x, 0.0, z])
+        V = look_at_viewmat(tuple(eye), (x + math.sin(a), 0.0, z + math.cos(a))).float()
+        d = ray_directions(V, K, w, h).reshape(-1, 3).double().numpy()
+        dh = d[:, [0, 2]]
+        oh = eye[[0, 2]]
+        A, B, C = (dh * dh).sum(1), dh @ oh, oh @ oh - radius**2
+        t = (-B + np.sqrt(B * B - A * C)) / A
+        p = eye + t[:, None] * d
+        e = torch.from_numpy(p[:, 1] / np.linalg.norm(p, axis=1))
+        band = ((e + 1) * 0.5 * bins).long().clamp(0, bins - 1)
+        views.append(_View(V, K, w, h, colour_of_band[band].reshape(h, w, 3).float()))
+    return views
+
+
+def test_cylinder_proxy_is_chosen_leave_one_out_and_predicts_a_nearer_camera():
+    """A courtyard: the views' colours are a function of the height on a wall of radius 10 around them, not of
+    the ray's elevation. The leave-one-out choice among the candidate cylinders finds that wall from points on
+    it, and renders a camera near the wall (where the roof line stands high) as the wall looks from there; the
+    elevation of the ray alone cannot. Without points, or with ``proxy="none"``, there is no cylinder."""
+    bins = 16
+    colours = torch.rand(bins, 3, generator=torch.Generator().manual_seed(11), dtype=torch.float64)
+    train = _walled_views(colours, bins, [((0.0, 0.0), 0), ((4.0, 2.0), 100), ((-3.0, -1.0), 200), ((1.0, 5.0), 290)])
+    g = np.random.default_rng(0)
+    th, hgt = g.uniform(0, 2 * np.pi, 400), g.uniform(-4, 6, 400)
+    points = np.stack([10 * np.cos(th), hgt, 10 * np.sin(th)], 1)
+    ff = ElevationFarField.fit(train, bins, 0.0, "auto", points)
+    assert ff.radius is not None and abs(ff.radius - 10.0) < 0.5, ff.describe()
+    assert ff.proxy["loo_psnr"] > ff.proxy["loo_psnr_without"]
+    test = _walled_views(colours, bins, [((0.0, -7.0), 180)])[0]  # 3 from the wall, facing it
+    truth = test.image.double()
+    cyl = ff.image(test.viewmat, test.K, test.width, test.height).double()
+    ray = ElevationFarField.fit(train, bins).image(test.viewmat, test.K, test.width, test.height).double()
+    err_cyl, err_ray = float(((cyl - truth) ** 2).mean()), float(((ray - truth) ** 2).mean())
+    assert err_cyl < 0.25 * err_ray, (err_cyl, err_ray)
+    assert ElevationFarField.fit(train, bins, 0.0, "none", points).radius is None
+    assert ElevationFarField.fit(train, bins, 0.0, "auto", None).radius is None
+    with pytest.raises(ValueError, match="far_field_proxy"):
+        ElevationFarField.fit(train, bins, 0.0, "sphere", points)
+
+
+def test_cylinder_far_field_round_trips_through_its_json(tmp_path):
+    bins = 8
+    colours = torch.rand(bins, 3, generator=torch.Generator().manual_seed(12), dtype=torch.float64)
+    train = _walled_views(colours, bins, [((0.0, 0.0), 0), ((4.0, 2.0), 120), ((-3.0, -1.0), 240)], size=(24, 20))
+    th = np.linspace(0, 2 * np.pi, 60, endpoint=False)
+    points = np.stack([10 * np.cos(th), np.linspace(-3, 5, 60), 10 * np.sin(th)], 1)
+    ff = ElevationFarField.fit(train, bins, 0.0, "auto", points)
+    assert ff.radius is not None
+    back = ElevationFarField.load(ff.save(tmp_path / "ff.json"))
+    assert back.radius == ff.radius and back.proxy == ff.proxy
+    cam = train[1]
+    assert_close(back.image(cam.viewmat, cam.K, cam.width, cam.height), ff.image(cam.viewmat, cam.K, cam.width, cam.height),
+                 1e-6, what="image after the round trip")
+
+
+def test_the_captures_config_asks_for_the_cylinder_and_a_bad_proxy_is_named():
+    from pathlib import Path
+
+    from warpgs.config import load_config
+
+    assert load_config([Path(__file__).resolve().parents[1] / "configs" / "dl3dv.yaml"]).train.far_field_proxy == "auto"
+    assert load_config().train.far_field_proxy == "none"
+    with pytest.raises(ValueError, match="far_field_proxy"):
+        load_config(overrides=["train.far_field_proxy=sphere"])

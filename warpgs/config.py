@@ -123,6 +123,9 @@ class TrainConfig:
     far_field_bins: int = 16  # elevation bands of the far field
     far_field_blur: float | str = 0.0  # width (in bands) of the Gaussian over the elevation that each band averages
     #   the inputs' pixels with; auto: the width that best predicts each input from the others (leave-one-out)
+    far_field_proxy: str = "none"  # none: bands by the ray's elevation | auto: by the elevation of where the ray
+    #   leaves a vertical cylinder around the capture, its centre and radius chosen leave-one-out over the inputs
+    #   among candidates from the initial points (or no cylinder when none predicts better; warpgs/farfield.py)
     path_clearance: float = 0.0  # > 0: every strategy.refine_every steps, remove the Gaussians whose centre lies
     #   within this x the scene's near depth of the camera path (warpgs/clearance.py: the photographer's space,
     #   where floaters in front of novel views sit); 0: off
@@ -199,7 +202,7 @@ class TrainConfig:
               "explode_factor": ">= 0", "explode_window": ">= 1", "explode_patience": ">= 1", "snapshot_every": ">= 0",
               "max_recoveries": ">= 0", "recovery_lr_factor": "(0, 1]", "cpu_threads": ">= 0", "sync_every": ">= 1",
               "far_field": FAR_FIELD_RULE, "hold_geometry": "{off, on, stereo}", "hold_means_lr": "> 0",
-              "hold_scales_lr": "> 0", "hold_quats_lr": "> 0", "far_field_bins": ">= 1", "far_field_blur": ">= 0 or {auto}", "alpha_binary": ">= 0", "path_clearance": ">= 0", "view_clearance": ">= 0", "path_floaters": ">= 0", "path_floaters_every": ">= 1", "path_floaters_poses": ">= 1", "co_prune_every": ">= 0", "co_prune_dist": "> 0",
+              "hold_scales_lr": "> 0", "hold_quats_lr": "> 0", "far_field_bins": ">= 1", "far_field_blur": ">= 0 or {auto}", "far_field_proxy": "{none, auto}", "alpha_binary": ">= 0", "path_clearance": ">= 0", "view_clearance": ">= 0", "path_floaters": ">= 0", "path_floaters_every": ">= 1", "path_floaters_poses": ">= 1", "co_prune_every": ">= 0", "co_prune_dist": "> 0",
               "co_reg_weight": ">= 0", "co_reg_start": ">= 0", "co_reg_frames": ">= 1"}
 
 

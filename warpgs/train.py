@@ -418,18 +418,16 @@ class Trainer:
         self.train_cams = [c.to_torch(self.device) for c in scene.train]
         self.test_cams = [c.to_torch(self.device) for c in scene.test]
         self.background = torch.tensor(background_colour(cfg, scene), dtype=torch.float32, device=self.device)
-        # fitted on the training views only, deterministic: a resumed run computes the same one
-        self.far_field = make_far_field(cfg.train.far_field, self.train_cams, cfg.train.far_field_bins, self.background,
-                                        cfg.train.far_field_blur)
-        if self.far_field is not None and cfg.train.far_field_blur == "auto":
-            self.log(f"far field: elevation blur {self.far_field.blur:g} bands, chosen leave-one-out over the inputs")
         self.scene_scale = cfg.optim.scene_scale or scene_scale_of(scene.train)
         seed = cfg.train.seed
         torch.manual_seed(seed)
         np.random.seed(seed % 2**32)
         # the initial points (found here or earlier, then kept on the scene) decide train.hold_geometry
-        cfg, self.held = hold_geometry(cfg, prepare_geometry(cfg, scene, self.log))  # the same cfg when not held
+        geo = prepare_geometry(cfg, scene, self.log)
+        cfg, self.held = hold_geometry(cfg, geo)  # the same cfg when not held
         self.cfg = cfg
+        # fitted on the training views (and their points) only, deterministic: a resumed run computes the same one
+        self.far_field = self.fit_far_field(cfg.train.far_field, geo)
         if self.held is not None:
             self.log(f"warpgs: geometry held ({self.held['why']}): no densification; means / scales / rotations "
                      f"learning rates x {self.held['means_lr']:g} / {self.held['scales_lr']:g} / {self.held['quats_lr']:g}")
@@ -592,6 +590,17 @@ class Trainer:
             loss = loss + tc.scale_reg * sr
             parts["scale_reg"] = sr
         return loss
+
+    def fit_far_field(self, kind: str, geo=None):
+        """``make_far_field`` of ``kind`` on the training views, with the initial points for
+        ``train.far_field_proxy``; its choice in one line when something was chosen."""
+        tc = self.cfg.train
+        points = None if geo is None or not len(geo.xyz) else geo.xyz
+        ff = make_far_field(kind, self.train_cams, tc.far_field_bins, self.background, tc.far_field_blur,
+                            tc.far_field_proxy, points)
+        if ff is not None and (tc.far_field_blur == "auto" or ff.proxy):
+            self.log(f"warpgs: {ff.describe()}")
+        return ff
 
     def background_for(self, cam) -> torch.Tensor:
         """What ``cam`` (anything with viewmat, K, width, height) sees behind the Gaussians: the far field's

@@ -33,7 +33,6 @@ import torch
 from warpgs import losses
 from warpgs.config import FullConfig, check_limits
 from warpgs.console import warn_once
-from warpgs.farfield import make_far_field
 from warpgs.model import rgb_to_sh
 from warpgs.train import STATE_PARTS, Method, Trainer
 
@@ -95,8 +94,7 @@ class FullMethod(Method):
         if self.settings.drop_rate is not None:
             trainer.drop_rate = self.settings.drop_rate
         if self.settings.far_field is not None:
-            trainer.far_field = make_far_field(self.settings.far_field, trainer.train_cams, cfg.train.far_field_bins,
-                                               trainer.background, cfg.train.far_field_blur)
+            trainer.far_field = trainer.fit_far_field(self.settings.far_field, getattr(trainer.scene, "geometry", None))
         self.pseudo_cams: list = []
         self.pseudo_order: list[int] = []
         self.pseudo_rng = np.random.default_rng(cfg.train.seed + 3)
