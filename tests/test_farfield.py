@@ -278,7 +278,7 @@ def test_cylinder_directions_are_the_analytic_exit_points():
                  torch.tensor([[1.0, 0.0, 0.0]]), 1e-6, what="from outside")
 
 
-def _walled_views(colour_of_band, bins, eyes_yaws, radius=10.0, size=(48, 40)):
+def _walled_views(colour_of_band, bins, eyes_yaws, radius=10.0, size=(48, 40), device="cpu"):
     """Cameras at ``eyes_yaws`` ((x, z), yaw) at height 0 inside a vertical wall of ``radius`` around the origin
     (world up +y) whose colour at a point is ``colour_of_band`` of that point's elevation band seen from the
     origin: the exit points solved here in numpy, independently of ``cylinder_directions``."""
@@ -297,26 +297,29 @@ def _walled_views(colour_of_band, bins, eyes_yaws, radius=10.0, size=(48, 40)):
         p = eye + t[:, None] * d
         e = torch.from_numpy(p[:, 1] / np.linalg.norm(p, axis=1))
         band = ((e + 1) * 0.5 * bins).long().clamp(0, bins - 1)
-        views.append(_View(V, K, w, h, colour_of_band[band].reshape(h, w, 3).float()))
+        views.append(_View(V.to(device), K.to(device), w, h, colour_of_band[band].reshape(h, w, 3).float().to(device)))
     return views
 
 
-def test_cylinder_proxy_is_chosen_leave_one_out_and_predicts_a_nearer_camera():
+@pytest.mark.parametrize("device", DEVICES)
+def test_cylinder_proxy_is_chosen_leave_one_out_and_predicts_a_nearer_camera(device):
     """A courtyard: the views' colours are a function of the height on a wall of radius 10 around them, not of
     the ray's elevation. The leave-one-out choice among the candidate cylinders finds that wall from points on
     it, and renders a camera near the wall (where the roof line stands high) as the wall looks from there; the
     elevation of the ray alone cannot. Without points, or with ``proxy="none"``, there is no cylinder."""
     bins = 16
     colours = torch.rand(bins, 3, generator=torch.Generator().manual_seed(11), dtype=torch.float64)
-    train = _walled_views(colours, bins, [((0.0, 0.0), 0), ((4.0, 2.0), 100), ((-3.0, -1.0), 200), ((1.0, 5.0), 290)])
+    train = _walled_views(colours, bins, [((0.0, 0.0), 0), ((4.0, 2.0), 100), ((-3.0, -1.0), 200), ((1.0, 5.0), 290)],
+                          device=device)
     g = np.random.default_rng(0)
     th, hgt = g.uniform(0, 2 * np.pi, 400), g.uniform(-4, 6, 400)
     points = np.stack([10 * np.cos(th), hgt, 10 * np.sin(th)], 1)
     ff = ElevationFarField.fit(train, bins, 0.0, "auto", points)
     assert ff.radius is not None and abs(ff.radius - 10.0) < 0.5, ff.describe()
     assert ff.proxy["loo_psnr"] > ff.proxy["loo_psnr_without"]
-    test = _walled_views(colours, bins, [((0.0, -7.0), 180)])[0]  # 3 from the wall, facing it
+    test = _walled_views(colours, bins, [((0.0, -7.0), 180)], device=device)[0]  # 3 from the wall, facing it
     truth = test.image.double()
+    assert ff.image(test.viewmat, test.K, test.width, test.height).device == test.viewmat.device
     cyl = ff.image(test.viewmat, test.K, test.width, test.height).double()
     ray = ElevationFarField.fit(train, bins).image(test.viewmat, test.K, test.width, test.height).double()
     err_cyl, err_ray = float(((cyl - truth) ** 2).mean()), float(((ray - truth) ** 2).mean())

@@ -208,8 +208,8 @@ class ElevationFarField:
         dirs = [ray_directions(m, torch.as_tensor(c.K), c.width, c.height) for c, m in zip(cameras, mats)]
         candidates: list = [("none", None, None)]
         if proxy == "auto" and points is not None and len(points) >= 10 and len(cameras) >= 2:
-            origins = torch.stack([camera_centre(m) for m in mats])
-            candidates += proxy_candidates(torch.as_tensor(np.asarray(points), dtype=torch.float64), origins, up)
+            origins = torch.stack([camera_centre(m).cpu() for m in mats])
+            candidates += proxy_candidates(torch.as_tensor(np.asarray(points), dtype=torch.float64), origins, up.cpu())
         blurs = BLUR_CHOICES if blur == "auto" else (float(blur),)
         best, scored = None, []
         for name, centre, radius in candidates:
