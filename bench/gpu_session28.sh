@@ -5,6 +5,7 @@
 #    leave-one-out over the inputs): castle_p30 and herz_jesus_p25 at 3, 6 and 9 views, baseline and full, seeds 0-2
 #    (384x256, 3000 it; prefix c), and the rasterizer's far-field tests on CUDA.
 # b: the same 36 runs with 24 far-field bands (train.far_field_bins=24; prefix b).
+# m: the full method of a's 18 cases with its pseudo views supervising every pixel (full.pseudo_mask=all; prefix m).
 set -u
 source "$(dirname "${BASH_SOURCE[0]}")/gpu_one.sh"
 session_env "$@"; P=$1; D=$2; R=$3; shift 3
@@ -22,6 +23,12 @@ b)
       echo "b_${c}_${v}v_${m}_s$s $m $c $v $s --set train.far_field_bins=24"
     done; done; done; done; } | xargs -P ${JOBS:-36} -L 1 bash -c 'one "$@"' _ | grep -v "rc=0"
   summary b_ b369.txt
+  ;;
+m)
+  { for c in castle_p30 herz_jesus_p25; do for v in 3 6 9; do for s in 0 1 2; do
+      echo "m_${c}_${v}v_full_s$s full $c $v $s --set full.pseudo_mask=all"
+    done; done; done; } | xargs -P ${JOBS:-18} -L 1 bash -c 'one "$@"' _ | grep -v "rc=0"
+  summary m_ m369.txt
   ;;
 *) echo "unknown phase $P"; exit 2 ;;
 esac
