@@ -24,7 +24,11 @@ median).
   ``full.pseudo_mask=all`` (``s27/m3.txt``, ``s27/m369.txt``) and ``full.cycles=1`` (``s27/y369.txt``), then
   ``train.far_field_blur=1`` for both methods (``s27/f3.txt``, ``s27/f369.txt``; with ``pseudo_mask=all`` at 3 views,
   ``s27/g3.txt``) and ``train.opacity_noise=0.8`` at 3 views (``s27/n3.txt``); ``s27/k3.txt`` is session 26's
-  castle_p30 3-view baseline seed 0 re-run (the same 14.824).
+  castle_p30 3-view baseline seed 0 re-run (the same 14.824);
+- session 28 (``bench/gpu_session28.sh``): session 27's default (``s27/h.txt``) beside the far field on a cylinder
+  (``train.far_field_proxy=auto``, ``s28/c369.txt``) and beside session 28's default, which adds
+  ``full.pseudo_mask=all`` for the captures (its full runs ``s28/m369.txt``, its baseline runs those of ``c369``: the
+  option touches only the full method); then ``pseudo_mask=all`` as a variant against the cylinder's runs.
 """
 
 from __future__ import annotations
@@ -129,7 +133,7 @@ def merged(*parts: dict) -> dict:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--results", default=str(Path(__file__).resolve().parent / "results"))
-    ap.add_argument("--session", type=int, choices=(20, 21, 22, 26, 27), default=21)
+    ap.add_argument("--session", type=int, choices=(20, 21, 22, 26, 27, 28), default=21)
     args = ap.parse_args(argv)
     r20, r21 = Path(args.results) / "s20", Path(args.results) / "s21"
     s20 = ("session 20 default", load(r20 / "captures_d.txt", "d"))
@@ -151,6 +155,16 @@ def main(argv=None) -> int:
         print()
         rel = merged(load(r26 / "r3.txt", "r"), load(r26 / "r69.txt", "r"))
         print("\n".join(variant_table(s26, {"pseudo_mask=reliable": rel}, "default (session 26)")))
+        return 0
+    if args.session == 28:
+        r27, r28 = Path(args.results) / "s27", Path(args.results) / "s28"
+        cyl = load(r28 / "c369.txt", "c")
+        mask_all = load(r28 / "m369.txt", "m")
+        default = merged({k: v for k, v in cyl.items() if k[2] == "baseline"}, mask_all)
+        print("\n".join(table([("session 27 default", load(r27 / "h.txt", "h")),
+                               ("far_field_proxy=auto", cyl), ("session 28 default", default)])))
+        print()
+        print("\n".join(variant_table(cyl, {"pseudo_mask=all": mask_all}, "far_field_proxy=auto")))
         return 0
     if args.session == 27:
         r26, r27 = Path(args.results) / "s26", Path(args.results) / "s27"
