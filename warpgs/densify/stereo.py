@@ -105,6 +105,13 @@ class StereoResult(NamedTuple):
 # plane sweep
 
 
+def small_inv(m: torch.Tensor) -> torch.Tensor:
+    """``torch.linalg.inv`` of small matrices (cameras' 3x3 / 4x4) computed on the CPU and returned on ``m``'s
+    device: on CUDA it needs a cuSOLVER handle, whose creation failed in a GPU shared by 12 runs
+    (CUSOLVER_STATUS_INTERNAL_ERROR, session 28), and a 4x4 gains nothing from the GPU."""
+    return torch.linalg.inv(m.cpu()).to(m.device)
+
+
 def to_gray(images: torch.Tensor) -> torch.Tensor:
     """[..., H, W, 3] in [0, 1] -> [..., H, W] luma (Rec. 601)."""
     w = torch.tensor([0.299, 0.587, 0.114], device=images.device, dtype=torch.float32)
@@ -128,8 +135,8 @@ def relative_homography_terms(K_ref, viewmat_ref, K_src, viewmat_src) -> tuple[t
     Vr = viewmat_ref.double()
     Ks_ = K_src.double().reshape(-1, 3, 3)
     Vs = viewmat_src.double().reshape(-1, 4, 4)
-    T = Vs @ torch.linalg.inv(Vr)  # reference camera -> source camera
-    A = Ks_ @ T[:, :3, :3] @ torch.linalg.inv(Kr)
+    T = Vs @ small_inv(Vr)  # reference camera -> source camera
+    A = Ks_ @ T[:, :3, :3] @ small_inv(Kr)
     b = (Ks_ @ T[:, :3, 3:4]).squeeze(-1)
     return A.float().contiguous(), b.float().contiguous()
 
@@ -250,10 +257,10 @@ def check_consistency(depths: torch.Tensor, Ks: torch.Tensor, viewmats: torch.Te
     stream = stream_of(dev)
     v, h, w = d.shape
     w2c = viewmats.double()
-    c2w = torch.linalg.inv(w2c)
+    c2w = small_inv(w2c)
     Kd = Ks.double()
     to = dict(device=d.device, dtype=torch.float32)
-    w2c, c2w, K, K_inv = (x.to(**to).contiguous() for x in (w2c, c2w, Kd, torch.linalg.inv(Kd)))
+    w2c, c2w, K, K_inv = (x.to(**to).contiguous() for x in (w2c, c2w, Kd, small_inv(Kd)))
     nb = _index_tensor(neighbours).int()
     count = torch.zeros(v, h, w, dtype=torch.int32, device=d.device)
     dsum = d.clone()
@@ -311,8 +318,8 @@ def unproject(depth: torch.Tensor, K: torch.Tensor, viewmat: torch.Tensor, mask:
     ij = mask.nonzero()
     z = depth[ij[:, 0], ij[:, 1]].double()
     uv1 = torch.stack([ij[:, 1].double() + 0.5, ij[:, 0].double() + 0.5, torch.ones_like(z)], 1)
-    pc = uv1 @ torch.linalg.inv(K.double()).T * z[:, None]
-    c2w = torch.linalg.inv(viewmat.double())
+    pc = uv1 @ small_inv(K.double()).T * z[:, None]
+    c2w = small_inv(viewmat.double())
     return (pc @ c2w[:3, :3].T + c2w[:3, 3]).float(), ij
 
 
