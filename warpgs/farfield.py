@@ -95,11 +95,16 @@ def _band_stats(cam, e: torch.Tensor, bins: int):
     return sums, counts, img
 
 
+def band_coordinate(e: torch.Tensor, bins: int) -> torch.Tensor:
+    """Continuous band coordinate of elevation sines ``e`` in [-1, 1]: band i's centre is at i."""
+    return (e + 1) * 0.5 * bins - 0.5
+
+
 def interpolate_bands(colors: torch.Tensor, e: torch.Tensor) -> torch.Tensor:
-    """[..., 3] the colour at band coordinates ``e`` in [-1, 1]: linear between band centres, the end bands'
+    """[..., 3] the colour at elevation sines ``e`` in [-1, 1]: linear between band centres, the end bands'
     colour beyond their centres (what ``ElevationFarField.image`` renders)."""
     bins = colors.shape[0]
-    x = ((e + 1) * 0.5 * bins - 0.5).clamp(0, bins - 1)
+    x = band_coordinate(e, bins).clamp(0, bins - 1)
     i0 = x.floor().long().clamp(max=bins - 1)
     i1 = (i0 + 1).clamp(max=bins - 1)
     w = (x - i0.to(x.dtype))[..., None].to(colors.dtype)
@@ -153,17 +158,6 @@ def _loo_error(views: list, blur: float) -> float:
         c = band_colours(sums - s, counts - n, blur)
         err += float(((interpolate_bands(c, e.reshape(-1).double()) - img) ** 2).sum())
     return err
-
-
-def choose_blur(views: list, choices=BLUR_CHOICES) -> float:
-    """The blur of ``choices`` whose far field, fitted on all views but one, predicts the left-out view's pixels
-    with the least squared error, summed over the views (``views``: as ``_loo_error`` takes them). What no input
-    sees is a guess from the others: how sharply the colours of the inputs' elevation bands carry over to a
-    view they did not see is measured on the inputs themselves. 0 with a single view."""
-    if len(views) < 2:
-        return 0.0
-    errors = [_loo_error(views, blur) for blur in choices]
-    return float(choices[min(range(len(choices)), key=errors.__getitem__)])
 
 
 class ElevationFarField:
@@ -245,7 +239,7 @@ class ElevationFarField:
 
     def elevation_coordinate(self, dirs: torch.Tensor) -> torch.Tensor:
         """Continuous band coordinate of unit directions: band i's centre is at i."""
-        return (dirs @ self.up.to(dirs.device) + 1) * 0.5 * self.bins - 0.5
+        return band_coordinate(dirs @ self.up.to(dirs.device), self.bins)
 
     def image(self, viewmat: torch.Tensor, K: torch.Tensor, width: int, height: int) -> torch.Tensor:
         """[H, W, 3] far-field colour seen by a camera, on the viewmat's device."""
