@@ -28,7 +28,10 @@ median).
 - session 28 (``bench/gpu_session28.sh``): session 27's default (``s27/h.txt``) beside the far field on a cylinder
   (``train.far_field_proxy=auto``, ``s28/c369.txt``) and beside session 28's default, which adds
   ``full.pseudo_mask=all`` for the captures (its full runs ``s28/m369.txt``, its baseline runs those of ``c369``: the
-  option touches only the full method); then ``pseudo_mask=all`` as a variant against the cylinder's runs.
+  option touches only the full method); then ``pseudo_mask=all`` as a variant against the cylinder's runs;
+- session 29 (``bench/gpu_session29.sh``): the full method's variants ``full.cycles=3`` and
+  ``full.baseline_fraction=0.3`` (``s29/v369.txt``, ``v_c3_...`` / ``v_bf03_...``) and ``full.pseudo_weight=0.5``
+  (``s29/w_pw05.txt``, ``v_pw05_...``) against session 28's default.
 """
 
 from __future__ import annotations
@@ -133,7 +136,7 @@ def merged(*parts: dict) -> dict:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--results", default=str(Path(__file__).resolve().parent / "results"))
-    ap.add_argument("--session", type=int, choices=(20, 21, 22, 26, 27, 28), default=21)
+    ap.add_argument("--session", type=int, choices=(20, 21, 22, 26, 27, 28, 29), default=21)
     args = ap.parse_args(argv)
     r20, r21 = Path(args.results) / "s20", Path(args.results) / "s21"
     s20 = ("session 20 default", load(r20 / "captures_d.txt", "d"))
@@ -156,11 +159,18 @@ def main(argv=None) -> int:
         rel = merged(load(r26 / "r3.txt", "r"), load(r26 / "r69.txt", "r"))
         print("\n".join(variant_table(s26, {"pseudo_mask=reliable": rel}, "default (session 26)")))
         return 0
-    if args.session == 28:
+    if args.session in (28, 29):
         r27, r28 = Path(args.results) / "s27", Path(args.results) / "s28"
         cyl = load(r28 / "c369.txt", "c")
         mask_all = load(r28 / "m369.txt", "m")
         default = merged({k: v for k, v in cyl.items() if k[2] == "baseline"}, mask_all)
+        if args.session == 29:
+            r29 = Path(args.results) / "s29"
+            variants = merged(load_variants(r29 / "v369.txt", "v"), load_variants(r29 / "w_pw05.txt", "v"))
+            names = {"c3": "cycles=3", "bf03": "baseline_fraction=0.3", "pw05": "pseudo_weight=0.5"}
+            print("\n".join(variant_table(default, {names[k]: v for k, v in variants.items()},
+                                           "default (session 28)")))
+            return 0
         print("\n".join(table([("session 27 default", load(r27 / "h.txt", "h")),
                                ("far_field_proxy=auto", cyl), ("session 28 default", default)])))
         print()

@@ -1,5 +1,5 @@
 """Pose helpers shared by every part (numpy, float64): camera centres, quaternions (w, x, y, z), slerp,
-axis-angle rotations, poses from a rotation and a centre. Poses are world-to-camera 4x4 matrices in
+axis-angle rotations, poses from a rotation and a centre, and the inverse of small torch matrices. Poses are world-to-camera 4x4 matrices in
 OpenCV axes (``warpgs/__init__.py``)."""
 
 from __future__ import annotations
@@ -90,3 +90,12 @@ def pose(R_c2w: np.ndarray, center: np.ndarray) -> np.ndarray:
 
 
 __all__ = ["as_viewmats", "axis_angle_to_rotmat", "camera_centres", "pose", "quat_to_rotmat", "rotmat_to_quat", "slerp"]
+
+
+def small_inv(m):
+    """``torch.linalg.inv`` of small matrices (cameras' 3x3 / 4x4, batched or not) computed on the CPU and returned
+    on ``m``'s device in ``m``'s dtype: on CUDA it needs a cuSOLVER handle, whose creation failed in a GPU shared
+    by 12 runs (CUSOLVER_STATUS_INTERNAL_ERROR, session 28), and a 4x4 gains nothing from the GPU."""
+    import torch
+
+    return torch.linalg.inv(m.cpu()).to(m.device)

@@ -51,6 +51,7 @@ from torch import nn
 
 from warpgs._warp import arg, device_of, launch, stream_of
 from warpgs.densify.select import neighbour_views
+from warpgs.geometry import small_inv
 from warpgs.kernels import stereo as ks
 
 WEIGHTS_ENV = "WARPGS_STEREO_WEIGHTS"
@@ -103,13 +104,6 @@ class StereoResult(NamedTuple):
 
 # ----------------------------------------------------------------------------------------------
 # plane sweep
-
-
-def small_inv(m: torch.Tensor) -> torch.Tensor:
-    """``torch.linalg.inv`` of small matrices (cameras' 3x3 / 4x4) computed on the CPU and returned on ``m``'s
-    device: on CUDA it needs a cuSOLVER handle, whose creation failed in a GPU shared by 12 runs
-    (CUSOLVER_STATUS_INTERNAL_ERROR, session 28), and a 4x4 gains nothing from the GPU."""
-    return torch.linalg.inv(m.cpu()).to(m.device)
 
 
 def to_gray(images: torch.Tensor) -> torch.Tensor:

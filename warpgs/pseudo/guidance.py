@@ -36,6 +36,7 @@ import torch
 import warp as wp
 
 from warpgs._warp import arg, device_of, launch, stream_of
+from warpgs.geometry import small_inv
 from warpgs.kernels import warping as kw
 
 
@@ -124,16 +125,16 @@ def _check_index(src_index, n_src: int, n_frames: int, device) -> torch.Tensor:
 def relative_transforms(src_viewmats: torch.Tensor, dst_viewmats: torch.Tensor, src_index: torch.Tensor):
     """Per frame ``(P_inp P_guid^-1, P_guid P_inp^-1)`` as float32 [F, 4, 4] (composed in float64).
 
-    ``inv_ex`` rather than ``inv``: no host synchronisation on CUDA."""
+    The inverses are taken on the CPU (``small_inv``): no cuSOLVER handle on a shared GPU."""
     S = src_viewmats[src_index.long()].double()
     D = dst_viewmats.double()
-    Dinv = torch.linalg.inv_ex(D)[0]
-    Sinv = torch.linalg.inv_ex(S)[0]
+    Dinv = small_inv(D)
+    Sinv = small_inv(S)
     return (S @ Dinv).float().contiguous(), (D @ Sinv).float().contiguous()
 
 
 def _inv3(K: torch.Tensor) -> torch.Tensor:
-    return torch.linalg.inv_ex(K.double())[0].float().contiguous()
+    return small_inv(K.double()).float().contiguous()
 
 
 def warp_guidance(
