@@ -354,3 +354,35 @@ def test_the_captures_config_asks_for_the_cylinder_and_a_bad_proxy_is_named():
     assert load_config().train.far_field_proxy == "none"
     with pytest.raises(ValueError, match="far_field_proxy"):
         load_config(overrides=["train.far_field_proxy=sphere"])
+
+
+def test_far_field_images_are_kept_per_camera_and_recomputed_when_it_changes():
+    """``FarFieldImages`` (what ``Trainer.background_for`` draws on) returns exactly the far field's image, computes
+    it once per camera however often it is asked, recomputes it after the camera's pose or the band colours
+    change in place, and keeps at most ``size`` images."""
+    from types import SimpleNamespace
+
+    from warpgs.farfield import FarFieldImages
+
+    up = torch.tensor([0.0, -1.0, 0.0])
+    ff = ElevationFarField(up, torch.rand(8, 3, generator=torch.Generator().manual_seed(0)),
+                           centre=torch.tensor([0.0, 0.0, 4.0]), radius=3.0)
+    K = torch.tensor([[20.0, 0, 8], [0, 20.0, 6], [0, 0, 1]])
+    cams = [SimpleNamespace(viewmat=look_at_viewmat(np.array([math.cos(a), 0.3, math.sin(a)]) * 2, np.zeros(3)),
+                            K=K.clone(), width=16, height=12) for a in (0.0, 1.0, 2.0)]
+    calls = []
+    real = ff.image
+    ff.image = lambda *a: calls.append(1) or real(*a)
+    kept = FarFieldImages(size=2)
+    for _ in range(3):
+        for cam in cams[:2]:
+            assert torch.equal(kept.image(ff, cam), real(cam.viewmat, cam.K, cam.width, cam.height))
+    assert len(calls) == 2  # once per camera
+    cams[0].viewmat[:3, 3] += 0.5  # the pose moved in place: recomputed
+    moved = kept.image(ff, cams[0])
+    assert len(calls) == 3 and torch.equal(moved, real(cams[0].viewmat, K, 16, 12))
+    ff.colors.mul_(0.5)  # the bands changed in place: recomputed
+    assert torch.equal(kept.image(ff, cams[0]), real(cams[0].viewmat, K, 16, 12)) and len(calls) == 4
+    kept.image(ff, cams[2])  # a third camera evicts the least recently used (the second)
+    kept.image(ff, cams[1])
+    assert len(calls) == 6 and len(kept._kept) == 2

@@ -34,6 +34,7 @@ from __future__ import annotations
 
 import json
 import math
+from collections import OrderedDict
 from pathlib import Path
 
 import numpy as np
@@ -282,6 +283,40 @@ class ElevationFarField:
     def load(cls, path: str | Path) -> "ElevationFarField":
         """What ``save`` wrote (a run folder's ``far_field.json``)."""
         return cls.from_dict(json.loads(Path(path).read_text()))
+
+
+class FarFieldImages:
+    """The far field's image of each camera, kept: it depends only on the far field and the camera, and computing
+    it (a ray and, with a cylinder, its exit point per pixel in float64) took 19 ms of a 2-core CPU's step at
+    384x256, each step. ``image(far_field, cam)`` returns the one kept for the same far field and the same
+    ``cam.viewmat`` / ``cam.K`` tensors and band colours (unchanged since: their version counters) at the same size, else computes
+    and keeps it; at most ``size`` images, the least recently used dropped first. Nothing is kept while a CUDA graph
+    is being captured (its memory belongs to the graph)."""
+
+    def __init__(self, size: int = 128):
+        self.size = int(size)
+        self._kept: OrderedDict = OrderedDict()
+
+    @staticmethod
+    def _version(t) -> int | None:
+        return t._version if isinstance(t, torch.Tensor) else None
+
+    def image(self, far_field, cam) -> torch.Tensor:
+        vm, K, colors = cam.viewmat, cam.K, far_field.colors
+        key = (id(far_field), id(vm), id(K), int(cam.width), int(cam.height))
+        versions = (self._version(vm), self._version(K), id(colors), self._version(colors))
+        hit = self._kept.get(key)
+        if hit is not None and hit[0] is far_field and hit[1] is vm and hit[2] is K and hit[3] == versions:
+            self._kept.move_to_end(key)
+            return hit[4]
+        img = far_field.image(vm, K, cam.width, cam.height)
+        capturing = torch.cuda.is_available() and torch.cuda.is_current_stream_capturing()
+        if self.size > 0 and not capturing and isinstance(vm, torch.Tensor) and isinstance(K, torch.Tensor):
+            self._kept[key] = (far_field, vm, K, versions, img)
+            self._kept.move_to_end(key)
+            while len(self._kept) > self.size:
+                self._kept.popitem(last=False)
+        return img
 
 
 def make_far_field(kind: str, cameras, bins: int, background=None, blur: float | str = 0.0, proxy: str = "none",

@@ -86,7 +86,7 @@ from warpgs import losses
 from warpgs.config import Config, config_from_dict, to_dict
 from warpgs.console import warn_once
 from warpgs.evaluation import evaluate_views, run_metrics, write_run_outputs
-from warpgs.farfield import make_far_field
+from warpgs.farfield import FarFieldImages, make_far_field
 from warpgs.guard import DivergenceGuard, LossWindow
 from warpgs.metrics import render_fps
 from warpgs.model import PARAM_NAMES, GaussianModel, read_point_cloud
@@ -427,6 +427,7 @@ class Trainer:
         cfg, self.held = hold_geometry(cfg, geo)  # the same cfg when not held
         self.cfg = cfg
         # fitted on the training views (and their points) only, deterministic: a resumed run computes the same one
+        self._far_images = FarFieldImages()
         self.far_field = self.fit_far_field(cfg.train.far_field, geo)
         if self.held is not None:
             self.log(f"warpgs: geometry held ({self.held['why']}): no densification; means / scales / rotations "
@@ -607,7 +608,7 @@ class Trainer:
         [H, W, 3] image when ``train.far_field`` is on, else the [3] ``background`` colour."""
         if self.far_field is None:
             return self.background
-        return self.far_field.image(cam.viewmat, cam.K, cam.width, cam.height)
+        return self._far_images.image(self.far_field, cam)
 
     def with_training_background(self, cam, generator: torch.Generator):
         """(camera, background) for one training step: with ``train.random_background`` and an alpha
