@@ -7,6 +7,13 @@
 #    v_c3) and 30% of the iterations on the inputs alone instead of 40% (full.baseline_fraction=0.3; prefix v_bf03).
 #    Session 27 measured one cycle (-0.08 dB on average) and session 22 a fraction of 0.6 (-0.05): both less.
 # w: the same 18 cases with VARIANT="name --set k=v ..." (prefix v_name), chosen from v.
+# f: (for the next session) the runs whose test frame collapsed, re-run (the code since gives the same arithmetic:
+#    session 28's baseline seed 0 of castle_p30 at 9 views, 19.216 with frame 8 at 11.75; v's full.baseline_fraction=0.3
+#    seed 2, frame 16 at 10.44), then bench/floaters.py on each: which Gaussians the collapsed view sees that no
+#    input does, and how far they and the test cameras lie from the camera path (in this layout frame 8 stands 1.2 m
+#    from the nearest of the path-floater poses, 3 per pair of inputs, and 4.8 m from the nearest input; the
+#    pass finds a dark sphere planted 0.3-2 m in front of frame 8 with 3 poses already, but not in front of frames 0
+#    and 16, 4-7 m from the path: bench/results/s29/plant_floaters_castle9_cpu.json).
 set -u
 source "$(dirname "${BASH_SOURCE[0]}")/gpu_one.sh"
 session_env "$@"; P=$1; D=$2; R=$3; shift 3
@@ -27,6 +34,19 @@ w)
   # shellcheck disable=SC2086
   cases ${VARIANT:?set VARIANT} | xargs -P ${JOBS:-18} -L 1 bash -c 'one "$@"' _ | grep -v "rc=0"
   summary "v_${VARIANT%% *}_" "w_${VARIANT%% *}.txt"
+  ;;
+f)
+  { echo "f_castle_p30_9v_baseline_s0 baseline castle_p30 9 0"
+    echo "f_castle_p30_9v_full_s2 full castle_p30 9 2 --set full.baseline_fraction=0.3"; } \
+    | xargs -P 2 -L 1 bash -c 'one "$@"' _
+  summary f_ f9.txt
+  for r in "$R"/f_*/; do
+    timeout 200 python3 bench/floaters.py "$r" --device cuda --data-root "$D" --unseen-sweep 0.05,1,5 \
+      --out "$OUT/floaters_$(basename "$r").json" > "$OUT/floaters_$(basename "$r").txt" 2>&1
+    tail -n 30 "$OUT/floaters_$(basename "$r").txt"
+    timeout 120 python3 bench/plant_floaters.py "$r" --device cuda --data-root "$D" \
+      --out "$OUT/plant_$(basename "$r").json" 2>&1 | tail -n 5
+  done
   ;;
 *) echo "unknown phase $P"; exit 2 ;;
 esac
