@@ -1,6 +1,7 @@
 """Which test cameras the path-floater pass (``train.path_floaters``, ``warpgs/clearance.py`` ``PathFloaters``)
 protects: plant an opaque, dark Gaussian on each test camera's optical axis at several distances in front of it,
-in a trained model, and report for each whether the pass finds it with N poses per pair of inputs.
+in a trained model, and report for each whether the pass finds it with N poses per pair of inputs, and whether
+the path clearance (``train.path_clearance``, ``PathClearance``, built as the run's trainer builds it) takes it.
 
     python bench/plant_floaters.py RUN_DIR [--depths 0.3,0.6,1,2] [--poses 3,9,17] [--device cpu]
                                    [--data-root ../shared/data] [--out FILE.json]
@@ -49,7 +50,7 @@ def main(argv=None) -> int:
     from warpgs.configio import read_yaml
     from warpgs.pipelines.sparse import load_scene_for
     from warpgs.strategy import contribution
-    from warpgs.train import load_trained
+    from warpgs.train import Trainer, load_trained
 
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     p.add_argument("run")
@@ -66,6 +67,7 @@ def main(argv=None) -> int:
         cfg.data.root = args.data_root
     cfg.train.device = args.device
     scene = load_scene_for(cfg)
+    clearance = Trainer(cfg, scene).clearance  # the run's initial geometry, bounds and path, as it trained
     model = load_trained(run / "point_cloud.ply", device=args.device)
     train = [c.to_torch(args.device) for c in scene.train]
     test = [c.to_torch(args.device) for c in scene.test]
@@ -83,6 +85,9 @@ def main(argv=None) -> int:
         row = {"depth_m": depth,
                "test_weight_px": {n: round(float(contribution(m, [c])[n0 + i]), 1) for i, (n, c) in enumerate(zip(names, test))},
                "input_weight_px": dict(zip(names, (round(float(x), 1) for x in contribution(m, train)[n0:])))}
+        if clearance is not None:
+            inside = clearance.inside(m.means.detach()[n0:])
+            row["taken_by_path_clearance"] = dict(zip(names, (bool(x) for x in inside)))
         for k in (int(x) for x in args.poses.split(",")):
             pf = PathFloaters.build(viewmats, train[0].K.detach().cpu().numpy(), (train[0].width, train[0].height),
                                     args.ratio, per_pair=k, order=order, device=args.device)
@@ -90,7 +95,9 @@ def main(argv=None) -> int:
             row[f"found_with_{k}_poses"] = dict(zip(names, (bool(x) for x in found)))
         rows.append(row)
         print(json.dumps(row), flush=True)
-    res = {"run": str(run), "gaussians": n0, "order": order, "ratio": args.ratio, "rows": rows}
+    res = {"run": str(run), "gaussians": n0, "order": order, "ratio": args.ratio, "rows": rows,
+           "clearance_radius_m": None if clearance is None else clearance.radius,
+           "clearance_segments_dropped": None if clearance is None else clearance.dropped}
     out = Path(args.out) if args.out else run / "plant_floaters.json"
     out.write_text(json.dumps(res, indent=1))
     print(f"wrote {out}")
