@@ -188,6 +188,9 @@ def test_trainer_fits_the_far_field_on_training_views_only_and_resumes_exactly(t
     second.train()
     assert same_params(param_copy(straight), param_copy(second))
     assert straight.losses == second.losses
+    # the fit's time is one of the run's per-stage timings
+    stages = second.finish()["stage_times_s"]
+    assert second.far_field_time > 0 and stages["far_field_s"] == round(second.far_field_time, 2)
 
 
 def _loo_oracle(views, up, bins, blur):

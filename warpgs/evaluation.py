@@ -90,6 +90,8 @@ def run_metrics(trainer, ev: dict, train_ev: dict, fps: float) -> dict:
         metrics["init"] = geo.summary()
     metrics["stage_times_s"] = {**{f"init_{k}": round(v, 2) for k, v in (geo.times.items() if geo else [])},
                                 "train_s": round(tr.train_time, 2)}
+    if getattr(tr, "far_field_time", None) is not None:
+        metrics["stage_times_s"]["far_field_s"] = round(tr.far_field_time, 2)
     if getattr(tr, "held", None):
         metrics["hold_geometry"] = tr.held
     if tr.stopped_early:

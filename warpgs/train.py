@@ -597,10 +597,14 @@ class Trainer:
         ``train.far_field_proxy``; its choice in one line when something was chosen."""
         tc = self.cfg.train
         points = None if geo is None or not len(geo.xyz) else geo.xyz
+        t0 = time.perf_counter()
         ff = make_far_field(kind, self.train_cams, tc.far_field_bins, self.background, tc.far_field_blur,
                             tc.far_field_proxy, points)
+        took = time.perf_counter() - t0
+        if ff is not None:  # the run's per-stage timings (metrics.json stage_times_s far_field_s)
+            self.far_field_time = getattr(self, "far_field_time", 0.0) + took
         if ff is not None and (tc.far_field_blur == "auto" or ff.proxy):
-            self.log(f"warpgs: {ff.describe()}")
+            self.log(f"warpgs: {ff.describe()} ({took:.1f} s)")
         return ff
 
     def background_for(self, cam) -> torch.Tensor:
