@@ -362,7 +362,7 @@ def test_the_captures_config_asks_for_the_cylinder_and_a_bad_proxy_is_named():
 def test_far_field_images_are_kept_per_camera_and_recomputed_when_it_changes():
     """``FarFieldImages`` (what ``Trainer.background_for`` draws on) returns exactly the far field's image, computes
     it once per camera however often it is asked, recomputes it after the camera's pose or the band colours
-    change in place, and keeps at most ``size`` images."""
+    change in place, keeps at most ``max_bytes`` of images, and keeps nothing for a one-off pose."""
     from types import SimpleNamespace
 
     from warpgs.farfield import FarFieldImages
@@ -376,7 +376,8 @@ def test_far_field_images_are_kept_per_camera_and_recomputed_when_it_changes():
     calls = []
     real = ff.image
     ff.image = lambda *a: calls.append(1) or real(*a)
-    kept = FarFieldImages(size=2)
+    one = 16 * 12 * 3 * 4  # bytes of one float32 image
+    kept = FarFieldImages(max_bytes=2 * one)
     for _ in range(3):
         for cam in cams[:2]:
             assert torch.equal(kept.image(ff, cam), real(cam.viewmat, cam.K, cam.width, cam.height))
@@ -388,4 +389,10 @@ def test_far_field_images_are_kept_per_camera_and_recomputed_when_it_changes():
     assert torch.equal(kept.image(ff, cams[0]), real(cams[0].viewmat, K, 16, 12)) and len(calls) == 4
     kept.image(ff, cams[2])  # a third camera evicts the least recently used (the second)
     kept.image(ff, cams[1])
-    assert len(calls) == 6 and len(kept._kept) == 2
+    assert len(calls) == 6 and len(kept._kept) == 2 and kept.bytes == 2 * one
+    kept.image(ff, cams[2], keep=False)  # kept already: returned without computing
+    assert len(calls) == 6
+    passing = SimpleNamespace(viewmat=cams[0].viewmat.clone(), K=K, width=16, height=12)
+    for _ in range(2):  # a one-off pose: computed each time, and nothing kept or evicted
+        kept.image(ff, passing, keep=False)
+    assert len(calls) == 8 and len(kept._kept) == 2 and kept.bytes == 2 * one

@@ -153,7 +153,7 @@ def write_flythrough(trainer, path: Path, frames_per_segment: int = 24, order: s
             for vm in traj.viewmats:
                 v = torch.as_tensor(vm, dtype=torch.float32, device=trainer.device)
                 view = SimpleNamespace(viewmat=v, K=cam0.K, width=cam0.width, height=cam0.height)
-                img = trainer.model.render(v, cam0.K, cam0.width, cam0.height, background=trainer.background_for(view)).image
+                img = trainer.model.render(v, cam0.K, cam0.width, cam0.height, background=trainer.background_for(view, keep=False)).image
                 frames.append(Image.fromarray((img.clamp(0, 1).cpu().numpy() * 255 + 0.5).astype(np.uint8)))
     path.parent.mkdir(parents=True, exist_ok=True)
     frames[0].save(path, save_all=True, append_images=frames[1:], duration=80, loop=0)

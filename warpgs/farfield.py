@@ -289,19 +289,22 @@ class FarFieldImages:
     """The far field's image of each camera, kept: it depends only on the far field and the camera, and computing
     it (a ray and, with a cylinder, its exit point per pixel in float64) took 19 ms of a 2-core CPU's step at
     384x256, each step. ``image(far_field, cam)`` returns the one kept for the same far field and the same
-    ``cam.viewmat`` / ``cam.K`` tensors and band colours (unchanged since: their version counters) at the same size, else computes
-    and keeps it; at most ``size`` images, the least recently used dropped first. Nothing is kept while a CUDA graph
-    is being captured (its memory belongs to the graph)."""
+    ``cam.viewmat`` / ``cam.K`` tensors and band colours (unchanged since: their version counters) at the same
+    size, else computes it and keeps it (``keep=False``: computes it and keeps nothing, for one-off cameras such as a
+    fly-through's). At most ``max_bytes`` of images are kept (512 MB: 109 images at 768x512, 20 at 1920x1080), the
+    least recently used dropped first. Nothing is kept while a CUDA graph is being captured (its memory belongs to
+    the graph)."""
 
-    def __init__(self, size: int = 128):
-        self.size = int(size)
+    def __init__(self, max_bytes: int = 512 << 20):
+        self.max_bytes = int(max_bytes)
+        self.bytes = 0
         self._kept: OrderedDict = OrderedDict()
 
     @staticmethod
     def _version(t) -> int | None:
         return t._version if isinstance(t, torch.Tensor) else None
 
-    def image(self, far_field, cam) -> torch.Tensor:
+    def image(self, far_field, cam, keep: bool = True) -> torch.Tensor:
         vm, K, colors = cam.viewmat, cam.K, far_field.colors
         key = (id(far_field), id(vm), id(K), int(cam.width), int(cam.height))
         versions = (self._version(vm), self._version(K), id(colors), self._version(colors))
@@ -311,11 +314,17 @@ class FarFieldImages:
             return hit[4]
         img = far_field.image(vm, K, cam.width, cam.height)
         capturing = torch.cuda.is_available() and torch.cuda.is_current_stream_capturing()
-        if self.size > 0 and not capturing and isinstance(vm, torch.Tensor) and isinstance(K, torch.Tensor):
+        size = img.numel() * img.element_size()
+        if (keep and size <= self.max_bytes and not capturing and isinstance(vm, torch.Tensor)
+                and isinstance(K, torch.Tensor)):
+            if hit is not None:  # a stale image of the same key
+                self.bytes -= hit[4].numel() * hit[4].element_size()
             self._kept[key] = (far_field, vm, K, versions, img)
             self._kept.move_to_end(key)
-            while len(self._kept) > self.size:
-                self._kept.popitem(last=False)
+            self.bytes += size
+            while self.bytes > self.max_bytes:
+                old = self._kept.popitem(last=False)[1][4]
+                self.bytes -= old.numel() * old.element_size()
         return img
 
 

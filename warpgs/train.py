@@ -607,12 +607,13 @@ class Trainer:
             self.log(f"warpgs: {ff.describe()} ({took:.1f} s)")
         return ff
 
-    def background_for(self, cam) -> torch.Tensor:
+    def background_for(self, cam, keep: bool = True) -> torch.Tensor:
         """What ``cam`` (anything with viewmat, K, width, height) sees behind the Gaussians: the far field's
-        [H, W, 3] image when ``train.far_field`` is on, else the [3] ``background`` colour."""
+        [H, W, 3] image when ``train.far_field`` is on, else the [3] ``background`` colour. The image is kept
+        for the next render of the same camera (``FarFieldImages``) unless ``keep`` is False (a one-off pose)."""
         if self.far_field is None:
             return self.background
-        return self._far_images.image(self.far_field, cam)
+        return self._far_images.image(self.far_field, cam, keep)
 
     def with_training_background(self, cam, generator: torch.Generator):
         """(camera, background) for one training step: with ``train.random_background`` and an alpha
