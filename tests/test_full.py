@@ -35,6 +35,7 @@ def test_full_method_end_to_end_and_resume(tmp_path, capsys):
     for f in ("report.md", "flythrough.gif", "point_cloud.ply", "config.yaml", "charts/psnr_per_cycle.png",
               "charts/time_per_stage.png", "cycle_1/densified.ply"):
         assert (out / f).is_file(), f
+    assert not list(out.glob("*.tmp"))  # the GIF and metrics.json are written through a rename
     seqs = sorted((out / "cycle_1" / "pseudo").glob("seq_*"))
     assert len(seqs) == 2 and len(list(seqs[0].glob("uncertainty_*.png"))) == 5
     # the viewer reads each cycle's trajectories and densified cloud from these files

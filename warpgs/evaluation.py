@@ -156,8 +156,9 @@ def write_flythrough(trainer, path: Path, frames_per_segment: int = 24, order: s
                 img = trainer.model.render(v, cam0.K, cam0.width, cam0.height, background=trainer.background_for(view, keep=False)).image
                 frames.append(Image.fromarray((img.clamp(0, 1).cpu().numpy() * 255 + 0.5).astype(np.uint8)))
     path.parent.mkdir(parents=True, exist_ok=True)
-    frames[0].save(path, save_all=True, append_images=frames[1:], duration=80, loop=0)
-    return path
+    tmp = path.with_name(path.name + ".tmp")  # through a rename: an interrupted run leaves no half-written GIF
+    frames[0].save(tmp, format="GIF", save_all=True, append_images=frames[1:], duration=80, loop=0)
+    return tmp.replace(path)
 
 
 def write_report(out: Path, metrics: dict, history: list[dict], baseline: dict | None = None) -> Path:
