@@ -14,6 +14,11 @@
 #    from the nearest of the path-floater poses, 3 per pair of inputs, and 4.8 m from the nearest input; the
 #    pass finds a dark sphere planted 0.3-2 m in front of frame 8 with 3 poses already, but not in front of frames 0
 #    and 16, 4-7 m from the path: bench/results/s29/plant_floaters_castle9_cpu.json).
+# b: (for the next session) the captures' 36 runs (both methods, 3/6/9 views, seeds 0-2; prefix b) with the
+#    path-floater pass also on the straight lines between the inputs and 9 poses per pair
+#    (train.path_floaters_paths=both, train.path_floaters_poses=9): on the CPU model above that finds the dark
+#    spheres in front of frame 16 (0.6-2 m) and frame 24 that the default misses. Resumable: a second call
+#    finishes what the first could not (36 runs with 18 full ones took two calls this session).
 set -u
 source "$(dirname "${BASH_SOURCE[0]}")/gpu_one.sh"
 session_env "$@"; P=$1; D=$2; R=$3; shift 3
@@ -47,6 +52,12 @@ f)
     timeout 120 python3 bench/plant_floaters.py "$r" --device cuda --data-root "$D" \
       --out "$OUT/plant_$(basename "$r").json" 2>&1 | tail -n 5
   done
+  ;;
+b)
+  { for c in castle_p30 herz_jesus_p25; do for v in 3 6 9; do for m in baseline full; do for s in 0 1 2; do
+      echo "b_${c}_${v}v_${m}_s$s $m $c $v $s --set train.path_floaters_paths=both --set train.path_floaters_poses=9"
+    done; done; done; done; } | xargs -P ${JOBS:-36} -L 1 bash -c 'one "$@"' _ | grep -v "rc=0"
+  summary b_ b369.txt
   ;;
 *) echo "unknown phase $P"; exit 2 ;;
 esac

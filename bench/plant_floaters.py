@@ -1,6 +1,7 @@
 """Which test cameras the path-floater pass (``train.path_floaters``, ``warpgs/clearance.py`` ``PathFloaters``)
 protects: plant an opaque, dark Gaussian on each test camera's optical axis at several distances in front of it,
-in a trained model, and report for each whether the pass finds it with N poses per pair of inputs, and whether
+in a trained model, and report for each whether the pass finds it with N poses per pair of inputs (on the pseudo
+views' spline, and on it and the straight line between the inputs: ``train.path_floaters_paths``), and whether
 the path clearance (``train.path_clearance``, ``PathClearance``, built as the run's trainer builds it) takes it.
 
     python bench/plant_floaters.py RUN_DIR [--depths 0.3,0.6,1,2] [--poses 3,9,17] [--device cpu]
@@ -88,11 +89,13 @@ def main(argv=None) -> int:
         if clearance is not None:
             inside = clearance.inside(m.means.detach()[n0:])
             row["taken_by_path_clearance"] = dict(zip(names, (bool(x) for x in inside)))
-        for k in (int(x) for x in args.poses.split(",")):
-            pf = PathFloaters.build(viewmats, train[0].K.detach().cpu().numpy(), (train[0].width, train[0].height),
-                                    args.ratio, per_pair=k, order=order, device=args.device)
-            found = pf.find(m, train)[n0:]
-            row[f"found_with_{k}_poses"] = dict(zip(names, (bool(x) for x in found)))
+        for paths in ("spline", "both"):
+            for k in (int(x) for x in args.poses.split(",")):
+                pf = PathFloaters.build(viewmats, train[0].K.detach().cpu().numpy(), (train[0].width, train[0].height),
+                                        args.ratio, per_pair=k, order=order, device=args.device, paths=paths)
+                found = pf.find(m, train)[n0:]
+                key = f"found_with_{k}_poses" + ("" if paths == "spline" else "_on_both_paths")
+                row[key] = dict(zip(names, (bool(x) for x in found)))
         rows.append(row)
         print(json.dumps(row), flush=True)
     res = {"run": str(run), "gaussians": n0, "order": order, "ratio": args.ratio, "rows": rows,

@@ -136,6 +136,37 @@ def test_path_floaters_are_what_a_pose_of_the_path_sees_and_no_input_does():
     assert not finder.find(model, inputs2).any()
 
 
+def test_path_floaters_on_both_paths_find_what_stands_before_the_line_where_the_spline_bulges():
+    """Inputs at (0, 0, -2), (1, 0, 0), (9, 0, 0), (10, 0, -2) look at a wall at z = 10. Across the 8 m gap between
+    the middle two, the pseudo views' spline bulges 1.5 m towards the wall, past a small Gaussian 0.8 m in front of
+    the straight line's midpoint. The spline's poses (``paths="spline"``) have it behind them; the line's poses
+    (``"both"``) see it straight ahead. No input sees it, and the wall is found by neither. A bad value is named."""
+    from types import SimpleNamespace
+
+    from warpgs.clearance import PathFloaters
+    from warpgs.geometry import camera_centres
+    from warpgs.pseudo.trajectory import path_trajectories
+
+    centres = [(0.0, 0.0, -2.0), (1.0, 0.0, 0.0), (9.0, 0.0, 0.0), (10.0, 0.0, -2.0)]
+    V = np.stack([look_at_viewmat(c, (c[0], c[1], c[2] + 10.0)) for c in centres])
+    mid_spline = camera_centres(path_trajectories(V, 5, "capture")[1].viewmats)[2]
+    mid_line = camera_centres(path_trajectories(V, 5, "capture", centres="line")[1].viewmats)[2]
+    assert np.allclose(mid_line, (5.0, 0.0, 0.0), atol=1e-6) and mid_spline[2] > 1.2  # the bulge
+    K = np.array([[50.0, 0, 25], [0, 50.0, 20], [0, 0, 1]], np.float32)
+    wall = [(x, y, 10.0) for x in np.arange(-4.0, 16.5, 1.0) for y in np.arange(-4.0, 4.5, 1.0)]
+    model = _model(wall + [(5.0, 0.0, 0.8)], scale=0.4)
+    with torch.no_grad():
+        model.params["scales"][len(wall)] = float(np.log(0.1))
+    inputs = [SimpleNamespace(viewmat=torch.as_tensor(v), K=torch.as_tensor(K), width=50, height=40) for v in V]
+    spline = PathFloaters.build(V, K, (50, 40), ratio=10.0, per_pair=3, order="capture")
+    both = PathFloaters.build(V, K, (50, 40), ratio=10.0, per_pair=3, order="capture", paths="both")
+    assert len(spline.poses) == 3 * 3 and len(both.poses) == 2 * 3 * 3
+    assert spline.find(model, inputs).tolist() == [False] * (len(wall) + 1)
+    assert both.find(model, inputs).tolist() == [False] * len(wall) + [True]
+    with pytest.raises(ValueError, match="path_floaters_paths"):
+        PathFloaters.build(V, K, (50, 40), ratio=10.0, paths="curve")
+
+
 @pytest.mark.skipif("cpu" not in DEVICES, reason="trains on the CPU (the GPU machine's packed Warp has no CPU compiler)")
 def test_trainer_removes_the_path_floaters_on_its_schedule(tmp_path):
     from tiny_scene import make_scene, tiny_config

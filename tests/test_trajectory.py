@@ -114,6 +114,17 @@ def test_path_trajectories_ends_rotations_and_spline():
         assert np.allclose(R.transpose(0, 2, 1), ref(s).as_matrix(), atol=1e-9)
 
 
+def test_line_centres_are_straight_between_the_neighbours_with_the_same_rotations():
+    rng = np.random.default_rng(5)
+    V = _random_poses(5, rng)
+    for t_line, t_spline in zip(path_trajectories(V, 7, "capture", centres="line"), path_trajectories(V, 7, "capture")):
+        a, b = camera_centres(V[[t_line.start]])[0], camera_centres(V[[t_line.end]])[0]
+        assert np.allclose(t_line.centers, a + np.linspace(0, 1, 7)[:, None] * (b - a), atol=1e-9)
+        assert np.allclose(t_line.viewmats[:, :3, :3], t_spline.viewmats[:, :3, :3], atol=1e-12)
+    with pytest.raises(ValueError, match="spline or line"):
+        path_trajectories(V, 5, "capture", centres="arc")
+
+
 def test_collinear_equally_spaced_inputs_give_a_straight_uniform_path():
     V = np.stack([pose(np.eye(3), [x, 0.0, 0.0]) for x in (0.0, 2.0, 1.0, 3.0)])
     trajs = path_trajectories(V, n_frames=5)

@@ -124,16 +124,21 @@ class PathFloaters:
 
     @classmethod
     def build(cls, viewmats, K, size, ratio: float, per_pair: int = 3, order="nearest", device="cpu",
-              min_share: float = 1e-3) -> "PathFloaters":
+              min_share: float = 1e-3, paths: str = "spline") -> "PathFloaters":
         """``per_pair`` poses strictly between each pair of neighbouring inputs (world-to-camera [N, 4, 4], in
-        ``order`` as the pseudo views' trajectories), seen with the inputs' ``K`` [3, 3] and ``size`` (W, H)."""
+        ``order`` as the pseudo views' trajectories), seen with the inputs' ``K`` [3, 3] and ``size`` (W, H).
+        ``paths``: ``"spline"``, the pseudo views' path; ``"both"``, also as many poses on the straight line
+        between each pair (the walk between two far-apart inputs can lie nearer the line than the spline)."""
         from warpgs.pseudo.trajectory import path_trajectories
 
+        if paths not in ("spline", "both"):
+            raise ValueError(f"train.path_floaters_paths must be spline or both, got {paths!r}")
         V = np.asarray(viewmats if not torch.is_tensor(viewmats) else viewmats.detach().cpu().numpy(), np.float64)
         poses = []
         if len(V) >= 2 and per_pair > 0:
-            for traj in path_trajectories(V, per_pair + 2, order):
-                poses += [np.asarray(m, np.float64) for m in traj.viewmats[1:-1]]
+            for centres in ("spline", "line") if paths == "both" else ("spline",):
+                for traj in path_trajectories(V, per_pair + 2, order, centres=centres):
+                    poses += [np.asarray(m, np.float64) for m in traj.viewmats[1:-1]]
         P = torch.tensor(np.array(poses).reshape(-1, 4, 4), dtype=torch.float32, device=device)
         return cls(P, torch.as_tensor(np.asarray(K, np.float32), device=device), size, ratio, min_share)
 

@@ -140,6 +140,9 @@ class TrainConfig:
     path_floaters_every: int = 500
     path_floaters_final: bool = True  # also the pass before the final evaluation (no training after it)
     path_floaters_poses: int = 3  # poses of the path between each pair of neighbouring inputs
+    path_floaters_paths: str = "spline"  # spline: those poses on the pseudo views' path | both: also as many on the
+    #   straight line between the two inputs (bench/plant_floaters.py: castle_p30 9 views' test frame 16 stands
+    #   1.5 m from that line and 4.4 m from the spline, which bulges across the 22.6 m gap between its inputs)
     alpha_binary: float = 0.0  # weight of mean(alpha (1 - alpha)) over each input render: every pixel either
     #   covered by Gaussians or showing what is behind them (with a far field, no translucent cover that a novel
     #   view sees at another angle); 0: off
@@ -202,7 +205,7 @@ class TrainConfig:
               "explode_factor": ">= 0", "explode_window": ">= 1", "explode_patience": ">= 1", "snapshot_every": ">= 0",
               "max_recoveries": ">= 0", "recovery_lr_factor": "(0, 1]", "cpu_threads": ">= 0", "sync_every": ">= 1",
               "far_field": FAR_FIELD_RULE, "hold_geometry": "{off, on, stereo}", "hold_means_lr": "> 0",
-              "hold_scales_lr": "> 0", "hold_quats_lr": "> 0", "far_field_bins": ">= 1", "far_field_blur": ">= 0 or {auto}", "far_field_proxy": "{none, auto}", "alpha_binary": ">= 0", "path_clearance": ">= 0", "view_clearance": ">= 0", "path_floaters": ">= 0", "path_floaters_every": ">= 1", "path_floaters_poses": ">= 1", "co_prune_every": ">= 0", "co_prune_dist": "> 0",
+              "hold_scales_lr": "> 0", "hold_quats_lr": "> 0", "far_field_bins": ">= 1", "far_field_blur": ">= 0 or {auto}", "far_field_proxy": "{none, auto}", "alpha_binary": ">= 0", "path_clearance": ">= 0", "view_clearance": ">= 0", "path_floaters": ">= 0", "path_floaters_every": ">= 1", "path_floaters_poses": ">= 1", "path_floaters_paths": "{spline, both}", "co_prune_every": ">= 0", "co_prune_dist": "> 0",
               "co_reg_weight": ">= 0", "co_reg_start": ">= 0", "co_reg_frames": ">= 1"}
 
 

@@ -460,7 +460,8 @@ class Trainer:
             c0 = scene.train[0]
             self.floaters = PathFloaters.build(
                 np.stack([c.viewmat for c in scene.train]), c0.K, (c0.width, c0.height), cfg.train.path_floaters,
-                per_pair=cfg.train.path_floaters_poses, order=cfg.pseudo.trajectory.order, device=self.device)
+                per_pair=cfg.train.path_floaters_poses, order=cfg.pseudo.trajectory.order, device=self.device,
+                paths=cfg.train.path_floaters_paths)
         self.view_rng = np.random.default_rng(seed + 2)
         self.order: list[int] = []
         self.optimizer = make_optimizer(self.model, cfg, self.scene_scale)

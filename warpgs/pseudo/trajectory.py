@@ -126,11 +126,14 @@ def chord_knots(centers: np.ndarray) -> np.ndarray:
     return np.concatenate([[0.0], np.cumsum(d)])
 
 
-def path_trajectories(viewmats: np.ndarray, n_frames: int, order: list[int] | str | None = None) -> list[Trajectory]:
+def path_trajectories(viewmats: np.ndarray, n_frames: int, order: list[int] | str | None = None,
+                      centres: str = "spline") -> list[Trajectory]:
     """One trajectory of ``n_frames`` poses between each pair of neighbours along the path.
 
     ``order``: a list of indices, ``"capture"`` (the order given), or ``"nearest"`` / None (the
-    ``nearest_neighbour_path`` of the camera centres); Trajectory.start/end index ``viewmats``."""
+    ``nearest_neighbour_path`` of the camera centres); Trajectory.start/end index ``viewmats``.
+    ``centres``: ``"spline"`` (the natural cubic spline through all centres, chord-length knots) or ``"line"``
+    (straight between the two neighbours); the rotations are slerped either way."""
     V = np.asarray(viewmats, np.float64).reshape(-1, 4, 4)
     if n_frames < 2:
         raise ValueError(f"a trajectory needs at least 2 frames, got {n_frames}")
@@ -142,6 +145,8 @@ def path_trajectories(viewmats: np.ndarray, n_frames: int, order: list[int] | st
         order = list(range(len(V)))
     elif isinstance(order, str):
         raise ValueError(f"trajectory order must be capture, nearest or a list of indices, got {order!r}")
+    if centres not in ("spline", "line"):
+        raise ValueError(f"trajectory centres must be spline or line, got {centres!r}")
     order = list(order)
     C = camera_centres(V[order])
     knots = chord_knots(C)
@@ -150,8 +155,11 @@ def path_trajectories(viewmats: np.ndarray, n_frames: int, order: list[int] | st
     s = np.linspace(0.0, 1.0, n_frames)
     out = []
     for seg in range(len(order) - 1):
-        centres = spline(knots[seg] + s * (knots[seg + 1] - knots[seg]))
-        mats = np.stack([pose(quat_to_rotmat(slerp(quats[seg], quats[seg + 1], si)), c) for si, c in zip(s, centres)])
+        if centres == "line":
+            cs = C[seg] + s[:, None] * (C[seg + 1] - C[seg])
+        else:
+            cs = spline(knots[seg] + s * (knots[seg + 1] - knots[seg]))
+        mats = np.stack([pose(quat_to_rotmat(slerp(quats[seg], quats[seg + 1], si)), c) for si, c in zip(s, cs)])
         mats[0], mats[-1] = V[order[seg]], V[order[seg + 1]]  # the ends are the inputs, exactly
         out.append(Trajectory(order[seg], order[seg + 1], mats))
     return out
