@@ -6,17 +6,14 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import torch
 
+from warpgs.clearance import segment_distance
 from warpgs.geometry import camera_centres
 from warpgs.pseudo.trajectory import path_trajectories
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))
 from path_fit import KINDS, dense_path  # noqa: E402
-
-
-def _seg_dist(p, a, b):
-    t = np.clip(((p - a) @ (b - a)) / ((b - a) @ (b - a)), 0, 1)
-    return np.linalg.norm(p - (a + t * (b - a)))
 
 
 @pytest.mark.parametrize("kind", KINDS)
@@ -28,7 +25,8 @@ def test_each_path_passes_through_the_centres_and_is_straight_on_a_line(kind):
         assert np.linalg.norm(D - c, axis=1).min() < 1e-9
     L = np.outer(np.cumsum([0.0, 1.0, 4.0, 0.5, 2.0]), [1.0, 2.0, -1.0])  # collinear, uneven
     D = dense_path(L, kind, n=50)
-    assert max(_seg_dist(p, L[0], L[-1]) for p in D) < 1e-9
+    d = segment_distance(torch.as_tensor(D), torch.as_tensor(L[:1]), torch.as_tensor(L[-1:]))
+    assert float(d.max()) < 1e-9
 
 
 def test_the_natural_spline_is_the_trajectories_path():

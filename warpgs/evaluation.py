@@ -153,7 +153,8 @@ def write_flythrough(trainer, path: Path, frames_per_segment: int = 24, order: s
             for vm in traj.viewmats:
                 v = torch.as_tensor(vm, dtype=torch.float32, device=trainer.device)
                 view = SimpleNamespace(viewmat=v, K=cam0.K, width=cam0.width, height=cam0.height)
-                img = trainer.model.render(v, cam0.K, cam0.width, cam0.height, background=trainer.background_for(view, keep=False)).image
+                bg = trainer.background_for(view, keep=False)  # a one-off pose: nothing kept
+                img = trainer.model.render(v, cam0.K, cam0.width, cam0.height, background=bg).image
                 frames.append(Image.fromarray((img.clamp(0, 1).cpu().numpy() * 255 + 0.5).astype(np.uint8)))
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(path.name + ".tmp")  # through a rename: an interrupted run leaves no half-written GIF

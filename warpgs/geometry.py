@@ -1,6 +1,6 @@
 """Pose helpers shared by every part (numpy, float64): camera centres, quaternions (w, x, y, z), slerp,
-axis-angle rotations, poses from a rotation and a centre, and the inverse of small torch matrices. Poses are world-to-camera 4x4 matrices in
-OpenCV axes (``warpgs/__init__.py``)."""
+axis-angle rotations, poses from a rotation and a centre; and the inverse of small torch matrices (``small_inv``).
+Poses are world-to-camera 4x4 matrices in OpenCV axes (``warpgs/__init__.py``)."""
 
 from __future__ import annotations
 
@@ -89,9 +89,6 @@ def pose(R_c2w: np.ndarray, center: np.ndarray) -> np.ndarray:
     return V
 
 
-__all__ = ["as_viewmats", "axis_angle_to_rotmat", "camera_centres", "pose", "quat_to_rotmat", "rotmat_to_quat", "slerp"]
-
-
 def small_inv(m):
     """``torch.linalg.inv`` of small matrices (cameras' 3x3 / 4x4, batched or not) computed on the CPU and returned
     on ``m``'s device in ``m``'s dtype: on CUDA it needs a cuSOLVER handle, whose creation failed in a GPU shared
@@ -99,3 +96,7 @@ def small_inv(m):
     import torch
 
     return torch.linalg.inv(m.cpu()).to(m.device)
+
+
+__all__ = ["as_viewmats", "axis_angle_to_rotmat", "camera_centres", "pose", "quat_to_rotmat", "rotmat_to_quat", "slerp", "small_inv"]
+
