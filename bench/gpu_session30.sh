@@ -1,0 +1,33 @@
+#!/usr/bin/env bash
+# GPU runs of session 30 (issue 13: the full method's gain over the baseline on the captures), after the packed
+# wheels are installed in /tmp/site and the scenes copied to $D.
+#   T=seconds bash bench/gpu_session30.sh PHASE D RUNS
+# b: the captures' 36 runs (both methods, 3/6/9 views, seeds 0-2; prefix b) with the path-floater pass also on the
+#    straight lines between the inputs and 9 poses per pair (train.path_floaters_paths=both,
+#    train.path_floaters_poses=9), prepared in session 29 (bench/gpu_session29.sh b), plus the full method at 3
+#    views (where it gains least: +0.26 castle, +0.05 herz) with 17 poses per trajectory instead of 9
+#    (pseudo.trajectory.n_frames=17; prefix x_n17) and the pseudo views' loss x2 (full.pseudo_weight=2; prefix
+#    x_pw2; session 29 measured x0.5: +0.37 dB against +0.40). Resumable: a second call finishes what the first
+#    could not.
+# f: session 29's phase f (the collapsed castle_p30 9-view runs re-run and diagnosed), bench/gpu_session29.sh f.
+set -u
+source "$(dirname "${BASH_SOURCE[0]}")/gpu_one.sh"
+session_env "$@"; P=$1; D=$2; R=$3; shift 3
+export R D T
+case $P in
+b)
+  { for c in castle_p30 herz_jesus_p25; do for v in 3 6 9; do for m in baseline full; do for s in 0 1 2; do
+      echo "b_${c}_${v}v_${m}_s$s $m $c $v $s --set train.path_floaters_paths=both --set train.path_floaters_poses=9"
+    done; done; done; done
+    for c in castle_p30 herz_jesus_p25; do for s in 0 1 2; do
+      echo "x_n17_${c}_3v_full_s$s full $c 3 $s --set pseudo.trajectory.n_frames=17"
+      echo "x_pw2_${c}_3v_full_s$s full $c 3 $s --set full.pseudo_weight=2"
+    done; done; } | xargs -P ${JOBS:-48} -L 1 bash -c 'one "$@"' _ | grep -v "rc=0"
+  summary b_ b369.txt
+  summary x_ x3.txt
+  ;;
+f)
+  bash "$(dirname "${BASH_SOURCE[0]}")/gpu_session29.sh" f "$D" "$R"
+  ;;
+*) echo "unknown phase $P"; exit 2 ;;
+esac
