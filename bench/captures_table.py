@@ -31,7 +31,11 @@ median).
   option touches only the full method); then ``pseudo_mask=all`` as a variant against the cylinder's runs;
 - session 29 (``bench/gpu_session29.sh``): the full method's variants ``full.cycles=3`` and
   ``full.baseline_fraction=0.3`` (``s29/v369.txt``, ``v_c3_...`` / ``v_bf03_...``) and ``full.pseudo_weight=0.5``
-  (``s29/w_pw05.txt``, ``v_pw05_...``) against session 28's default.
+  (``s29/w_pw05.txt``, ``v_pw05_...``) against session 28's default;
+- session 30 (``bench/gpu_session30.sh``): session 28's default beside the path-floater pass on both paths with 9
+  poses (``train.path_floaters_paths=both``, ``train.path_floaters_poses=9``; ``s30/b369.txt``, both methods), then
+  the full method's 3-view variants ``pseudo.trajectory.n_frames=17`` and ``full.pseudo_weight=2``
+  (``s30/x3.txt``, ``x_n17_...`` / ``x_pw2_...``) against session 28's default.
 """
 
 from __future__ import annotations
@@ -136,7 +140,7 @@ def merged(*parts: dict) -> dict:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--results", default=str(Path(__file__).resolve().parent / "results"))
-    ap.add_argument("--session", type=int, choices=(20, 21, 22, 26, 27, 28, 29), default=21)
+    ap.add_argument("--session", type=int, choices=(20, 21, 22, 26, 27, 28, 29, 30), default=21)
     args = ap.parse_args(argv)
     r20, r21 = Path(args.results) / "s20", Path(args.results) / "s21"
     s20 = ("session 20 default", load(r20 / "captures_d.txt", "d"))
@@ -159,11 +163,19 @@ def main(argv=None) -> int:
         rel = merged(load(r26 / "r3.txt", "r"), load(r26 / "r69.txt", "r"))
         print("\n".join(variant_table(s26, {"pseudo_mask=reliable": rel}, "default (session 26)")))
         return 0
-    if args.session in (28, 29):
+    if args.session in (28, 29, 30):
         r27, r28 = Path(args.results) / "s27", Path(args.results) / "s28"
         cyl = load(r28 / "c369.txt", "c")
         mask_all = load(r28 / "m369.txt", "m")
         default = merged({k: v for k, v in cyl.items() if k[2] == "baseline"}, mask_all)
+        if args.session == 30:
+            r30 = Path(args.results) / "s30"
+            print("\n".join(table([("session 28 default", default), ("both paths, 9 poses", load(r30 / "b369.txt", "b"))])))
+            print()
+            names = {"n17": "n_frames=17", "pw2": "pseudo_weight=2"}
+            variants = load_variants(r30 / "x3.txt", "x")
+            print("\n".join(variant_table(default, {names[k]: v for k, v in variants.items()}, "default (session 28)")))
+            return 0
         if args.session == 29:
             r29 = Path(args.results) / "s29"
             variants = merged(load_variants(r29 / "v369.txt", "v"), load_variants(r29 / "w_pw05.txt", "v"))

@@ -8,7 +8,12 @@
 #    views (where it gains least: +0.26 castle, +0.05 herz) with 17 poses per trajectory instead of 9
 #    (pseudo.trajectory.n_frames=17; prefix x_n17) and the pseudo views' loss x2 (full.pseudo_weight=2; prefix
 #    x_pw2; session 29 measured x0.5: +0.37 dB against +0.40). Resumable: a second call finishes what the first
-#    could not.
+#    could not. Run (one H100): the 48 processes together ran out of GPU memory in 4 runs (their metrics.json said
+#    stopped_early out_of_memory at the last good step); those were moved aside and resumed from their checkpoints.
+# i: the 12 images_4 runs (768x512, 10,000 it, seed 0, both methods, 3/6/9 views; prefix i) with the captures'
+#    default after b (the path-floater pass on both paths, 9 poses): every run completes and writes its metrics, none
+#    stops on a divergence (issue 13's first acceptance point; session 28: bench/results/s28/i369.txt). Resumed from
+#    the checkpoints by a second call.
 # f: session 29's phase f (the collapsed castle_p30 9-view runs re-run and diagnosed), bench/gpu_session29.sh f.
 set -u
 source "$(dirname "${BASH_SOURCE[0]}")/gpu_one.sh"
@@ -25,6 +30,13 @@ b)
     done; done; } | xargs -P ${JOBS:-48} -L 1 bash -c 'one "$@"' _ | grep -v "rc=0"
   summary b_ b369.txt
   summary x_ x3.txt
+  ;;
+i)
+  { for c in castle_p30 herz_jesus_p25; do for v in 3 6 9; do for m in baseline full; do
+      echo "i_${c}_${v}v_${m}_s0 $m $c $v 0"
+    done; done; done; } | DS=4 IT=10000 xargs -P ${JOBS:-12} -L 1 bash -c 'one "$@"' _
+  summary i_ i369.txt
+  grep -l "TrainingDiverged\|diverged\|out_of_memory" "$R"/i_*.log "$R"/i_*/metrics.json 2>/dev/null | tee "$OUT/i369_stopped.txt"
   ;;
 f)
   bash "$(dirname "${BASH_SOURCE[0]}")/gpu_session29.sh" f "$D" "$R"
