@@ -108,7 +108,7 @@ def diagnose(run: Path, device: str, data_root: str | None, ratio: float, min_in
                          "rgb": [round(float(x), 3) for x in rgb[i]]})
     for v in views:
         v.pop("_w", None)
-    depths_in = [float((c.viewmat[:3, :3] @ model.means.T + c.viewmat[:3, 3:]).T[:, 2].median()) for c in train]
+    depths_in = [float((c.viewmat[:3, :3] @ model.means.detach().T + c.viewmat[:3, 3:]).T[:, 2].median()) for c in train]
     # where they lie against the camera path of train.path_clearance, in metres and in near depths (the run's
     # measured bounds when metrics.json has them: the loader's are not what the clearance used)
     metrics = json.loads((run / "metrics.json").read_text()) if (run / "metrics.json").is_file() else {}

@@ -14,6 +14,9 @@
 #    default after b (the path-floater pass on both paths, 9 poses): every run completes and writes its metrics, none
 #    stops on a divergence (issue 13's first acceptance point; session 28: bench/results/s28/i369.txt). Resumed from
 #    the checkpoints by a second call.
+# r: (issue 15, with the device time left) bench/rasterizer.py against gsplat 1.5.3 (.device/gsplat) on the issue's three
+#    configurations and the first again, then bench/train_speed.py on fern 3 views, 3000 it, DropGaussian 0.2 (the
+#    trainer against the gsplat loop), as sessions 20 and 24 ran them.
 # f: session 29's phase f (the collapsed castle_p30 9-view runs re-run and diagnosed), bench/gpu_session29.sh f.
 set -u
 source "$(dirname "${BASH_SOURCE[0]}")/gpu_one.sh"
@@ -37,6 +40,14 @@ i)
     done; done; done; } | DS=4 IT=10000 xargs -P ${JOBS:-12} -L 1 bash -c 'one "$@"' _
   summary i_ i369.txt
   grep -l "TrainingDiverged\|diverged\|out_of_memory" "$R"/i_*.log "$R"/i_*/metrics.json 2>/dev/null | tee "$OUT/i369_stopped.txt"
+  ;;
+r)
+  python3 -m pip install -q --no-index --no-deps --target /tmp/site .device/gsplat/*.whl 2>/dev/null
+  timeout ${T:-240} python3 bench/rasterizer.py --warmup 10 --iters 20 --rounds ${ROUNDS:-7} --out "$OUT/rasterizer_cuda.json" \
+    --configs 138766x648x420,555000x1280x720,1100000x1920x1080,138766x648x420 2>&1 | tee "$OUT/rasterizer.log" \
+    | grep -E "Gaussians|ratio|paired|wrote"
+  timeout ${T:-240} python3 bench/train_speed.py --data-root "$D" --out "$OUT/train_speed_cuda.json" --set model.init=frustum \
+    --set train.drop_rate=0.2 2>&1 | grep -v "^Module\|^Warp" | tee "$OUT/train_speed.log" | tail -12
   ;;
 f)
   bash "$(dirname "${BASH_SOURCE[0]}")/gpu_session29.sh" f "$D" "$R"
