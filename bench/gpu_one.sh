@@ -1,12 +1,13 @@
 #!/usr/bin/env bash
 # Sourced by the GPU session scripts (bench/gpu_session14.sh to gpu_session21.sh).
 # sparse_run NAME [python -m warpgs.pipelines.sparse arguments ...]: one run on the GPU into $R/NAME (log: $R/NAME.log),
-# on the scenes under $D; skipped when NAME has its metrics, resumed when it has started (a run stopped before its
+# on the scenes under $D; skipped when NAME has its metrics (not those of a stop on out of memory), resumed when it has started (a run stopped before its
 # first checkpoint resumes from the start); stopped at the deadline $END (epoch seconds), or after ${T:-540} s
 # without one. Prints NAME, the exit code and the run's last test PSNR line.
 sparse_run() {
   local name=$1; shift
-  [ -f "$R/$name/metrics.json" ] && return 0
+  # finished, unless it stopped on a GPU out of memory (runs sharing the GPU): that one is resumed
+  [ -f "$R/$name/metrics.json" ] && ! grep -q '"out_of_memory"' "$R/$name/metrics.json" && return 0
   local resume=(); [ -f "$R/$name/config.yaml" ] && resume=(--resume)
   local t=${T:-540}; [ -n "${END:-}" ] && t=$((END - $(date +%s)))
   [ "$t" -lt 20 ] && { echo "$name: no time left in this call"; return 0; }

@@ -92,17 +92,23 @@ def test_batch_with_killed_runs_and_a_bad_scene(tmp_path):
     ref = subprocess.Popen([sys.executable, "-m", "warpgs.pipelines.sparse", "--data", str(data), "--views", "3",
                             "--method", "baseline", "--seed", "0", *TINY, "--no-progress", "--out", str(tmp_path / "ref")],
                            cwd=REPO, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
-    killed, worker = "ring_a_3v_baseline_s0", "ring_a_3v_baseline_s1"
+    killed = "ring_a_3v_baseline_s0"
+    others = ("ring_a_3v_baseline_s1", "ring_b_3v_baseline_s0", "ring_b_3v_baseline_s1")
+
+    def under_way():  # another run with a checkpoint, not finished yet (the first one may finish while we wait)
+        return next((n for n in others if (runs / n / "checkpoint.pt").exists() and (logs / f"{n}.attempts.jsonl").exists()
+                     and not (runs / n / "metrics.json").exists()), None)
     try:
         # a checkpoint written, the run still going: SIGKILL to the run's process (the pid in its folder's lock) ...
         _wait_for(lambda: (runs / killed / "checkpoint.pt").exists() and (runs / killed / LOCK).exists(), driver)
         pid = read_lock(runs / killed)["pid"]
         assert not (runs / killed / "metrics.json").exists()
         os.kill(pid, signal.SIGKILL)
-        # ... and to the Ray worker of another run (its run dies with it)
-        _wait_for(lambda: (runs / worker / "checkpoint.pt").exists(), driver)
+        # ... and to the Ray worker of another run under way (its run dies with it)
+        seen = []
+        _wait_for(lambda: seen.append(under_way()) or seen[-1] is not None, driver)
+        worker = seen[-1]
         worker_pid = batch.read_attempts(logs / f"{worker}.attempts.jsonl")[-1]["worker_pid"]
-        assert not (runs / worker / "metrics.json").exists()
         os.kill(worker_pid, signal.SIGKILL)
         stdout, stderr = driver.communicate(timeout=240)
     finally:
@@ -164,3 +170,44 @@ def test_batch_with_killed_runs_and_a_bad_scene(tmp_path):
     with pytest.raises(batch.BatchError, match=f"run {specs[0].name} was made with other settings .*--overwrite"):
         batch.run_on_ray(specs, runs, logs, log=lambda msg: None)
     print(f"batch test: {took:.0f} s")
+
+
+def test_a_run_stopped_on_out_of_memory_is_resumed_not_kept(tmp_path, capsys, monkeypatch):
+    """A run that stopped itself on a GPU out of memory (runs sharing the GPU; session 30: 4 of 48 capture runs)
+    writes the last good state's metrics with ``stopped_early: out_of_memory``. The batch does not take that for
+    a finished run: it resumes it, and the resumed run finishes all its steps. A diverged run's metrics stay final."""
+    import torch
+
+    from warpgs.pipelines.sparse import main
+    from warpgs.train import Trainer
+
+    real = Trainer.compute_loss
+
+    def oom_from_step_12(self, out, cam):
+        if self.step >= 12:
+            raise torch.OutOfMemoryError("CUDA out of memory. Tried to allocate 28.00 MiB.")
+        return real(self, out, cam)
+
+    data = write_nerfstudio(tmp_path / "scene")
+    out, logs = tmp_path / "runs" / "r", tmp_path / "logs"
+    argv = ["--data", str(data), "--views", "3", "--method", "baseline", *TINY[:-4], "--iterations", "30",
+            "--device", "cpu"]
+    with monkeypatch.context() as mp:
+        mp.setattr(Trainer, "compute_loss", oom_from_step_12)
+        assert main([*argv, "--no-progress", "--out", str(out)]) == 1
+    capsys.readouterr()
+    stopped = json.loads((out / "metrics.json").read_text())
+    assert stopped["stopped_early"]["reason"] == "out_of_memory" and stopped["iterations"] < 30
+    assert batch.stopped_out_of_memory(stopped) and batch.metrics_complete(out, "baseline") is None
+    diverged = {**stopped, "stopped_early": {"reason": "diverged", "step": 12, "cause": "loss"}}
+    assert not batch.stopped_out_of_memory(diverged)
+
+    rec = batch.execute_run({"name": "r", "method": "baseline", "argv": argv, "num_cpus": 1}, str(out), str(logs), "b1")
+    assert rec["status"] == "finished" and not rec["reused"]
+    assert [a["resume"] for a in rec["attempts"]] == [True]  # resumed in place, not started over elsewhere
+    m = json.loads((out / "metrics.json").read_text())
+    assert m["iterations"] == 30 and "stopped_early" not in m
+    assert batch.metrics_complete(out, "baseline") == m
+    # the batch again: now it is finished and reused as it is
+    again = batch.execute_run({"name": "r", "method": "baseline", "argv": argv, "num_cpus": 1}, str(out), str(logs), "b2")
+    assert again["status"] == "finished" and again["reused"]

@@ -16,10 +16,13 @@ Faults (issue 17):
 
 - a run whose process dies (killed, out of memory: host or GPU) or whose Ray worker dies is retried, at most
   ``--max-retries`` times, and the retry continues from the run's last checkpoint (``--resume``); every
-  attempt is recorded in ``OUT/logs/<name>.attempts.jsonl`` and in the results;
+  attempt is recorded in ``OUT/logs/<name>.attempts.jsonl`` and in the results. So is a run that stopped
+  itself on a GPU out of memory (its metrics.json with ``stopped_early: out_of_memory``, the last good
+  state's): runs sharing a GPU cause that, and it passes;
 - a run that stops with a clear error (exit code 2, ``error: ...``: a bad scene, bad settings) is reported
   with that line and not retried; the other runs go on;
-- running the same command again skips every run whose ``metrics.json`` is complete and resumes the others.
+- running the same command again skips every run whose ``metrics.json`` is complete (not stopped on out of
+  memory) and resumes the others.
 
 Resources: a run asks Ray for ``--cpus-per-run`` CPUs (1) and, on CUDA, for a share of a GPU, so that small
 runs pack onto one GPU (``gpu_share``: megapixels / 2 + millions of Gaussians / 10, rounded up to 1/k and
@@ -240,14 +243,23 @@ def plan(args) -> list[RunSpec]:
 # one run (the Ray task's body): start it, resume it, or skip it
 
 
+def stopped_out_of_memory(m: dict) -> bool:
+    """Whether metrics ``m`` are those of a run that stopped because its device ran out of memory (the last good
+    state's, ``stopped_early.reason == "out_of_memory"``). Runs sharing a GPU cause that; it passes, so such a run
+    is resumed from its checkpoint, not kept as finished (a run that diverged is: it would diverge again)."""
+    stop = m.get("stopped_early")
+    return isinstance(stop, dict) and stop.get("reason") == "out_of_memory"
+
+
 def metrics_complete(path: Path, method: str | None = None) -> dict | None:
     """The metrics of a finished run in ``path`` (its metrics.json with every record its method writes:
-    the full method's ``cycles`` come after the common ones), else None."""
+    the full method's ``cycles`` come after the common ones), else None. A run that stopped on running out
+    of memory is not finished (``stopped_out_of_memory``)."""
     try:
         m = json.loads((Path(path) / "metrics.json").read_text())
     except (OSError, ValueError):
         return None
-    if not isinstance(m, dict):
+    if not isinstance(m, dict) or stopped_out_of_memory(m):
         return None
     need = ("psnr", "iterations", "num_gaussians", "stage_times_s") + (("cycles",) if (method or m.get("method")) == "full" else ())
     return m if all(k in m for k in need) else None
@@ -334,6 +346,14 @@ def finished_record(name: str, out: Path, metrics: dict, attempts: list[dict]) -
             "metrics": slim_metrics(metrics)}
 
 
+def _stopped_oom(out: Path) -> bool:
+    try:
+        m = json.loads((Path(out) / "metrics.json").read_text())
+    except (OSError, ValueError):
+        return False
+    return isinstance(m, dict) and stopped_out_of_memory(m)
+
+
 def execute_run(spec: dict, out: str, logs: str, batch: str, overwrite: bool = False) -> dict:
     """Runs ``spec`` (a ``RunSpec`` as a dict) into ``out`` -> its record; ``batch`` names this batch in the
     attempts file. A run with complete metrics is skipped (unless ``overwrite`` and this batch has not run it
@@ -373,7 +393,8 @@ def execute_run(spec: dict, out: str, logs: str, batch: str, overwrite: bool = F
         f.seek(offset)
         text = f.read()
     resumed = re.search(r"resumed \S+ at step (\d+)", text)
-    oom = rc not in (0, 2) and re.search(r"out of memory|OutOfMemoryError|MemoryError", text[-3000:]) is not None
+    oom = rc not in (0, 2) and (re.search(r"out of memory|OutOfMemoryError|MemoryError", text[-3000:]) is not None
+                                or _stopped_oom(out))
     _append(attempts_path, {"attempt": number, "end": time.time(), "wall_s": round(time.time() - t0, 2),
                             "returncode": rc, "oom": oom, "from_step": int(resumed.group(1)) if resumed else None})
     attempts = read_attempts(attempts_path, batch)
