@@ -200,6 +200,11 @@ def test_trainer_removes_the_path_floaters_on_its_schedule(tmp_path):
         append_gaussians(tr, planted, torch.full((len(planted), 3), 0.1), torch.full((len(planted), 3), 0.05), 0.9)
         tr.train(21)
         assert int((torch.cdist(tr.model.means.detach(), planted).min(0).values < 0.02).sum()) == len(planted)
-        tr.finish()
+        stages = tr.finish()["stage_times_s"]
         left = int((torch.cdist(tr.model.means.detach(), planted).min(0).values < 0.02).sum())
         assert left == (0 if final else len(planted))
+        # the passes' seconds are one of the run's stage timings: none ran without the final one
+        assert stages["path_floaters_s"] == round(tr.path_floaters_time, 2)
+        assert (tr.path_floaters_time > 0) == final
+    assert "path_floaters_s" not in Trainer(tiny_config(21, str(tmp_path / "none.pth")), scene,
+                                            out_dir=tmp_path / "off").finish()["stage_times_s"]

@@ -92,6 +92,8 @@ def run_metrics(trainer, ev: dict, train_ev: dict, fps: float) -> dict:
                                 "train_s": round(tr.train_time, 2)}
     if getattr(tr, "far_field_time", None) is not None:
         metrics["stage_times_s"]["far_field_s"] = round(tr.far_field_time, 2)
+    if getattr(tr, "path_floaters_time", None) is not None:
+        metrics["stage_times_s"]["path_floaters_s"] = round(tr.path_floaters_time, 2)
     if getattr(tr, "held", None):
         metrics["hold_geometry"] = tr.held
     if tr.stopped_early:

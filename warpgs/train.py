@@ -462,6 +462,8 @@ class Trainer:
                 np.stack([c.viewmat for c in scene.train]), c0.K, (c0.width, c0.height), cfg.train.path_floaters,
                 per_pair=cfg.train.path_floaters_poses, order=cfg.pseudo.trajectory.order, device=self.device,
                 paths=cfg.train.path_floaters_paths)
+        # seconds its passes took (metrics.json stage_times_s path_floaters_s, part of train_s but the final pass)
+        self.path_floaters_time = None if self.floaters is None else 0.0
         self.view_rng = np.random.default_rng(seed + 2)
         self.order: list[int] = []
         self.optimizer = make_optimizer(self.model, cfg, self.scene_scale)
@@ -1340,13 +1342,16 @@ class Trainer:
         before the final evaluation."""
         if self.floaters is None:
             return 0
+        t0 = time.perf_counter()
         found = self.floaters.find(self.model, self.train_cams, self.background)
-        n = int(found.sum())
+        n = int(found.sum())  # a read of the device: the pass's work is done when it returns
+        if 0 < n < len(self.model):
+            from warpgs.strategy import remove
+
+            remove(self.model, self.optimizer, self.state, found)
+        self.path_floaters_time += time.perf_counter() - t0
         if not 0 < n < len(self.model):
             return 0
-        from warpgs.strategy import remove
-
-        remove(self.model, self.optimizer, self.state, found)
         self.log(f"warpgs: step {step}: {n} Gaussians removed that poses of the camera path see and no input does "
                  f"(train.path_floaters)")
         return n
