@@ -1345,12 +1345,13 @@ class Trainer:
         t0 = time.perf_counter()
         found = self.floaters.find(self.model, self.train_cams, self.background)
         n = int(found.sum())  # a read of the device: the pass's work is done when it returns
-        if 0 < n < len(self.model):
+        removing = 0 < n < len(self.model)
+        if removing:
             from warpgs.strategy import remove
 
             remove(self.model, self.optimizer, self.state, found)
         self.path_floaters_time += time.perf_counter() - t0
-        if not 0 < n < len(self.model):
+        if not removing:
             return 0
         self.log(f"warpgs: step {step}: {n} Gaussians removed that poses of the camera path see and no input does "
                  f"(train.path_floaters)")

@@ -243,6 +243,15 @@ def plan(args) -> list[RunSpec]:
 # one run (the Ray task's body): start it, resume it, or skip it
 
 
+def _read_metrics(path: Path) -> dict | None:
+    """The run folder ``path``'s metrics.json as a dict, or None (missing, unreadable, not an object)."""
+    try:
+        m = json.loads((Path(path) / "metrics.json").read_text())
+    except (OSError, ValueError):
+        return None
+    return m if isinstance(m, dict) else None
+
+
 def stopped_out_of_memory(m: dict) -> bool:
     """Whether metrics ``m`` are those of a run that stopped because its device ran out of memory (the last good
     state's, ``stopped_early.reason == "out_of_memory"``). Runs sharing a GPU cause that; it passes, so such a run
@@ -255,11 +264,8 @@ def metrics_complete(path: Path, method: str | None = None) -> dict | None:
     """The metrics of a finished run in ``path`` (its metrics.json with every record its method writes:
     the full method's ``cycles`` come after the common ones), else None. A run that stopped on running out
     of memory is not finished (``stopped_out_of_memory``)."""
-    try:
-        m = json.loads((Path(path) / "metrics.json").read_text())
-    except (OSError, ValueError):
-        return None
-    if not isinstance(m, dict) or stopped_out_of_memory(m):
+    m = _read_metrics(path)
+    if m is None or stopped_out_of_memory(m):
         return None
     need = ("psnr", "iterations", "num_gaussians", "stage_times_s") + (("cycles",) if (method or m.get("method")) == "full" else ())
     return m if all(k in m for k in need) else None
@@ -346,14 +352,6 @@ def finished_record(name: str, out: Path, metrics: dict, attempts: list[dict]) -
             "metrics": slim_metrics(metrics)}
 
 
-def _stopped_oom(out: Path) -> bool:
-    try:
-        m = json.loads((Path(out) / "metrics.json").read_text())
-    except (OSError, ValueError):
-        return False
-    return isinstance(m, dict) and stopped_out_of_memory(m)
-
-
 def execute_run(spec: dict, out: str, logs: str, batch: str, overwrite: bool = False) -> dict:
     """Runs ``spec`` (a ``RunSpec`` as a dict) into ``out`` -> its record; ``batch`` names this batch in the
     attempts file. A run with complete metrics is skipped (unless ``overwrite`` and this batch has not run it
@@ -394,7 +392,7 @@ def execute_run(spec: dict, out: str, logs: str, batch: str, overwrite: bool = F
         text = f.read()
     resumed = re.search(r"resumed \S+ at step (\d+)", text)
     oom = rc not in (0, 2) and (re.search(r"out of memory|OutOfMemoryError|MemoryError", text[-3000:]) is not None
-                                or _stopped_oom(out))
+                                or stopped_out_of_memory(_read_metrics(out) or {}))
     _append(attempts_path, {"attempt": number, "end": time.time(), "wall_s": round(time.time() - t0, 2),
                             "returncode": rc, "oom": oom, "from_step": int(resumed.group(1)) if resumed else None})
     attempts = read_attempts(attempts_path, batch)
