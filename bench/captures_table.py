@@ -35,7 +35,8 @@ median).
 - session 30 (``bench/gpu_session30.sh``): session 28's default beside the path-floater pass on both paths with 9
   poses (``train.path_floaters_paths=both``, ``train.path_floaters_poses=9``; ``s30/b369.txt``, both methods), then
   the full method's 3-view variants ``pseudo.trajectory.n_frames=17`` and ``full.pseudo_weight=2``
-  (``s30/x3.txt``, ``x_n17_...`` / ``x_pw2_...``) against session 28's default.
+  (``s30/x3.txt``, ``x_n17_...`` / ``x_pw2_...``) against session 28's default; then the images_4 runs (768x512,
+  10,000 it, seed 0) of session 28 (``s28/i369.txt``) -> those with session 30's default (``s30/i369.txt``).
 """
 
 from __future__ import annotations
@@ -129,6 +130,27 @@ def table(columns: list[tuple[str, dict]]) -> list[str]:
     return lines
 
 
+def seed_table(before: dict, after: dict) -> list[str]:
+    """Runs of one seed each (images_4, seed 0), before -> after per case and method, and the mean change per method."""
+    keys = sorted({(s, n) for (s, n, _) in before} & {(s, n) for (s, n, _) in after})
+    lines = ["| scene | views | baseline | full |", "|---|---|---|---|"]
+    change: dict = {"baseline": [], "full": []}
+    for s, n in keys:
+        row = [s, str(n)]
+        for m in ("baseline", "full"):
+            b, a = before.get((s, n, m)), after.get((s, n, m))
+            if not b or not a:
+                row.append("-")
+                continue
+            (vb,), (va,) = b.values(), a.values()
+            change[m].append(va - vb)
+            row.append(f"{vb:.2f} -> {va:.2f}")
+        lines.append("| " + " | ".join(row) + " |")
+    lines.append("")
+    lines.append("- mean change: " + ", ".join(f"{m} {sum(v) / len(v):+.2f} dB" for m, v in change.items() if v))
+    return lines
+
+
 def merged(*parts: dict) -> dict:
     out: dict = {}
     for runs in parts:
@@ -175,6 +197,8 @@ def main(argv=None) -> int:
             names = {"n17": "n_frames=17", "pw2": "pseudo_weight=2"}
             variants = load_variants(r30 / "x3.txt", "x")
             print("\n".join(variant_table(default, {names[k]: v for k, v in variants.items()}, "default (session 28)")))
+            print()
+            print("\n".join(seed_table(load(r28 / "i369.txt", "i"), load(r30 / "i369.txt", "i"))))
             return 0
         if args.session == 29:
             r29 = Path(args.results) / "s29"

@@ -70,3 +70,15 @@ def test_session23_table_gives_each_groups_median_spread_and_gaussians(tmp_path)
     assert "| fern 3v | full, no depth terms | 0, 1, 2 | 21.00 [20.00, 23.00] | 200 |" in out
     assert any(row.startswith("| lego 8v |") and "| 0 | 24.00 | 50 |" in row for row in out)  # one seed: no spread
     assert not any("99.00" in row for row in out)  # only the named groups, in their order
+
+
+def test_seed_table_gives_each_cases_before_and_after_and_the_mean_change():
+    before = {("castle_p30", 3, "baseline"): {0: 15.0}, ("castle_p30", 3, "full"): {0: 14.5},
+              ("herz_jesus_p25", 9, "baseline"): {0: 21.0}, ("herz_jesus_p25", 9, "full"): {0: 22.0},
+              ("herz_jesus_p25", 6, "baseline"): {0: 19.0}}  # no after: not a row
+    after = {("castle_p30", 3, "baseline"): {0: 14.0}, ("castle_p30", 3, "full"): {0: 15.0},
+             ("herz_jesus_p25", 9, "baseline"): {0: 21.5}}  # herz 9 views full missing: "-"
+    out = ct.seed_table(before, after)
+    assert out[2] == "| castle_p30 | 3 | 15.00 -> 14.00 | 14.50 -> 15.00 |"
+    assert out[3] == "| herz_jesus_p25 | 9 | 21.00 -> 21.50 | - |"
+    assert len(out) == 6 and out[-1] == "- mean change: baseline -0.25 dB, full +0.50 dB"
