@@ -189,6 +189,10 @@ def test_run_folder_lock_stale_locks_and_earlier_runs(tmp_path):
         open_run_folder(out)
     assert not (out / LOCK).exists()  # the lock is given back when the folder is refused
     open_run_folder(out, resume=True).release()
+    # one that stopped early (its last good state's metrics) says so: --resume continues it
+    (out / "metrics.json").write_text(json.dumps({"stopped_early": {"reason": "out_of_memory", "step": 12}}))
+    with pytest.raises(RunFolderError, match="holds a run that stopped early \\(out_of_memory at step 12; .*--resume"):
+        open_run_folder(out)
     held = open_run_folder(out, overwrite=True, log=lambda msg: None)
     assert sorted(p.name for p in out.iterdir()) == sorted([LOCK, "my_notes.txt"])
     held.release()

@@ -117,11 +117,26 @@ def checkpoint_file(folder: str | Path) -> Path | None:
     return next((Path(folder) / n for n in CHECKPOINT_FILES if (Path(folder) / n).is_file()), None)
 
 
+def _stopped_early(metrics: Path) -> str | None:
+    """How the run of ``metrics`` (a metrics.json) stopped early, in words ("out_of_memory at step 4000"), or None
+    (finished, or unreadable)."""
+    try:
+        stop = json.loads(metrics.read_text()).get("stopped_early")
+    except (OSError, ValueError, AttributeError):
+        return None
+    if not isinstance(stop, dict):
+        return None
+    return f"{stop.get('reason', 'stopped')}" + (f" at step {stop['step']}" if "step" in stop else "")
+
+
 def earlier_run(folder: str | Path) -> str | None:
     """What earlier run ``folder`` holds ("a finished run (metrics.json)", ...), or None."""
     folder = Path(folder)
     for d in (folder, *(folder / m for m in METHOD_DIRS)):
         if (d / "metrics.json").is_file() or (d / "comparison.json").is_file():
+            stop = _stopped_early(d / "metrics.json")
+            if stop:  # the last good state's metrics (out of memory, divergence): --resume continues the run
+                return f"a run that stopped early ({stop}; {d / 'metrics.json'})"
             return f"a finished run ({d / 'metrics.json'})"
     for d in (folder, *(folder / m for m in METHOD_DIRS)):
         found = checkpoint_file(d)
