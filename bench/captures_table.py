@@ -36,7 +36,9 @@ median).
   poses (``train.path_floaters_paths=both``, ``train.path_floaters_poses=9``; ``s30/b369.txt``, both methods), then
   the full method's 3-view variants ``pseudo.trajectory.n_frames=17`` and ``full.pseudo_weight=2``
   (``s30/x3.txt``, ``x_n17_...`` / ``x_pw2_...``) against session 28's default; then the images_4 runs (768x512,
-  10,000 it, seed 0) of session 28 (``s28/i369.txt``) -> those with session 30's default (``s30/i369.txt``).
+  10,000 it, seed 0) of session 28 (``s28/i369.txt``) -> those with session 30's default (``s30/i369.txt``);
+- session 31 (``bench/gpu_session31.sh j``, for the next session): images_4, seeds 0-2, session 28's path-floater
+  pass (seed 0 ``s28/i369.txt``, seeds 1-2 ``s31/k369.txt``) beside session 30's (``s30/i369.txt``, ``s31/j369.txt``).
 """
 
 from __future__ import annotations
@@ -162,8 +164,14 @@ def merged(*parts: dict) -> dict:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--results", default=str(Path(__file__).resolve().parent / "results"))
-    ap.add_argument("--session", type=int, choices=(20, 21, 22, 26, 27, 28, 29, 30), default=21)
+    ap.add_argument("--session", type=int, choices=(20, 21, 22, 26, 27, 28, 29, 30, 31), default=21)
     args = ap.parse_args(argv)
+    if args.session == 31:
+        r28, r30, r31 = (Path(args.results) / f"s{n}" for n in (28, 30, 31))
+        old = merged(load(r28 / "i369.txt", "i"), load(r31 / "k369.txt", "k"))
+        new = merged(load(r30 / "i369.txt", "i"), load(r31 / "j369.txt", "j"))
+        print("\n".join(table([("spline, 3 poses (session 28)", old), ("both paths, 9 poses (session 30)", new)])))
+        return 0
     r20, r21 = Path(args.results) / "s20", Path(args.results) / "s21"
     s20 = ("session 20 default", load(r20 / "captures_d.txt", "d"))
     s21 = merged(load(r21 / "captures_default3.txt", "d"), load(r21 / "captures_default69.txt", "d"))

@@ -8,6 +8,7 @@
 #    new default -0.26 dB on average for the baseline and -0.06 for the full method, where the three seeds at
 #    384x256 gave +0.24 / +0.08: these 24 runs say which holds at 768x512. 12 at a time (24 ran a GPU out of memory
 #    in session 30); runs stopped on out of memory or by the call's end are resumed by the next call.
+#    Copy $OUT/j369.txt and k369.txt to bench/results/s31/, then: python bench/captures_table.py --session 31
 set -u
 source "$(dirname "${BASH_SOURCE[0]}")/gpu_one.sh"
 session_env "$@"; P=$1; D=$2; R=$3; shift 3
