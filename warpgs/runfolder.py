@@ -117,16 +117,20 @@ def checkpoint_file(folder: str | Path) -> Path | None:
     return next((Path(folder) / n for n in CHECKPOINT_FILES if (Path(folder) / n).is_file()), None)
 
 
-def _stopped_early(metrics: Path) -> str | None:
-    """How the run of ``metrics`` (a metrics.json) stopped early, in words ("out_of_memory at step 4000"), or None
-    (finished, or unreadable)."""
+def read_metrics(folder: str | Path) -> dict | None:
+    """The run folder ``folder``'s metrics.json as a dict, or None (missing, unreadable, not an object)."""
     try:
-        stop = json.loads(metrics.read_text()).get("stopped_early")
-    except (OSError, ValueError, AttributeError):
+        m = json.loads((Path(folder) / "metrics.json").read_text())
+    except (OSError, ValueError):
         return None
-    if not isinstance(stop, dict):
-        return None
-    return f"{stop.get('reason', 'stopped')}" + (f" at step {stop['step']}" if "step" in stop else "")
+    return m if isinstance(m, dict) else None
+
+
+def stopped_early(metrics: dict | None) -> dict | None:
+    """The ``stopped_early`` record of a run's metrics (``{"reason": "out_of_memory" | "diverged", "step": ...}``:
+    the metrics are the last good state's), or None (finished, or no metrics)."""
+    stop = (metrics or {}).get("stopped_early")
+    return stop if isinstance(stop, dict) else None
 
 
 def earlier_run(folder: str | Path) -> str | None:
@@ -134,9 +138,10 @@ def earlier_run(folder: str | Path) -> str | None:
     folder = Path(folder)
     for d in (folder, *(folder / m for m in METHOD_DIRS)):
         if (d / "metrics.json").is_file() or (d / "comparison.json").is_file():
-            stop = _stopped_early(d / "metrics.json")
+            stop = stopped_early(read_metrics(d))
             if stop:  # the last good state's metrics (out of memory, divergence): --resume continues the run
-                return f"a run that stopped early ({stop}; {d / 'metrics.json'})"
+                at = f" at step {stop['step']}" if "step" in stop else ""
+                return f"a run that stopped early ({stop.get('reason', 'stopped')}{at}; {d / 'metrics.json'})"
             return f"a finished run ({d / 'metrics.json'})"
     for d in (folder, *(folder / m for m in METHOD_DIRS)):
         found = checkpoint_file(d)

@@ -50,7 +50,7 @@ import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
-from warpgs.runfolder import checkpoint_file
+from warpgs.runfolder import checkpoint_file, read_metrics, stopped_early
 
 INSTALL_HINT = "pip install 'warpgs[ray]'"
 MIN_GPU_SHARE = 1 / 8
@@ -243,28 +243,18 @@ def plan(args) -> list[RunSpec]:
 # one run (the Ray task's body): start it, resume it, or skip it
 
 
-def _read_metrics(path: Path) -> dict | None:
-    """The run folder ``path``'s metrics.json as a dict, or None (missing, unreadable, not an object)."""
-    try:
-        m = json.loads((Path(path) / "metrics.json").read_text())
-    except (OSError, ValueError):
-        return None
-    return m if isinstance(m, dict) else None
-
-
-def stopped_out_of_memory(m: dict) -> bool:
+def stopped_out_of_memory(m: dict | None) -> bool:
     """Whether metrics ``m`` are those of a run that stopped because its device ran out of memory (the last good
     state's, ``stopped_early.reason == "out_of_memory"``). Runs sharing a GPU cause that; it passes, so such a run
     is resumed from its checkpoint, not kept as finished (a run that diverged is: it would diverge again)."""
-    stop = m.get("stopped_early")
-    return isinstance(stop, dict) and stop.get("reason") == "out_of_memory"
+    return (stopped_early(m) or {}).get("reason") == "out_of_memory"
 
 
 def metrics_complete(path: Path, method: str | None = None) -> dict | None:
     """The metrics of a finished run in ``path`` (its metrics.json with every record its method writes:
     the full method's ``cycles`` come after the common ones), else None. A run that stopped on running out
     of memory is not finished (``stopped_out_of_memory``)."""
-    m = _read_metrics(path)
+    m = read_metrics(path)
     if m is None or stopped_out_of_memory(m):
         return None
     need = ("psnr", "iterations", "num_gaussians", "stage_times_s") + (("cycles",) if (method or m.get("method")) == "full" else ())
@@ -392,7 +382,7 @@ def execute_run(spec: dict, out: str, logs: str, batch: str, overwrite: bool = F
         text = f.read()
     resumed = re.search(r"resumed \S+ at step (\d+)", text)
     oom = rc not in (0, 2) and (re.search(r"out of memory|OutOfMemoryError|MemoryError", text[-3000:]) is not None
-                                or stopped_out_of_memory(_read_metrics(out) or {}))
+                                or stopped_out_of_memory(read_metrics(out)))
     _append(attempts_path, {"attempt": number, "end": time.time(), "wall_s": round(time.time() - t0, 2),
                             "returncode": rc, "oom": oom, "from_step": int(resumed.group(1)) if resumed else None})
     attempts = read_attempts(attempts_path, batch)

@@ -15,7 +15,7 @@ import json
 import statistics
 from pathlib import Path
 
-STAGES = ("init_sfm_s", "init_stereo_s", "far_field_s", "train_s", "pseudo_views_s", "densify_s")
+STAGES = ("init_sfm_s", "init_stereo_s", "far_field_s", "train_s", "path_floaters_s", "pseudo_views_s", "densify_s")
 
 
 def spread(values: list) -> dict | None:
