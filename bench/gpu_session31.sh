@@ -12,7 +12,7 @@
 set -u
 source "$(dirname "${BASH_SOURCE[0]}")/gpu_one.sh"
 session_env "$@"; P=$1; D=$2; R=$3; shift 3
-export R D T
+export R D T END=$(( $(date +%s) + ${T:-540} ))  # every run of the call stops by then
 case $P in
 j)
   { for s in 1 2; do for c in castle_p30 herz_jesus_p25; do for v in 3 6 9; do for m in baseline full; do
