@@ -9,6 +9,12 @@
 #    384x256 gave +0.24 / +0.08: these 24 runs say which holds at 768x512. 12 at a time (24 ran a GPU out of memory
 #    in session 30); runs stopped on out of memory or by the call's end are resumed by the next call.
 #    Copy $OUT/j369.txt and k369.txt to bench/results/s31/, then: python bench/captures_table.py --session 31
+# o: the other scenes' current figures over three seeds (issue 14's "every PSNR a median over 3 seeds, with the code
+#    of today"): fern 3 views and DTU scan65 3 views (3000 it) and lego 8 views (10,000 it), baseline and full with
+#    their configs' defaults, seeds 0-2; and lego with session 17's best baseline setting (DropGaussian 0.2, opacity
+#    noise 0.8, SH degree 1) at 10,000 and at 20,000 iterations (its test curve still rose at 10,000). Needs lego and
+#    DTU in $D too (blender_lego, dtu_scan65 beside llff_fern). Summary lines in $OUT/o.txt:
+#    python bench/seed_medians.py bench/results/s31/o.txt prints their medians over the seeds.
 set -u
 source "$(dirname "${BASH_SOURCE[0]}")/gpu_one.sh"
 session_env "$@"; P=$1; D=$2; R=$3; shift 3
@@ -21,6 +27,25 @@ j)
     done; done; done; done; } | DS=4 IT=10000 xargs -P ${JOBS:-12} -L 1 bash -c 'one "$@"' _ | grep -v "rc=0"
   summary j_ j369.txt
   summary k_ k369.txt
+  ;;
+o)
+  BEST="--set train.drop_rate=0.2 --set train.opacity_noise=0.8 --set model.sh_degree=1"
+  lego() {  # NAME METHOD SEED ITERATIONS [--set k=v ...]
+    local name=$1 method=$2 seed=$3 it=$4; shift 4
+    sparse_run "$name" --method "$method" --data blender --scene lego --views 8 --iterations "$it" --seed "$seed" \
+      --set train.eval_every=$((it / 10)) "$@"
+  }
+  export -f lego
+  { for s in 0 1 2; do
+      echo "lego o_lego_best20k_s$s baseline $s 20000 $BEST"
+      for m in baseline full; do echo "lego o_lego_${m}_s$s $m $s 10000"; done
+      echo "lego o_lego_best_s$s baseline $s 10000 $BEST"
+    done
+    for s in 0 1 2; do for m in baseline full; do
+      echo "named o_fern_${m}_s$s $m llff fern 3 $s"
+      echo "named o_dtu_${m}_s$s $m dtu scan65 3 $s"
+    done; done; } | xargs -P ${JOBS:-12} -L 1 bash -c '"$@"' _ | grep -v "rc=0"
+  summary o_ o.txt
   ;;
 *) echo "unknown phase $P"; exit 2 ;;
 esac

@@ -82,3 +82,16 @@ def test_seed_table_gives_each_cases_before_and_after_and_the_mean_change():
     assert out[2] == "| castle_p30 | 3 | 15.00 -> 14.00 | 14.50 -> 15.00 |"
     assert out[3] == "| herz_jesus_p25 | 9 | 21.00 -> 21.50 | - |"
     assert len(out) == 6 and out[-1] == "- mean change: baseline -0.25 dB, full +0.50 dB"
+
+
+def test_seed_medians_groups_runs_by_name_without_the_seed(tmp_path):
+    from bench import seed_medians
+
+    f = tmp_path / "o.txt"
+    f.write_text("o_lego_full_s0 23.2 100 [1.0] [2.0]\no_lego_full_s2 23.6 300 [] []\no_lego_full_s1 22.0 200 [] []\n"
+                 "o_dtu_baseline_s0 20.5 50 [] []\nnot a run line\n")
+    rows = seed_medians.read([f])
+    assert rows == {"o_lego_full": {0: (23.2, 100), 2: (23.6, 300), 1: (22.0, 200)}, "o_dtu_baseline": {0: (20.5, 50)}}
+    lines = seed_medians.table(rows)
+    assert lines[2] == "| o_lego_full | 23.20 [22.00, 23.60] | 0, 1, 2 | 200 |"
+    assert lines[3] == "| o_dtu_baseline | 20.50 [20.50, 20.50] | 0 | 50 |"
