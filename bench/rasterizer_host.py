@@ -6,6 +6,12 @@ bench/rasterizer.py (138,766 random Gaussians at 648x420), where both are bound 
 For each: the host's time per forward+backward over 100 calls issued without a sync, and the time until the GPU
 has finished them (equal when the GPU keeps up), then a cProfile of 200 calls (warpgs: by own time and by
 cumulative time; gsplat: by own time). Session 19's output: bench/results/s19/host_profile_138k.txt.
+
+    py-spy record --native --idle -r 1000 -f raw -o spy.txt -- python bench/rasterizer_host.py --loop 10 --only warpgs
+
+``--loop S``: instead of the cProfile (which slows every Python call, and so overstates the Python's share), calls
+forward+backward for S seconds (a sync every 100 calls), for a sampling profiler outside the process to split the
+host's real time; ``--only`` picks one rasterizer. ``python bench/spy_summary.py spy.txt`` sums such a profile.
 """
 
 from __future__ import annotations
@@ -32,10 +38,14 @@ def main(argv=None) -> None:
     ap.add_argument("--gaussians", type=int, default=138_766)
     ap.add_argument("--width", type=int, default=648)
     ap.add_argument("--height", type=int, default=420)
+    ap.add_argument("--loop", type=float, default=0.0, help="call for this many seconds instead of the cProfile")
+    ap.add_argument("--only", choices=("warpgs", "gsplat"), default=None)
     args = ap.parse_args(argv)
     n, W, H = args.gaussians, args.width, args.height
     inp = make_inputs(n, W, H, "cuda")
     for name, fn in (("warpgs", warpgs_fn(inp, W, H, 0.999)), ("gsplat", gsplat_fn(inp, W, H))):
+        if args.only not in (None, name):
+            continue
         _, _, fb = calls(fn, inp)  # forward + backward on its own copy of the inputs, as bench/rasterizer.py times it
         for _ in range(30):
             fb()
@@ -47,6 +57,15 @@ def main(argv=None) -> None:
         torch.cuda.synchronize()
         total = (time.perf_counter() - t) * 10
         print(f"{name}: host {host:.3f} ms/call, to the end {total:.3f} ms/call", flush=True)
+        if args.loop > 0:
+            end, k = time.perf_counter() + args.loop, 0
+            while time.perf_counter() < end:
+                for _ in range(100):
+                    fb()
+                torch.cuda.synchronize()
+                k += 100
+            print(f"{name}: {k} calls in {args.loop:.0f} s of --loop", flush=True)
+            continue
         prof = cProfile.Profile()
         prof.enable()
         for _ in range(200):
