@@ -1,0 +1,24 @@
+"""bench/spy_summary.py: own and inclusive shares per thread from py-spy's raw (collapsed stacks) format."""
+
+from bench import spy_summary as ss
+
+
+def test_shares_per_thread_and_the_under_filter(tmp_path):
+    p = tmp_path / "spy.txt"
+    p.write_text(
+        "thread (0x1);main (a.py:1);f_b (b.py:3);launch (w.py:10) 6\n"
+        "thread (0x1);main (a.py:1);f_b (b.py:4);sort (w.py:20) 2\n"
+        "thread (0x1);main (a.py:1);setup (a.py:9) 2\n"
+        "thread (0x2);worker (t.py:5);backward (r.py:7) 5\n"
+        "garbage line\n")
+    t = ss.read(p)
+    total, own, incl = t["thread (0x1)"]
+    assert total == 10
+    assert own == {"launch (w.py)": 6, "sort (w.py)": 2, "setup (a.py)": 2}
+    assert incl["f_b (b.py)"] == 8 and incl["main (a.py)"] == 10  # line numbers dropped: one f_b
+    assert t["thread (0x2)"][0] == 5
+    under = ss.read(p, under="f_b")
+    assert list(under) == ["thread (0x1)"] and under["thread (0x1)"][0] == 8
+    lines = ss.report(under, rows=1)
+    assert lines[0] == "== thread (0x1): 8 samples"
+    assert lines[2].split() == ["75.00%", "6", "launch", "(w.py)"]
