@@ -6,7 +6,7 @@
 #    session 30 (the path-floater pass on both paths, 9 poses; prefix j) and with session 28's (the spline, 3
 #    poses; prefix k). Session 30's seed 0 at this size (bench/results/s30/i369.txt against s28/i369.txt) gave the
 #    new default -0.26 dB on average for the baseline and -0.06 for the full method, where the three seeds at
-#    384x256 gave +0.24 / +0.08: these 24 runs say which holds at 768x512. 12 at a time (24 ran a GPU out of memory
+#    384x256 gave +0.24 / +0.08: these 48 runs say which holds at 768x512. 12 at a time (24 ran a GPU out of memory
 #    in session 30); runs stopped on out of memory or by the call's end are resumed by the next call.
 #    Copy $OUT/j369.txt and k369.txt to bench/results/s31/, then: python bench/captures_table.py --session 31
 # o: the other scenes' current figures over three seeds (issue 14's "every PSNR a median over 3 seeds, with the code
