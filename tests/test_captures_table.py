@@ -95,3 +95,31 @@ def test_seed_medians_groups_runs_by_name_without_the_seed(tmp_path):
     lines = seed_medians.table(rows)
     assert lines[2] == "| o_lego_full | 23.20 [22.00, 23.60] | 0, 1, 2 | 200 |"
     assert lines[3] == "| o_dtu_baseline | 20.50 [20.50, 20.50] | 0 | 50 |"
+
+
+def test_readme_results_rows_from_summaries(tmp_path):
+    import json
+
+    from bench import readme_results as rr
+
+    (tmp_path / "noarg_cpu").mkdir()
+    (tmp_path / "noarg_cpu" / "seeds_s30.json").write_text(json.dumps({"per_seed": {
+        str(s): {"baseline": {"psnr": 20.0 + s}, "full": {"psnr": 22.0 + s}} for s in range(3)}}))
+    for d in ("s28", "s31"):
+        (tmp_path / d).mkdir()
+    (tmp_path / "s31" / "o.txt").write_text("o_fern_baseline_s0 21.0 10\no_fern_baseline_s1 21.4 10\no_fern_full_s0 22.0 9\n"
+                                           "o_lego_best_s0 24.0 5\n")
+    (tmp_path / "s28" / "c369.txt").write_text("c_castle_p30_3v_baseline_s0 15.0 1\nc_castle_p30_3v_full_s0 99.0 1\n")
+    (tmp_path / "s28" / "m369.txt").write_text("m_castle_p30_3v_full_s0 15.5 1\n")
+    (tmp_path / "s28" / "i369.txt").write_text("")
+    (tmp_path / "s31" / "k369.txt").write_text("k_herz_jesus_p25_9v_full_s1 21.0 1\n")
+    out = rr.rows(tmp_path)
+    assert out[2].startswith("| synthetic room, 3 views |") and "| 21.00 [20.00, 22.00] | 23.00 [22.00, 24.00] | +2.00 |" in out[2]
+    fern = next(r for r in out if r.startswith("| LLFF fern"))
+    assert "| 21.20 [21.00, 21.40] (2 seeds) | 22.00 [22.00, 22.00] (1 seed) | +0.80 |" in fern
+    assert any(r.startswith("| Blender lego, 8 views | baseline + opacity noise 0.8, SH degree 1, 10,000 it") and "24.00" in r
+               for r in out)
+    castle = next(r for r in out if r.startswith("| castle_p30, 3 views | 384x256"))
+    assert "| 15.00 [15.00, 15.00] (1 seed) | 15.50 [15.50, 15.50] (1 seed) | +0.50 |" in castle  # full from m369, not c369
+    herz = next(r for r in out if r.startswith("| herz_jesus_p25, 9 views | 768x512"))
+    assert "| - | 21.00 [21.00, 21.00] (1 seed) | - |" in herz

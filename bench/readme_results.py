@@ -1,0 +1,81 @@
+"""The README's table of current figures, generated from the committed run summaries (not typed by hand).
+
+    python bench/readme_results.py [--results bench/results]
+
+One row per scene and setting: the baseline's and the full method's test PSNR as median [min, max] over seeds 0-2,
+the full method's gain (difference of the medians), and where the runs ran. The sources are the latest runs of the
+current defaults:
+- the no-argument job (synthetic room, 2-core CPU): ``noarg_cpu/seeds_s30.json``;
+- fern 3 views, DTU scan65 3 views and lego 8 views (H200, session 31): ``s31/o.txt`` (``o_<scene>_<method>_s<seed>``),
+  and lego's best baseline setting (``o_lego_best``, ``o_lego_best20k``) as rows of their own;
+- the captures at 384x256, 3000 it (H100, session 28's runs of today's default: ``s28/c369.txt`` baselines,
+  ``s28/m369.txt`` full);
+- the captures at 768x512, 10,000 it (seed 0 H100, ``s28/i369.txt``; seeds 1-2 H200, ``s31/k369.txt``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import statistics
+import sys
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+import captures_table as ct  # noqa: E402
+import seed_medians as sm  # noqa: E402
+
+HEAD = ["scene", "setting", "machine", "baseline", "full", "full - baseline", "source"]
+
+
+def _cell(seeds: dict) -> str:
+    n = len(seeds)
+    return ct.cell(seeds) + ("" if n >= 3 else f" ({n} seed{'s' if n > 1 else ''})")
+
+
+def _row(scene: str, setting: str, machine: str, base: dict, full: dict, source: str) -> str:
+    gain = (f"{statistics.median(full.values()) - statistics.median(base.values()):+.2f}"
+            if base and full else "-")
+    return "| " + " | ".join([scene, setting, machine, _cell(base) if base else "-", _cell(full) if full else "-",
+                              gain, source]) + " |"
+
+
+def rows(results: Path) -> list[str]:
+    out = ["| " + " | ".join(HEAD) + " |", "|" + "---|" * len(HEAD)]
+    noarg = json.loads((results / "noarg_cpu" / "seeds_s30.json").read_text())["per_seed"]
+    out.append(_row("synthetic room, 3 views", "no arguments: 128x96, 1000 it", "2-core AMD EPYC CPU",
+                    {int(s): v["baseline"]["psnr"] for s, v in noarg.items()},
+                    {int(s): v["full"]["psnr"] for s, v in noarg.items()}, "`noarg_cpu/seeds_s30.json`"))
+    o = {name: {s: p for s, (p, _) in seeds.items()} for name, seeds in sm.read([results / "s31" / "o.txt"]).items()}
+    for scene, key, setting in (("LLFF fern, 3 views", "fern", "504x378, 3000 it"),
+                                ("DTU scan65, 3 views (masked)", "dtu", "400x300, 3000 it"),
+                                ("Blender lego, 8 views", "lego", "400x400, 10,000 it")):
+        out.append(_row(scene, setting, "H200", o.get(f"o_{key}_baseline", {}), o.get(f"o_{key}_full", {}),
+                        "`s31/o.txt`"))
+    for key, setting in (("o_lego_best", "10,000 it"), ("o_lego_best20k", "20,000 it")):
+        out.append(_row("Blender lego, 8 views", f"baseline + opacity noise 0.8, SH degree 1, {setting}", "H200",
+                        o.get(key, {}), {}, "`s31/o.txt`"))
+    r28, r31 = results / "s28", results / "s31"
+    small = ct.merged({k: v for k, v in ct.load(r28 / "c369.txt", "c").items() if k[2] == "baseline"},
+                      ct.load(r28 / "m369.txt", "m"))
+    large = ct.merged(ct.load(r28 / "i369.txt", "i"), ct.load(r31 / "k369.txt", "k"))
+    for runs, setting, machine, source in (
+            (small, "384x256, 3000 it", "H100", "`s28/c369.txt`, `s28/m369.txt`"),
+            (large, "768x512 (images_4), 10,000 it", "seed 0 H100, seeds 1-2 H200", "`s28/i369.txt`, `s31/k369.txt`")):
+        for scene, views in sorted({(s, n) for (s, n, _) in runs}):
+            out.append(_row(f"{scene}, {views} views", setting, machine, runs.get((scene, views, "baseline"), {}),
+                            runs.get((scene, views, "full"), {}), source))
+    return out
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--results", type=Path, default=Path(__file__).resolve().parent / "results")
+    args = ap.parse_args(argv)
+    print("\n".join(rows(args.results)))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
