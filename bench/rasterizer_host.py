@@ -7,7 +7,8 @@ For each: the host's time per forward+backward over 100 calls issued without a s
 has finished them (equal when the GPU keeps up), then a cProfile of 200 calls (warpgs: by own time and by
 cumulative time; gsplat: by own time). Session 19's output: bench/results/s19/host_profile_138k.txt.
 
-    py-spy record --native --idle -r 1000 -f raw -o spy.txt -- python bench/rasterizer_host.py --loop 10 --only warpgs
+    py-spy record --native --idle --threads -r 200 -f raw -o spy.txt -- python bench/rasterizer_host.py --loop 10 --only warpgs
+    gzip spy.txt   # (session 31: --native at 1000 Hz fell 47 s behind and wrote over 16 MB)
 
 ``--loop S``: instead of the cProfile (which slows every Python call, and so overstates the Python's share), calls
 forward+backward for S seconds (a sync every 100 calls), for a sampling profiler outside the process to split the
@@ -43,9 +44,11 @@ def main(argv=None) -> None:
     args = ap.parse_args(argv)
     n, W, H = args.gaussians, args.width, args.height
     inp = make_inputs(n, W, H, "cuda")
-    for name, fn in (("warpgs", warpgs_fn(inp, W, H, 0.999)), ("gsplat", gsplat_fn(inp, W, H))):
+    makers = {"warpgs": lambda: warpgs_fn(inp, W, H, 0.999), "gsplat": lambda: gsplat_fn(inp, W, H)}
+    for name, make in makers.items():
         if args.only not in (None, name):
-            continue
+            continue  # not built either: --only warpgs runs where gsplat is not installed
+        fn = make()
         _, _, fb = calls(fn, inp)  # forward + backward on its own copy of the inputs, as bench/rasterizer.py times it
         for _ in range(30):
             fb()

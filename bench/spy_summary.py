@@ -2,7 +2,7 @@
 they were in (own) and by every function on their stack (inclusive), the file's line numbers dropped.
 
     py-spy record --native --idle --threads -r 1000 -f raw -o spy.txt -- python bench/rasterizer_host.py --loop 10 --only warpgs
-    python bench/spy_summary.py spy.txt [--rows 40] [--under f_b]
+    python bench/spy_summary.py spy.txt[.gz] [--rows 40] [--under f_b]
 
 ``--under NAME``: count only the samples whose stack passes through a function named NAME (the timed calls).
 A line of the raw format is ``frame;frame;...;frame COUNT``, the outermost frame first; with ``--threads`` the first
@@ -12,6 +12,7 @@ frame names the thread.
 from __future__ import annotations
 
 import argparse
+import gzip
 import re
 from collections import Counter, defaultdict
 from pathlib import Path
@@ -28,7 +29,9 @@ def read(path: Path, under: str | None = None) -> dict[str, tuple[int, Counter, 
     """thread -> (samples, own samples by function, inclusive samples by function). Without thread frames
     (py-spy without ``--threads``) everything is one thread, ``all``."""
     out: dict[str, list] = defaultdict(lambda: [0, Counter(), Counter()])
-    for line in path.read_text(errors="replace").splitlines():
+    text = (gzip.decompress(path.read_bytes()).decode(errors="replace") if path.suffix == ".gz"
+            else path.read_text(errors="replace"))
+    for line in text.splitlines():
         stack, _, count = line.rpartition(" ")
         if not stack or not count.isdigit():
             continue

@@ -22,3 +22,11 @@ def test_shares_per_thread_and_the_under_filter(tmp_path):
     lines = ss.report(under, rows=1)
     assert lines[0] == "== thread (0x1): 8 samples"
     assert lines[2].split() == ["75.00%", "6", "launch", "(w.py)"]
+
+
+def test_reads_a_gzipped_profile(tmp_path):
+    import gzip
+
+    p = tmp_path / "spy.txt.gz"
+    p.write_bytes(gzip.compress(b"main (a.py:1);f (b.py:2) 3\n"))
+    assert ss.read(p)["all"][0] == 3
