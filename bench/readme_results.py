@@ -1,6 +1,8 @@
 """The README's table of current figures, generated from the committed run summaries (not typed by hand).
 
-    python bench/readme_results.py [--results bench/results]
+    python bench/readme_results.py [--results bench/results] [--write README.md]
+
+``--write``: put the table between the file's ``<!-- readme_results: start -->`` and ``<!-- readme_results: end -->``.
 
 One row per scene and setting: the baseline's and the full method's test PSNR as median [min, max] over seeds 0-2,
 the full method's gain (difference of the medians), and where the runs ran. The sources are the latest runs of the
@@ -25,6 +27,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import captures_table as ct  # noqa: E402
 import seed_medians as sm  # noqa: E402
+
+START, END = "<!-- readme_results: start -->", "<!-- readme_results: end -->"
 
 HEAD = ["scene", "setting", "machine", "baseline", "full", "full - baseline", "source"]
 
@@ -72,8 +76,19 @@ def rows(results: Path) -> list[str]:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--results", type=Path, default=Path(__file__).resolve().parent / "results")
+    ap.add_argument("--write", type=Path, default=None, help=f"replace the table between {START} and {END} here")
     args = ap.parse_args(argv)
-    print("\n".join(rows(args.results)))
+    table = "\n".join(rows(args.results))
+    if args.write is None:
+        print(table)
+        return 0
+    from switch_table import replace_between_markers  # (it imports warpgs, and so torch: only here)
+
+    try:
+        args.write.write_text(replace_between_markers(args.write.read_text(), table, START, END))
+    except ValueError as e:
+        ap.error(f"{args.write}: {e}")
+    print(f"wrote the table into {args.write}")
     return 0
 
 

@@ -201,13 +201,13 @@ def main(argv=None) -> int:
 README_START, README_END = "<!-- switch_table: start -->", "<!-- switch_table: end -->"
 
 
-def replace_between_markers(doc: str, table: str) -> str:
-    """``doc`` with the text between the README markers (kept) replaced by ``table``; a ValueError when the
-    markers are missing or out of order."""
-    i, j = doc.find(README_START), doc.find(README_END)
+def replace_between_markers(doc: str, table: str, start: str = README_START, end: str = README_END) -> str:
+    """``doc`` with the text between the markers ``start`` and ``end`` (kept; the switch table's by default)
+    replaced by ``table``; a ValueError when the markers are missing or out of order."""
+    i, j = doc.find(start), doc.find(end)
     if i < 0 or j < i:
-        raise ValueError(f"no {README_START} ... {README_END} pair to put the table between")
-    return doc[:i + len(README_START)] + "\n" + table.rstrip("\n") + "\n" + doc[j:]
+        raise ValueError(f"no {start} ... {end} pair to put the table between")
+    return doc[:i + len(start)] + "\n" + table.rstrip("\n") + "\n" + doc[j:]
 
 
 if __name__ == "__main__":

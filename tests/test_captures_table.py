@@ -123,3 +123,14 @@ def test_readme_results_rows_from_summaries(tmp_path):
     assert "| 15.00 [15.00, 15.00] (1 seed) | 15.50 [15.50, 15.50] (1 seed) | +0.50 |" in castle  # full from m369, not c369
     herz = next(r for r in out if r.startswith("| herz_jesus_p25, 9 views | 768x512"))
     assert "| - | 21.00 [21.00, 21.00] (1 seed) | - |" in herz
+
+
+def test_readme_current_figures_match_the_committed_summaries():
+    """The README's table between its readme_results markers is what bench/readme_results.py makes of the committed
+    run summaries: a figure typed by hand, or a summary changed without regenerating the table, fails here."""
+    from bench import readme_results as rr
+
+    root = Path(__file__).resolve().parents[1]
+    doc = (root / "README.md").read_text()
+    i, j = doc.index(rr.START) + len(rr.START), doc.index(rr.END)
+    assert doc[i:j].strip("\n").splitlines() == rr.rows(root / "bench" / "results")
