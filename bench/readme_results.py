@@ -12,7 +12,8 @@ current defaults:
   and lego's best baseline setting (``o_lego_best``, ``o_lego_best20k``) as rows of their own;
 - the captures at 384x256, 3000 it (H100, session 28's runs of today's default: ``s28/c369.txt`` baselines,
   ``s28/m369.txt`` full);
-- the captures at 768x512, 10,000 it (seed 0 H100, ``s28/i369.txt``; seeds 1-2 H200, ``s31/k369.txt``).
+- the captures at 768x512, 10,000 it (seed 0 H100, ``s28/i369.txt``; seeds 1-2 H200, ``s31/k369.txt``, and the five
+  runs session 31 did not finish in ``s32/k369.txt`` once it exists: bench/gpu_session32.sh k).
 """
 
 from __future__ import annotations
@@ -63,10 +64,12 @@ def rows(results: Path) -> list[str]:
     r28, r31 = results / "s28", results / "s31"
     small = ct.merged({k: v for k, v in ct.load(r28 / "c369.txt", "c").items() if k[2] == "baseline"},
                       ct.load(r28 / "m369.txt", "m"))
-    large = ct.merged(ct.load(r28 / "i369.txt", "i"), ct.load(r31 / "k369.txt", "k"))
+    later = [p for p in (results / "s32" / "k369.txt",) if p.is_file()]
+    large = ct.merged(ct.load(r28 / "i369.txt", "i"), ct.load(r31 / "k369.txt", "k"), *[ct.load(p, "k") for p in later])
+    large_source = ", ".join(["`s28/i369.txt`", "`s31/k369.txt`"] + [f"`{p.parent.name}/{p.name}`" for p in later])
     for runs, setting, machine, source in (
             (small, "384x256, 3000 it", "H100", "`s28/c369.txt`, `s28/m369.txt`"),
-            (large, "768x512 (images_4), 10,000 it", "seed 0 H100, seeds 1-2 H200", "`s28/i369.txt`, `s31/k369.txt`")):
+            (large, "768x512 (images_4), 10,000 it", "seed 0 H100, seeds 1-2 H200", large_source)):
         for scene, views in sorted({(s, n) for (s, n, _) in runs}):
             out.append(_row(f"{scene}, {views} views", setting, machine, runs.get((scene, views, "baseline"), {}),
                             runs.get((scene, views, "full"), {}), source))

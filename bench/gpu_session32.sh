@@ -1,0 +1,42 @@
+#!/usr/bin/env bash
+# GPU runs prepared in session 31 for the next session, after the packed wheels are installed in /tmp/site and the
+# scenes copied to $D (images_4 of castle_p30 and herz_jesus_p25 for phase k).
+#   T=seconds bash bench/gpu_session32.sh PHASE D RUNS
+# k: the five images_4 runs (768x512, 10,000 it) of the captures' default that session 31's device time did not
+#    finish, seed 2: castle_p30 9 views full, herz_jesus_p25 3 / 6 / 9 views full and 9 views baseline (spline path,
+#    3 poses: the default again since session 31). One call, 5 at a time. Copy $OUT/k369.txt to
+#    bench/results/s32/k369.txt; bench/readme_results.py reads it beside s31/k369.txt.
+# p: issue 15's host profile at 138k Gaussians without cProfile: py-spy (from .device/pyspy, installed into
+#    /tmp/pyspy) records bench/rasterizer_host.py --loop 10 for warpgs, then for gsplat (from .device/gsplat), at
+#    200 Hz with native frames; the raw profiles gzipped and bench/spy_summary.py's summaries into $OUT. Then
+#    bench/rasterizer.py's three configurations (7 rounds), to put the profile beside a ratio of the same machine.
+set -u
+source "$(dirname "${BASH_SOURCE[0]}")/gpu_one.sh"
+session_env "$@"; P=$1; D=$2; R=$3; shift 3
+export R D T END=$(( $(date +%s) + ${T:-540} ))  # every run of the call stops by then
+case $P in
+k)
+  FLOAT="--set train.path_floaters_paths=spline --set train.path_floaters_poses=3"
+  { echo "k_castle_p30_9v_full_s2 full castle_p30 9 2 $FLOAT"
+    for v in 3 6 9; do echo "k_herz_jesus_p25_${v}v_full_s2 full herz_jesus_p25 $v 2 $FLOAT"; done
+    echo "k_herz_jesus_p25_9v_baseline_s2 baseline herz_jesus_p25 9 2 $FLOAT"
+  } | DS=4 IT=10000 xargs -P ${JOBS:-5} -L 1 bash -c 'one "$@"' _ | grep -v "rc=0"
+  summary k_ k369.txt
+  ;;
+p)
+  python3 -m pip install -q --no-index --no-deps --target /tmp/site .device/gsplat/*.whl 2>/dev/null
+  python3 -m pip install -q --no-index --no-deps --target /tmp/pyspy .device/pyspy/*.whl 2>/dev/null
+  for who in warpgs gsplat; do
+    timeout 200 /tmp/pyspy/bin/py-spy record --native --idle --threads -r 200 -f raw -o "$OUT/spy_$who.txt" -- \
+      python3 bench/rasterizer_host.py --loop 10 --only $who > "$OUT/spy_$who.log" 2>&1
+    tail -2 "$OUT/spy_$who.log"
+    python3 bench/spy_summary.py "$OUT/spy_$who.txt" --under f_b --rows 60 > "$OUT/spy_${who}_summary.txt" 2>&1
+    head -40 "$OUT/spy_${who}_summary.txt"
+    gzip -f "$OUT/spy_$who.txt"
+  done
+  timeout ${T:-240} python3 bench/rasterizer.py --warmup 10 --iters 20 --rounds ${ROUNDS:-7} --out "$OUT/rasterizer_cuda.json" \
+    --configs 138766x648x420,555000x1280x720,1100000x1920x1080,138766x648x420 2>&1 | tee "$OUT/rasterizer.log" \
+    | grep -E "Gaussians|ratio|paired|wrote"
+  ;;
+*) echo "unknown phase $P"; exit 2 ;;
+esac
