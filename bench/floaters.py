@@ -35,14 +35,13 @@ def psnr(a: torch.Tensor, b: torch.Tensor) -> float:
     return -10 * math.log10(max(float(((a.clamp(0, 1) - b) ** 2).mean()), 1e-12))
 
 
-def diagnose(run: Path, device: str, data_root: str | None, ratio: float, min_input: float, top: int,
-             sweep: tuple[float, ...] = ()) -> dict:
+def load_run(run: Path, device: str, data_root: str | None):
+    """A finished run folder as the run saw it: (config, scene, trained model with every SH band on, its far field
+    or None, the background colour, the training cameras, the test cameras; cameras as tensors on ``device``)."""
     from warpgs.config import build_config
     from warpgs.configio import read_yaml
     from warpgs.farfield import ElevationFarField
     from warpgs.pipelines.sparse import load_scene_for
-    from warpgs.strategy import contribution
-    from warpgs.clearance import PathClearance, segment_distance
     from warpgs.train import background_colour, load_trained
 
     cfg = build_config([(str(run / "config.yaml"), read_yaml(run / "config.yaml"))])
@@ -53,9 +52,18 @@ def diagnose(run: Path, device: str, data_root: str | None, ratio: float, min_in
     model = load_trained(run / "point_cloud.ply", device=device)
     model.active_sh_degree = model.max_sh_degree
     ff = ElevationFarField.load(run / "far_field.json") if (run / "far_field.json").is_file() else None
-    bgc = torch.tensor(background_colour(cfg, scene), device=device)
+    bgc = torch.tensor(background_colour(cfg, scene), dtype=torch.float32, device=device)
     train = [c.to_torch(device) for c in scene.train]
     test = [c.to_torch(device) for c in scene.test]
+    return cfg, scene, model, ff, bgc, train, test
+
+
+def diagnose(run: Path, device: str, data_root: str | None, ratio: float, min_input: float, top: int,
+             sweep: tuple[float, ...] = ()) -> dict:
+    from warpgs.strategy import contribution
+    from warpgs.clearance import PathClearance, segment_distance
+
+    cfg, scene, model, ff, bgc, train, test = load_run(run, device, data_root)
 
     def bg(c):
         return ff.image(c.viewmat, c.K, c.width, c.height) if ff is not None else bgc

@@ -26,7 +26,7 @@ import torch
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from bench.floaters import psnr  # noqa: E402
+from bench.floaters import load_run, psnr  # noqa: E402
 
 SETTINGS = {"spline3": ("spline", 3), "both9": ("both", 9)}
 
@@ -54,24 +54,9 @@ def edge_shares(means: torch.Tensor, cams, margin: float = 0.05) -> tuple[float,
 
 def diff(run: Path, device: str, data_root: str | None) -> dict:
     from warpgs.clearance import PathFloaters
-    from warpgs.config import build_config
-    from warpgs.configio import read_yaml
-    from warpgs.farfield import ElevationFarField
     from warpgs.model import GaussianModel
-    from warpgs.pipelines.sparse import load_scene_for
-    from warpgs.train import background_colour, load_trained
 
-    cfg = build_config([(str(run / "config.yaml"), read_yaml(run / "config.yaml"))])
-    if data_root:
-        cfg.data.root = data_root
-    cfg.train.device = device
-    scene = load_scene_for(cfg)
-    model = load_trained(run / "point_cloud.ply", device=device)
-    model.active_sh_degree = model.max_sh_degree
-    ff = ElevationFarField.load(run / "far_field.json") if (run / "far_field.json").is_file() else None
-    bgc = torch.tensor(background_colour(cfg, scene), dtype=torch.float32, device=device)
-    train = [c.to_torch(device) for c in scene.train]
-    test = [c.to_torch(device) for c in scene.test]
+    cfg, scene, model, ff, bgc, train, test = load_run(run, device, data_root)
     c0 = scene.train[0]
     found = {}
     for name, (paths, poses) in SETTINGS.items():
