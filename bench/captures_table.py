@@ -37,8 +37,9 @@ median).
   the full method's 3-view variants ``pseudo.trajectory.n_frames=17`` and ``full.pseudo_weight=2``
   (``s30/x3.txt``, ``x_n17_...`` / ``x_pw2_...``) against session 28's default; then the images_4 runs (768x512,
   10,000 it, seed 0) of session 28 (``s28/i369.txt``) -> those with session 30's default (``s30/i369.txt``);
-- session 31 (``bench/gpu_session31.sh j``, for the next session): images_4, seeds 0-2, session 28's path-floater
-  pass (seed 0 ``s28/i369.txt``, seeds 1-2 ``s31/k369.txt``) beside session 30's (``s30/i369.txt``, ``s31/j369.txt``).
+- session 31 (``bench/gpu_session31.sh j``): images_4, seeds 0-2, session 28's path-floater pass
+  (``images4_default``: seed 0 ``s28/i369.txt``, seeds 1-2 ``s31/k369.txt``, later ``s32/k369.txt``) beside session
+  30's (``s30/i369.txt``, ``s31/j369.txt``).
 """
 
 from __future__ import annotations
@@ -161,16 +162,35 @@ def merged(*parts: dict) -> dict:
     return out
 
 
+def session28_default(results: Path) -> dict:
+    """The captures' default since session 28 at 384x256, 3000 it, seeds 0-2: the baselines of ``s28/c369.txt`` (the
+    far field on a cylinder) and the full runs of ``s28/m369.txt`` (that and ``full.pseudo_mask=all``)."""
+    cyl = load(results / "s28" / "c369.txt", "c")
+    return merged({k: v for k, v in cyl.items() if k[2] == "baseline"}, load(results / "s28" / "m369.txt", "m"))
+
+
+def images4_default_files(results: Path) -> list[Path]:
+    """The summaries of the captures' default (spline path, 3 poses) at images_4, 10,000 it: seed 0 (``s28/i369.txt``),
+    seeds 1-2 (``s31/k369.txt``) and the runs session 31 did not finish (``s32/k369.txt``, once it exists)."""
+    later = results / "s32" / "k369.txt"
+    return [results / "s28" / "i369.txt", results / "s31" / "k369.txt"] + ([later] if later.is_file() else [])
+
+
+def images4_default(results: Path) -> dict:
+    """{(scene, views, method): {seed: psnr}} of ``images4_default_files``."""
+    return merged(*[load(f, "i" if f.parent.name == "s28" else "k") for f in images4_default_files(results)])
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--results", default=str(Path(__file__).resolve().parent / "results"))
     ap.add_argument("--session", type=int, choices=(20, 21, 22, 26, 27, 28, 29, 30, 31), default=21)
     args = ap.parse_args(argv)
     if args.session == 31:
-        r28, r30, r31 = (Path(args.results) / f"s{n}" for n in (28, 30, 31))
-        old = merged(load(r28 / "i369.txt", "i"), load(r31 / "k369.txt", "k"))
+        r30, r31 = (Path(args.results) / f"s{n}" for n in (30, 31))
         new = merged(load(r30 / "i369.txt", "i"), load(r31 / "j369.txt", "j"))
-        print("\n".join(table([("spline, 3 poses (session 28)", old), ("both paths, 9 poses (session 30)", new)])))
+        print("\n".join(table([("spline, 3 poses (session 28)", images4_default(Path(args.results))),
+                               ("both paths, 9 poses (session 30)", new)])))
         return 0
     r20, r21 = Path(args.results) / "s20", Path(args.results) / "s21"
     s20 = ("session 20 default", load(r20 / "captures_d.txt", "d"))
@@ -197,7 +217,7 @@ def main(argv=None) -> int:
         r27, r28 = Path(args.results) / "s27", Path(args.results) / "s28"
         cyl = load(r28 / "c369.txt", "c")
         mask_all = load(r28 / "m369.txt", "m")
-        default = merged({k: v for k, v in cyl.items() if k[2] == "baseline"}, mask_all)
+        default = session28_default(Path(args.results))
         if args.session == 30:
             r30 = Path(args.results) / "s30"
             print("\n".join(table([("session 28 default", default), ("both paths, 9 poses", load(r30 / "b369.txt", "b"))])))

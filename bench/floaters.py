@@ -58,6 +58,22 @@ def load_run(run: Path, device: str, data_root: str | None):
     return cfg, scene, model, ff, bgc, train, test
 
 
+def render_view(model, cam, far_field, background: torch.Tensor, keep: torch.Tensor | None = None) -> torch.Tensor:
+    """``model``'s image of ``cam`` (without gradients) over the run's far field (or ``background`` where it had none),
+    with only the Gaussians of the bool mask ``keep`` where given."""
+    from warpgs.model import GaussianModel
+
+    m = model
+    if keep is not None:
+        P = {k: v.detach()[keep] for k, v in model.params.items()}
+        m = GaussianModel(P["means"], P["quats"], P["scales"], P["opacities"], P["sh0"], P["shN"],
+                          max_sh_degree=model.max_sh_degree)
+        m.active_sh_degree = model.active_sh_degree
+    bg = far_field.image(cam.viewmat, cam.K, cam.width, cam.height) if far_field is not None else background
+    with torch.no_grad():
+        return m.render(cam.viewmat, cam.K, cam.width, cam.height, background=bg).image
+
+
 def diagnose(run: Path, device: str, data_root: str | None, ratio: float, min_input: float, top: int,
              sweep: tuple[float, ...] = ()) -> dict:
     from warpgs.strategy import contribution
@@ -65,20 +81,8 @@ def diagnose(run: Path, device: str, data_root: str | None, ratio: float, min_in
 
     cfg, scene, model, ff, bgc, train, test = load_run(run, device, data_root)
 
-    def bg(c):
-        return ff.image(c.viewmat, c.K, c.width, c.height) if ff is not None else bgc
-
     def render(c, keep=None):
-        from warpgs.model import GaussianModel
-
-        m = model
-        if keep is not None:
-            P = {k: v.detach()[keep] for k, v in model.params.items()}
-            m = GaussianModel(P["means"], P["quats"], P["scales"], P["opacities"], P["sh0"], P["shN"],
-                              max_sh_degree=model.max_sh_degree)
-            m.active_sh_degree = model.active_sh_degree
-        with torch.no_grad():
-            return m.render(c.viewmat, c.K, c.width, c.height, background=bg(c)).image
+        return render_view(model, c, ff, bgc, keep)
 
     w_in = contribution(model, train)
     suspects = torch.zeros(len(model), dtype=torch.bool, device=device)

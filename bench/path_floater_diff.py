@@ -26,7 +26,7 @@ import torch
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from bench.floaters import load_run, psnr  # noqa: E402
+from bench.floaters import load_run, psnr, render_view  # noqa: E402
 
 SETTINGS = {"spline3": ("spline", 3), "both9": ("both", 9)}
 
@@ -54,7 +54,6 @@ def edge_shares(means: torch.Tensor, cams, margin: float = 0.05) -> tuple[float,
 
 def diff(run: Path, device: str, data_root: str | None) -> dict:
     from warpgs.clearance import PathFloaters
-    from warpgs.model import GaussianModel
 
     cfg, scene, model, ff, bgc, train, test = load_run(run, device, data_root)
     c0 = scene.train[0]
@@ -66,18 +65,6 @@ def diff(run: Path, device: str, data_root: str | None) -> dict:
         found[name] = pf.find(model, train, bgc)
     found["extra"] = found["both9"] & ~found["spline3"]
 
-    def render(c, drop=None):
-        m = model
-        if drop is not None:
-            keep = ~drop
-            P = {k: v.detach()[keep] for k, v in model.params.items()}
-            m = GaussianModel(P["means"], P["quats"], P["scales"], P["opacities"], P["sh0"], P["shN"],
-                              max_sh_degree=model.max_sh_degree)
-            m.active_sh_degree = model.active_sh_degree
-        bg = ff.image(c.viewmat, c.K, c.width, c.height) if ff is not None else bgc
-        with torch.no_grad():
-            return m.render(c.viewmat, c.K, c.width, c.height, background=bg).image
-
     out = {"run": str(run), "gaussians": len(model), "found": {k: int(v.sum()) for k, v in found.items()}}
     outside, edge = edge_shares(model.means.detach()[found["extra"]], train)
     out["extra_outside_every_input"], out["extra_near_the_edge"] = outside, edge
@@ -85,7 +72,7 @@ def diff(run: Path, device: str, data_root: str | None) -> dict:
     views = []
     for c in test:
         gt = c.image.to(device)
-        views.append({k: psnr(render(c, drop), gt) for k, drop in
+        views.append({k: psnr(render_view(model, c, ff, bgc, None if drop is None else ~drop), gt) for k, drop in
                       (("model", None), ("without_spline3", found["spline3"]), ("without_both9", found["both9"]),
                        ("without_extra", found["extra"]))})
     out["test_views"] = views

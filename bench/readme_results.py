@@ -61,15 +61,10 @@ def rows(results: Path) -> list[str]:
     for key, setting in (("o_lego_best", "10,000 it"), ("o_lego_best20k", "20,000 it")):
         out.append(_row("Blender lego, 8 views", f"baseline + opacity noise 0.8, SH degree 1, {setting}", "H200",
                         o.get(key, {}), {}, "`s31/o.txt`"))
-    r28, r31 = results / "s28", results / "s31"
-    small = ct.merged({k: v for k, v in ct.load(r28 / "c369.txt", "c").items() if k[2] == "baseline"},
-                      ct.load(r28 / "m369.txt", "m"))
-    later = [p for p in (results / "s32" / "k369.txt",) if p.is_file()]
-    large = ct.merged(ct.load(r28 / "i369.txt", "i"), ct.load(r31 / "k369.txt", "k"), *[ct.load(p, "k") for p in later])
-    large_source = ", ".join(["`s28/i369.txt`", "`s31/k369.txt`"] + [f"`{p.parent.name}/{p.name}`" for p in later])
+    large_source = ", ".join(f"`{p.parent.name}/{p.name}`" for p in ct.images4_default_files(results))
     for runs, setting, machine, source in (
-            (small, "384x256, 3000 it", "H100", "`s28/c369.txt`, `s28/m369.txt`"),
-            (large, "768x512 (images_4), 10,000 it", "seed 0 H100, seeds 1-2 H200", large_source)):
+            (ct.session28_default(results), "384x256, 3000 it", "H100", "`s28/c369.txt`, `s28/m369.txt`"),
+            (ct.images4_default(results), "768x512 (images_4), 10,000 it", "seed 0 H100, seeds 1-2 H200", large_source)):
         for scene, views in sorted({(s, n) for (s, n, _) in runs}):
             out.append(_row(f"{scene}, {views} views", setting, machine, runs.get((scene, views, "baseline"), {}),
                             runs.get((scene, views, "full"), {}), source))
