@@ -12,7 +12,12 @@ from __future__ import annotations
 import argparse
 import re
 import statistics
+import sys
 from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from captures_table import cell  # noqa: E402  (median [min, max], as every capture table writes it)
 
 _LINE = re.compile(r"^(?P<name>\S+)_s(?P<seed>\d+) (?P<psnr>[-\d.]+|nan) (?P<n>\d+)")
 
@@ -31,9 +36,8 @@ def read(paths: list[Path]) -> dict[str, dict[int, tuple[float, int]]]:
 def table(rows: dict[str, dict[int, tuple[float, int]]]) -> list[str]:
     out = ["| run | test PSNR, median [min, max] | seeds | Gaussians (median) |", "|---|---|---|---|"]
     for name, seeds in rows.items():
-        psnr = [p for p, _ in seeds.values()]
         n = statistics.median(g for _, g in seeds.values())
-        out.append(f"| {name} | {statistics.median(psnr):.2f} [{min(psnr):.2f}, {max(psnr):.2f}] | "
+        out.append(f"| {name} | {cell({s: p for s, (p, _) in seeds.items()})} | "
                    f"{', '.join(str(s) for s in sorted(seeds))} | {n:,.0f} |")
     return out
 
