@@ -10,6 +10,11 @@
 #    /tmp/pyspy) records bench/rasterizer_host.py --loop 10 for warpgs, then for gsplat (from .device/gsplat), at
 #    200 Hz with native frames; the raw profiles gzipped and bench/spy_summary.py's summaries into $OUT. Then
 #    bench/rasterizer.py's three configurations (7 rounds), to put the profile beside a ratio of the same machine.
+# L: lego 8 views (10,000 it, seeds 0-2) with session 17's best baseline setting (DropGaussian 0.2, opacity noise 0.8,
+#    SH degree 1; 23.96 in session 31) and DropGaussian's own Blender recipe, one change at a time (DCVL-3D/
+#    DropGaussian_release: white background without random backgrounds, no pruning of large Gaussians, 10,000 random
+#    starting points in [-1, 1]^3 with opacity 0.1), all three together, and all three at 20,000 it. Needs blender_lego
+#    in $D. Summary lines in $OUT/L.txt (python bench/seed_medians.py prints the medians).
 set -u
 source "$(dirname "${BASH_SOURCE[0]}")/gpu_one.sh"
 session_env "$@"; P=$1; D=$2; R=$3; shift 3
@@ -37,6 +42,26 @@ p)
   timeout ${T:-240} python3 bench/rasterizer.py --warmup 10 --iters 20 --rounds ${ROUNDS:-7} --out "$OUT/rasterizer_cuda.json" \
     --configs 138766x648x420,555000x1280x720,1100000x1920x1080,138766x648x420 2>&1 | tee "$OUT/rasterizer.log" \
     | grep -E "Gaussians|ratio|paired|wrote"
+  ;;
+L)
+  BEST="--set train.drop_rate=0.2 --set train.opacity_noise=0.8 --set model.sh_degree=1"
+  WHITE="--set train.random_background=false"
+  NOBIG="--set strategy.prune_scale3d=1000"
+  BOX="--set model.init=box --set model.init_num=10000 --set model.init_box=[-1,-1,-1,1,1,1]"
+  lego() {  # NAME SEED ITERATIONS [--set k=v ...]: the baseline on lego
+    local name=$1 seed=$2 it=$3; shift 3
+    sparse_run "$name" --method baseline --data blender --scene lego --views 8 --iterations "$it" --seed "$seed" \
+      --set train.eval_every=$((it / 10)) "$@"
+  }
+  export -f lego
+  { for s in 0 1 2; do
+      echo "lego L_all20k_s$s $s 20000 $BEST $WHITE $NOBIG $BOX"
+      echo "lego L_white_s$s $s 10000 $BEST $WHITE"
+      echo "lego L_nobig_s$s $s 10000 $BEST $NOBIG"
+      echo "lego L_box_s$s $s 10000 $BEST $BOX"
+      echo "lego L_all_s$s $s 10000 $BEST $WHITE $NOBIG $BOX"
+    done; } | xargs -P ${JOBS:-15} -L 1 bash -c '"$@"' _ | grep -v "rc=0"
+  summary L_ L.txt
   ;;
 *) echo "unknown phase $P"; exit 2 ;;
 esac
