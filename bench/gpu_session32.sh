@@ -15,6 +15,12 @@
 #    DropGaussian_release: white background without random backgrounds, no pruning of large Gaussians, 10,000 random
 #    starting points in [-1, 1]^3 with opacity 0.1), all three together, and all three at 20,000 it. Needs blender_lego
 #    in $D. Summary lines in $OUT/L.txt (python bench/seed_medians.py prints the medians).
+# r: issue 15's host cuts at 138k (session 32: one host read without the largest depth on CUDA, camera tuples made
+#    once per view and not rewritten into a launch, no float()/contiguous() calls on float32 contiguous inputs):
+#    the CUDA rasterizer tests; bench/rasterizer.py at 138,766 Gaussians, 15 rounds, the code before them
+#    (.device/old.tar: git archive of d8c358d's warpgs, bench and tests, unpacked into /tmp/old) and after, twice in
+#    turn; then the three configurations (7 rounds, the first again at the end); then fern's baseline trained (3
+#    views, 3000 it) and bench/rasterizer.py on its Gaussians (SH degree 3) at 1x, 2x and 3x the test view.
 set -u
 source "$(dirname "${BASH_SOURCE[0]}")/gpu_one.sh"
 session_env "$@"; P=$1; D=$2; R=$3; shift 3
@@ -62,6 +68,27 @@ L)
       echo "lego L_all_s$s $s 10000 $BEST $WHITE $NOBIG $BOX"
     done; } | xargs -P ${JOBS:-15} -L 1 bash -c '"$@"' _ | grep -v "rc=0"
   summary L_ L.txt
+  ;;
+r)
+  python3 -m pip install -q --no-index --no-deps --target /tmp/site .device/gsplat/*.whl 2>/dev/null
+  timeout 240 python3 -m pytest -q -x -p no:warnings tests/test_rasterizer.py tests/test_binning.py tests/test_launch.py \
+    > "$OUT/tests_cuda.log" 2>&1; tail -3 "$OUT/tests_cuda.log"
+  mkdir -p /tmp/old && tar -xf .device/old.tar -C /tmp/old
+  AB="--warmup 10 --iters 20 --rounds 15 --configs 138766x648x420"
+  for k in 1 2; do
+    (cd /tmp/old && timeout 200 python3 bench/rasterizer.py $AB --out "$OUT/ab_old_$k.json" 2>&1 | grep -E "warpgs  |gsplat  |ratio|paired" | sed "s/^/old $k: /")
+    timeout 200 python3 bench/rasterizer.py $AB --out "$OUT/ab_new_$k.json" 2>&1 | grep -E "warpgs  |gsplat  |ratio|paired" | sed "s/^/new $k: /"
+  done
+  timeout 240 python3 bench/rasterizer.py --warmup 10 --iters 20 --rounds 7 --out "$OUT/rasterizer_cuda.json" \
+    --configs 138766x648x420,555000x1280x720,1100000x1920x1080,138766x648x420 2>&1 | tee "$OUT/rasterizer.log" \
+    | grep -E "Gaussians|ratio|paired"
+  [ -f "$R/fern_base/point_cloud.ply" ] || timeout 150 python3 -m warpgs.pipelines.sparse --method baseline --data llff \
+    --data-root "$D" --iterations 3000 --set model.init=frustum --device cuda --no-progress --out "$R/fern_base" \
+    > "$OUT/fern_base.log" 2>&1
+  tail -2 "$OUT/fern_base.log"
+  timeout 200 python3 bench/rasterizer.py --ply "$R/fern_base/point_cloud.ply" --data llff --data-root "$D" \
+    --scales 1,2,3 --warmup 10 --iters 20 --rounds 7 --out "$OUT/rasterizer_cuda_trained.json" 2>&1 \
+    | tee "$OUT/rasterizer_trained.log" | grep -E "Gaussians|ratio|paired"
   ;;
 *) echo "unknown phase $P"; exit 2 ;;
 esac

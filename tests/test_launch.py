@@ -53,6 +53,43 @@ def test_fast_launch_matches_wp_launch_with_structs_2d_arrays_and_scalars():
     assert torch.equal(got, want)  # the first call's output is untouched
 
 
+def test_a_struct_given_as_the_same_tuple_again_is_not_rewritten_and_another_tuple_is():
+    g = torch.Generator().manual_seed(1)
+    a, b, x = torch.rand(4, 3, generator=g), torch.rand(4, 3, generator=g), torch.rand(4, 3, generator=g)
+    first = (a, 2.0)
+    got = torch.zeros(4, 3)
+    fast_launch(_axpy, (4, 3), "cpu", None, first, x, 0, got)
+    assert torch.equal(got, 2.0 * x + a)
+    a.add_(1.0)  # the same tuple: its tensor's memory is read at the launch, as before
+    fast_launch(_axpy, (4, 3), "cpu", None, first, x, 0, got)
+    assert torch.equal(got, 2.0 * x + a)
+    fast_launch(_axpy, (4, 3), "cpu", None, (b, 2.0), x, 0, got)  # an equal-looking new tuple: written
+    assert torch.equal(got, 2.0 * x + b)
+    fast_launch(_axpy, (4, 3), "cpu", None, [a, -1.0], x, 0, got)  # a list is written every time
+    assert torch.equal(got, -1.0 * x + a)
+    with pytest.raises(ValueError, match="'p.a'"):  # a failed write is not remembered as written
+        fast_launch(_axpy, (4, 3), "cpu", None, (a.double(), 1.0), x, 0, got)
+    fast_launch(_axpy, (4, 3), "cpu", None, first, x, 0, got)
+    assert torch.equal(got, 2.0 * x + a)
+
+
+def test_render_camera_tuple_is_made_once_per_view_and_follows_the_matrices_memory():
+    from warpgs import render
+
+    vm, K = torch.eye(4), torch.tensor([[10.0, 0, 8], [0, 10.0, 6], [0, 0, 1]])
+    cam = render._camera(vm, K, 16, 12, 0.3, False)
+    assert render._camera(vm, K, 16, 12, 0.3, False) is cam
+    assert render._camera(vm.detach(), K, 16, 12, 0.3, False) is cam  # another tensor on the same memory
+    assert render._camera(vm, K, 16, 12, 0.3, True) is not cam  # other numbers: another tuple
+    assert render._camera(vm.clone(), K, 16, 12, 0.3, False) is not cam  # other memory: another tuple
+    vm[0, 3] = 5.0  # changed in place: the tuple's view reads it
+    assert float(cam[0][0, 0, 3]) == 5.0
+    for k in range(render._CAMERAS_KEPT + 1):  # many views: the oldest go
+        render._camera(torch.eye(4) * (k + 2), K, 16, 12, 0.3, False)
+    assert len(render._CAMERAS) <= render._CAMERAS_KEPT
+    assert render._camera(vm, K, 16, 12, 0.3, False) is not cam
+
+
 @pytest.mark.parametrize("bad, why", [
     (lambda x: x.double(), "torch.float32"),          # wrong scalar type
     (lambda x: x[:, :2].contiguous(), r"followed by \[3\]"),  # a vec3 array needs a trailing 3

@@ -296,7 +296,9 @@ def _scalar_setter(c):
 
 def _struct_setter(label: str, stype, c):
     """Writes a tuple of field values (torch tensors for array fields), in the struct's field order,
-    into the struct's packed value ``c`` in place."""
+    into the struct's packed value ``c`` in place. Given the same tuple object as the call before, it writes
+    nothing: ``c`` is this launcher's own and already holds those values (a tuple cannot change, and its tensors
+    keep their memory; ``warpgs.render._camera`` hands out one tuple per view)."""
     fields = []
     for name, var in stype.vars.items():
         sub = getattr(c, name)  # a view into ``c``'s memory for arrays and nested structs
@@ -307,13 +309,19 @@ def _struct_setter(label: str, stype, c):
         else:
             fields.append(functools.partial(setattr, c, name))
     n_fields = len(fields)
+    last = None  # the tuple written last (a reference: it cannot be another object at the same address)
 
     def set_struct(values):
+        nonlocal last
+        if values is last:
+            return
         if len(values) != n_fields:
             raise ValueError(f"kernel argument {label!r} takes {n_fields} fields "
                              f"({', '.join(stype.vars)}), got {len(values)}")
+        last = None  # a field that fails leaves ``c`` part written
         for f, v in zip(fields, values):
             f(v)
+        last = values if type(values) is tuple else None  # a list could change in place
     return set_struct
 
 

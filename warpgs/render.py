@@ -17,6 +17,7 @@ quaternions (w, x, y, z), scales as standard deviations, opacities in [0, 1]).
 
 from __future__ import annotations
 
+import collections
 import functools
 import math
 import struct
@@ -86,10 +87,34 @@ def _zero_input(shape, device) -> torch.Tensor:
     return view
 
 
+_CAMERAS: collections.OrderedDict = collections.OrderedDict()  # ``_camera``'s tuples, the latest used last
+_CAMERAS_KEPT = 32
+
+
 def _camera(viewmat, K, width, height, eps2d, antialiased):
-    """The fields of ``kp.Camera`` for one view: viewmat [4, 4] and K [3, 3] stay on their device as
-    one-element arrays. (A ``kp.Gaussians`` argument is the tuple (means, quats, scales, opacities).)"""
-    return (viewmat.reshape(1, 4, 4), K.reshape(1, 3, 3), width, height, eps2d, int(antialiased))
+    """The fields of ``kp.Camera`` for one view: viewmat [4, 4] and K [3, 3] (contiguous float32, as ``rasterize``
+    makes them) stay on their device as one-element arrays. (A ``kp.Gaussians`` argument is the tuple (means,
+    quats, scales, opacities).)
+
+    The tuple of a view is made once and handed out again while it is among the last ``_CAMERAS_KEPT`` used: it is
+    found by the two matrices' memory (their data pointers; the tuple's views keep that memory alive, so no other
+    tensor can have been given it since) and the numbers. A render's forward and backward, and a training run's
+    steps on one camera, pass the same tuple, and the launcher writes a struct argument only when it is given
+    another tuple than last time (``warpgs._warp._struct_setter``). Matrices changed in place are read as they are
+    at the launch, as before: the views share their memory."""
+    key = (viewmat.data_ptr(), K.data_ptr(), width, height, eps2d, antialiased)
+    got = _CAMERAS.get(key)
+    if got is None or got[0].data_ptr() != key[0] or got[1].data_ptr() != key[1] or got[0].device != viewmat.device:
+        # (a view whose memory moved since, by an in-place resize of its tensor, is made again)
+        got = _CAMERAS[key] = (viewmat.reshape(1, 4, 4), K.reshape(1, 3, 3), width, height, eps2d, int(antialiased))
+        if len(_CAMERAS) > _CAMERAS_KEPT:
+            _CAMERAS.popitem(last=False)
+    else:
+        try:
+            _CAMERAS.move_to_end(key)
+        except KeyError:  # another thread's render dropped it meanwhile: it is still this view's tuple
+            pass
+    return got
 
 
 def _project(means, quats, scales, opacities, viewmat, K, width, height, eps2d, near, far, antialiased, dev, stream):
@@ -184,11 +209,16 @@ def _bin_gaussians(means2d, radii, depths, conics, opac_eff, colors, splats, off
     ``ranges`` [tiles, 2] int32 (zeros on entry) with each tile's [start, end) in the sorted list; on CUDA the
     forward compositing kernel finds them in the keys itself and writes them there.
 
-    A key is the tile id above the depth's float bits less those of the near plane ``near`` (every depth on screen
-    is at least that), and the one host read of a render takes the largest depth's bits with the count: the
-    shift is the width of that difference (``_key_shift``; 27 bits while the largest depth is below 65,536 times
-    the near plane, instead of 32), so the radix sort passes over fewer key bits (five 8-bit passes instead of six
-    up to 8,192 tiles, a 1920x1080 image). The order is the same as with the raw bits, so the render is too.
+    A key is the tile id above the depth's float bits (every depth on screen is positive, so its bits sort as the
+    depth does). On the CPU the depth part is those bits less the near plane's ``near``, and the one host read of a
+    render takes the largest depth's bits with the count: the shift is the width of that difference
+    (``_key_shift``; 27 bits while the largest depth is below 65,536 times the near plane, instead of 32), so the
+    CPU's radix sort, whose passes are its cost, makes fewer. On CUDA the depth keeps its raw 32 bits (the shift is
+    32) and the host read is the count alone: the largest depth's reduction and the tensors that gather the two
+    cost the host about as much as the GPU spends on the sort's extra 8-bit pass (six instead of five at up to
+    8,192 tiles, whose even count also spares the native sort its copy back into the first buffer), and a render
+    of up to a few hundred thousand Gaussians waits on its host, not on its GPU (issue 15). The order is the same
+    either way, so the render is too.
 
     ``capacity``: the key buffers hold that many entries whatever the count, so nothing is read on the host
     (a CUDA graph can hold the render; ``warpgs.graphstep``): the unused entries are padding keys that sort
@@ -199,15 +229,17 @@ def _bin_gaussians(means2d, radii, depths, conics, opac_eff, colors, splats, off
     if dev is None:
         dev, stream = device_of(means2d), launch_stream(means2d)
     n = means2d.shape[0]
-    shift, base = 32, 0  # a fixed capacity: the depth's raw bits (no host read to size them by)
+    shift, base = 32, 0  # CUDA, or a fixed capacity: the depth's raw bits
     if capacity is None:
         count = 0
-        if n:  # the one host sync of a render: the count sizes the key buffers, the largest depth the keys
-            # (the two int32 read as one int64, low half first: one scalar copy, as int() of the count alone made)
+        if n and dev == "cpu":  # the one host read of a render: the count sizes the key buffers, the largest depth
+            # the keys (the two int32 read as one int64, low half first: one scalar copy)
             both = torch.stack((offsets[-1], depths.view(torch.int32).amax())).view(torch.int64).item()
             count, top = both & 0xFFFFFFFF, both >> 32
             base = _float_bits(near)
             shift = _key_shift(top - base)
+        elif n:  # the one host sync of a CUDA render: the count alone
+            count = offsets[-1].item()
         keys = torch.empty(2 * count, device=means2d.device, dtype=torch.int64)  # the sort's double buffer
         values = torch.empty(2 * count, device=means2d.device, dtype=torch.int32)
     else:
@@ -394,6 +426,11 @@ def _shape_matches(got, shape) -> bool:
     return True
 
 
+def _f32(t: torch.Tensor) -> torch.Tensor:
+    """``t.float().contiguous()``, without the two calls where ``t`` already is both (the usual case)."""
+    return t if t.dtype is torch.float32 and t.is_contiguous() else t.float().contiguous()
+
+
 def _check_finite(named: dict[str, torch.Tensor]):
     for name, t in named.items():
         if not bool(torch.isfinite(t).all()):
@@ -480,8 +517,10 @@ def rasterize(
     if not (0.0 < near_plane < far_plane):
         _fail("near_plane", f"must satisfy 0 < near_plane < far_plane, got {near_plane}, {far_plane}")
 
-    means, quats, scales, opacities, colors = (t.float().contiguous() for t in (means, quats, scales, opacities, colors))
-    viewmat, K, background = (t.detach().float().contiguous() for t in (viewmat, K, background))
+    means, quats, scales, opacities, colors = (_f32(means), _f32(quats), _f32(scales), _f32(opacities), _f32(colors))
+    viewmat, K, background = (_f32(viewmat.detach() if viewmat.requires_grad else viewmat),
+                              _f32(K.detach() if K.requires_grad else K),
+                              _f32(background.detach() if background.requires_grad else background))
     if check_finite:
         _check_finite(dict(means=means, quats=quats, scales=scales, opacities=opacities, colors=colors,
                            viewmat=viewmat, K=K, background=background if backdrop is None else backdrop))
