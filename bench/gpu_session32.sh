@@ -19,7 +19,7 @@
 #    once per view and not rewritten into a launch, no float()/contiguous() calls on float32 contiguous inputs):
 #    the CUDA rasterizer tests; bench/rasterizer.py at 138,766 Gaussians, 15 rounds, the code before them
 #    (.device/old.tar: git archive of d8c358d's warpgs, bench and tests, unpacked into /tmp/old) and after, twice in
-#    turn; then the three configurations (7 rounds, the first again at the end); then fern's baseline trained (3
+#    turn. t: the three configurations (7 rounds, the first again at the end); then fern's baseline trained (3
 #    views, 3000 it) and bench/rasterizer.py on its Gaussians (SH degree 3) at 1x, 2x and 3x the test view.
 set -u
 source "$(dirname "${BASH_SOURCE[0]}")/gpu_one.sh"
@@ -79,6 +79,9 @@ r)
     (cd /tmp/old && timeout 200 python3 bench/rasterizer.py $AB --out "$OUT/ab_old_$k.json" 2>&1 | grep -E "warpgs  |gsplat  |ratio|paired" | sed "s/^/old $k: /")
     timeout 200 python3 bench/rasterizer.py $AB --out "$OUT/ab_new_$k.json" 2>&1 | grep -E "warpgs  |gsplat  |ratio|paired" | sed "s/^/new $k: /"
   done
+  ;;
+t)  # (the second half of r, a call of its own)
+  python3 -m pip install -q --no-index --no-deps --target /tmp/site .device/gsplat/*.whl 2>/dev/null
   timeout 240 python3 bench/rasterizer.py --warmup 10 --iters 20 --rounds 7 --out "$OUT/rasterizer_cuda.json" \
     --configs 138766x648x420,555000x1280x720,1100000x1920x1080,138766x648x420 2>&1 | tee "$OUT/rasterizer.log" \
     | grep -E "Gaussians|ratio|paired"
