@@ -30,3 +30,18 @@ def test_reads_a_gzipped_profile(tmp_path):
     p = tmp_path / "spy.txt.gz"
     p.write_bytes(gzip.compress(b"main (a.py:1);f (b.py:2) 3\n"))
     assert ss.read(p)["all"][0] == 3
+
+
+def test_at_keeps_the_timed_line_and_whole_threads_that_never_pass_it_and_children_split_a_function(tmp_path):
+    p = tmp_path / "spy.txt"
+    p.write_text(
+        "thread (0x1);main (h.py:54);f_b (b.py:3);load (w.py:1) 9\n"       # the warm-up (compiles): left out
+        "thread (0x1);main (h.py:67);f_b (b.py:3);launch (w.py:10) 6\n"
+        "thread (0x1);main (h.py:67);f_b (b.py:3);bin (r.py:5);sort (w.py:20) 3\n"
+        "thread (0x1);main (h.py:67);f_b (b.py:3);bin (r.py:5) 1\n"
+        "thread (0x2);worker (t.py:5);backward (r.py:7) 5\n")
+    threads, kids = ss.read_children(p, at="h.py:67", children=("bin", "f_b"))
+    assert threads["thread (0x1)"][0] == 10 and threads["thread (0x2)"][0] == 5
+    assert kids["bin"] == (4, {"sort (w.py)": 3, "(own)": 1})
+    assert kids["f_b"] == (10, {"launch (w.py)": 6, "bin (r.py)": 4})
+    assert ss.read(p)["thread (0x1)"][0] == 19  # without --at, the warm-up counts too
