@@ -53,24 +53,42 @@ def test_fast_launch_matches_wp_launch_with_structs_2d_arrays_and_scalars():
     assert torch.equal(got, want)  # the first call's output is untouched
 
 
-def test_a_struct_given_as_the_same_tuple_again_is_not_rewritten_and_another_tuple_is():
+def test_a_struct_given_as_the_same_kept_fields_again_is_not_rewritten_and_other_values_are():
     g = torch.Generator().manual_seed(1)
     a, b, x = torch.rand(4, 3, generator=g), torch.rand(4, 3, generator=g), torch.rand(4, 3, generator=g)
-    first = (a, 2.0)
+    first = W.KeptFields((a, 2.0))
     got = torch.zeros(4, 3)
     fast_launch(_axpy, (4, 3), "cpu", None, first, x, 0, got)
     assert torch.equal(got, 2.0 * x + a)
-    a.add_(1.0)  # the same tuple: its tensor's memory is read at the launch, as before
+    a.add_(1.0)  # the same fields: the tensor's memory is read at the launch, as before
     fast_launch(_axpy, (4, 3), "cpu", None, first, x, 0, got)
     assert torch.equal(got, 2.0 * x + a)
-    fast_launch(_axpy, (4, 3), "cpu", None, (b, 2.0), x, 0, got)  # an equal-looking new tuple: written
+    fast_launch(_axpy, (4, 3), "cpu", None, W.KeptFields((b, 2.0)), x, 0, got)  # equal-looking, another object
     assert torch.equal(got, 2.0 * x + b)
-    fast_launch(_axpy, (4, 3), "cpu", None, [a, -1.0], x, 0, got)  # a list is written every time
+    fast_launch(_axpy, (4, 3), "cpu", None, (a, -1.0), x, 0, got)  # a plain tuple is written every time
     assert torch.equal(got, -1.0 * x + a)
     with pytest.raises(ValueError, match="'p.a'"):  # a failed write is not remembered as written
-        fast_launch(_axpy, (4, 3), "cpu", None, (a.double(), 1.0), x, 0, got)
+        fast_launch(_axpy, (4, 3), "cpu", None, W.KeptFields((a.double(), 1.0)), x, 0, got)
     fast_launch(_axpy, (4, 3), "cpu", None, first, x, 0, got)
     assert torch.equal(got, 2.0 * x + a)
+
+
+def test_a_launcher_keeps_no_tensor_of_a_plain_tuple_alive():
+    # a tensor of an autograd graph kept past its step keeps the graph (and its AccumulateGrad nodes) alive, which
+    # breaks the next step's CUDA graph capture
+    import gc
+    import weakref
+
+    leaf = torch.rand(4, 3, requires_grad=True)
+    a = leaf * 2.0  # in a graph
+    ref = weakref.ref(a)
+    got = torch.zeros(4, 3)
+    x = torch.rand(4, 3)
+    fast_launch(_axpy, (4, 3), "cpu", None, (a, 1.0), x, 0, got)
+    assert torch.equal(got, x + a.detach())
+    del a
+    gc.collect()
+    assert ref() is None
 
 
 def test_render_camera_tuple_is_made_once_per_view_and_follows_the_matrices_memory():

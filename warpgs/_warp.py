@@ -294,11 +294,21 @@ def _scalar_setter(c):
     return set_scalar
 
 
+class KeptFields(tuple):
+    """Field values of a struct argument (a tuple, in the struct's field order) that a launcher keeps after writing
+    them, so that given the same object again it writes nothing (``_struct_setter``). Only for values that are kept
+    anyway and hold no tensor in an autograd graph: a launcher holds its last ones until it is given others, and an
+    autograd graph kept alive past its step breaks the next step's CUDA graph capture (an AccumulateGrad node of an
+    earlier step on another stream). ``warpgs.render._camera`` makes one per view."""
+
+    __slots__ = ()
+
+
 def _struct_setter(label: str, stype, c):
     """Writes a tuple of field values (torch tensors for array fields), in the struct's field order,
-    into the struct's packed value ``c`` in place. Given the same tuple object as the call before, it writes
+    into the struct's packed value ``c`` in place. Given the same ``KeptFields`` object as the call before, it writes
     nothing: ``c`` is this launcher's own and already holds those values (a tuple cannot change, and its tensors
-    keep their memory; ``warpgs.render._camera`` hands out one tuple per view)."""
+    keep their memory). Other tuples are written every time and not kept."""
     fields = []
     for name, var in stype.vars.items():
         sub = getattr(c, name)  # a view into ``c``'s memory for arrays and nested structs
@@ -309,7 +319,7 @@ def _struct_setter(label: str, stype, c):
         else:
             fields.append(functools.partial(setattr, c, name))
     n_fields = len(fields)
-    last = None  # the tuple written last (a reference: it cannot be another object at the same address)
+    last = None  # the KeptFields written last (a reference: no other object can have its address meanwhile)
 
     def set_struct(values):
         nonlocal last
@@ -321,7 +331,7 @@ def _struct_setter(label: str, stype, c):
         last = None  # a field that fails leaves ``c`` part written
         for f, v in zip(fields, values):
             f(v)
-        last = values if type(values) is tuple else None  # a list could change in place
+        last = values if type(values) is KeptFields else None
     return set_struct
 
 

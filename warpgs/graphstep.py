@@ -156,6 +156,7 @@ class StepGraph:
         static = dataclasses.replace(cam, viewmat=inp["viewmat"], K=inp["K"], image=inp["image"],
                                      alpha=inp.get("alpha"), depth=None, mask=None)
         draws = self.draws(tr.step)
+        drawn = None
         try:
             self.stream.wait_stream(torch.cuda.current_stream(tr.device))
             drawn = tr.drop_gen.get_state()  # the warm-up's draws are given back: the replays draw what eager steps would
@@ -184,6 +185,13 @@ class StepGraph:
             self.graph = self.record = None
             for opt in tr.optimizers:
                 opt.zero_grad(set_to_none=True)
+            if draws and drawn is not None:
+                # a generator registered with a capture that failed can refuse the eager steps' draws ("Offset
+                # increment outside graph capture"): the run goes on with a fresh one at the state this step starts
+                # from, so it draws what it would have
+                fresh = torch.Generator(device=tr.device)
+                fresh.set_state(drawn)
+                tr.drop_gen = fresh
             tr.log(f"warpgs: CUDA graphs off for this run (train.cuda_graph): recording the step failed: {self.off}")
             return False
         self.graph, self.capacity = graph, capacity

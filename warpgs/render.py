@@ -26,8 +26,8 @@ from typing import NamedTuple
 import torch
 import warp as wp
 
-from warpgs._warp import (device_of, fast_launch, launch_parts, launch_stream, native_function, native_on_stream,
-                          to_wp, wp_stream)
+from warpgs._warp import (KeptFields, device_of, fast_launch, launch_parts, launch_stream, native_function,
+                          native_on_stream, to_wp, wp_stream)
 from warpgs.kernels import binning as kb
 from warpgs.kernels import projection as kp
 from warpgs.kernels import rasterize as kr
@@ -100,13 +100,15 @@ def _camera(viewmat, K, width, height, eps2d, antialiased):
     found by the two matrices' memory (their data pointers; the tuple's views keep that memory alive, so no other
     tensor can have been given it since) and the numbers. A render's forward and backward, and a training run's
     steps on one camera, pass the same tuple, and the launcher writes a struct argument only when it is given
-    another tuple than last time (``warpgs._warp._struct_setter``). Matrices changed in place are read as they are
-    at the launch, as before: the views share their memory."""
+    another tuple than last time (``warpgs._warp.KeptFields``). Matrices changed in place are read as they are at
+    the launch, as before: the views share their memory. ``rasterize`` passes them detached from any autograd graph,
+    and the tuple holds no other tensor."""
     key = (viewmat.data_ptr(), K.data_ptr(), width, height, eps2d, antialiased)
     got = _CAMERAS.get(key)
     if got is None or got[0].data_ptr() != key[0] or got[1].data_ptr() != key[1] or got[0].device != viewmat.device:
         # (a view whose memory moved since, by an in-place resize of its tensor, is made again)
-        got = _CAMERAS[key] = (viewmat.reshape(1, 4, 4), K.reshape(1, 3, 3), width, height, eps2d, int(antialiased))
+        got = _CAMERAS[key] = KeptFields((viewmat.reshape(1, 4, 4), K.reshape(1, 3, 3), width, height, eps2d,
+                                          int(antialiased)))
         if len(_CAMERAS) > _CAMERAS_KEPT:
             _CAMERAS.popitem(last=False)
     else:
