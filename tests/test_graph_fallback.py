@@ -20,7 +20,7 @@ def test_a_step_that_cannot_be_recorded_leaves_the_run_without_graphs_and_its_dr
     monkeypatch.setattr(StepGraph, "_body", unrecordable)
     cfg = tiny_config(60, drop_rate=0.2, cuda_graph=True)
     cfg.train.device = "cuda"
-    tr = Trainer(cfg, make_scene())
+    tr = Trainer(cfg, make_scene(device="cuda"))
     tr.train()
     assert tr.step == 60
     assert tr.graph is not None and tr.graph.off is not None and tr.graph.captures == 0

@@ -48,22 +48,28 @@ def camera_ring(angles_deg, radius=4.0, height=-0.8):
             for a in angles_deg]
 
 
-def render_views(c2ws, width, height, focal, gaussians, prefix, background=(0.0, 0.0, 0.0)) -> list[Camera]:
+def render_views(c2ws, width, height, focal, gaussians, prefix, background=(0.0, 0.0, 0.0),
+                 device="cpu") -> list[Camera]:
+    """The views of ``gaussians`` from the cameras ``c2ws``, rendered on ``device`` (a GPU machine whose Warp has no
+    CPU compiler renders them there)."""
     K = np.array([[focal, 0, width / 2], [0, focal, height / 2], [0, 0, 1]], np.float64)
-    bg = torch.tensor(background, dtype=torch.float32)
+    bg = torch.tensor(background, dtype=torch.float32, device=device)
+    gaussians = [g.to(device) for g in gaussians]
     cams = []
     for i, c2w in enumerate(c2ws):
-        V = torch.tensor(np.linalg.inv(c2w), dtype=torch.float32)
-        img = rasterize(*gaussians, V, torch.tensor(K, dtype=torch.float32), width, height, background=bg).image
+        V = torch.tensor(np.linalg.inv(c2w), dtype=torch.float32, device=device)
+        img = rasterize(*gaussians, V, torch.tensor(K, dtype=torch.float32, device=device), width, height,
+                        background=bg).image.cpu()
         cams.append(make_camera(f"{prefix}{i:02d}", c2w, K, img.numpy().astype(np.float32)))
     return cams
 
 
-def make_scene(width=48, height=48, train_angles=(0, 35, 70), test_angles=(18, 52), seed=0, masked=False) -> Scene:
+def make_scene(width=48, height=48, train_angles=(0, 35, 70), test_angles=(18, 52), seed=0, masked=False,
+               device="cpu") -> Scene:
     gs = gt_gaussians(seed=seed)
     focal = 1.1 * width
-    train = render_views(camera_ring(train_angles), width, height, focal, gs, "train")
-    test = render_views(camera_ring(test_angles), width, height, focal, gs, "test")
+    train = render_views(camera_ring(train_angles), width, height, focal, gs, "train", device=device)
+    test = render_views(camera_ring(test_angles), width, height, focal, gs, "test", device=device)
     if masked:
         for c in train + test:
             c.mask = np.zeros((height, width), bool)
