@@ -218,7 +218,8 @@ def _bin_gaussians(means2d, radii, depths, conics, opac_eff, colors, splats, off
     CPU's radix sort, whose passes are its cost, makes fewer. On CUDA the depth keeps its raw 32 bits (the shift is
     32) and the host read is the count alone: the largest depth's reduction and the tensors that gather the two
     cost the host about as much as the GPU spends on the sort's extra 8-bit pass (six instead of five at up to
-    8,192 tiles, whose even count also spares the native sort its copy back into the first buffer), and a render
+    8,192 tiles; with an even count the result should end in the first buffer, sparing the native sort its copy
+    back), and a render
     of up to a few hundred thousand Gaussians waits on its host, not on its GPU (issue 15). The order is the same
     either way, so the render is too.
 
