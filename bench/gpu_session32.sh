@@ -47,7 +47,7 @@ p)
     timeout 200 /tmp/pyspy/bin/py-spy record --native --idle --threads -r 200 -f raw -o "$OUT/spy_$who.txt" -- \
       python3 bench/rasterizer_host.py --loop 10 --only $who > "$OUT/spy_$who.log" 2>&1
     tail -2 "$OUT/spy_$who.log"
-    python3 bench/spy_summary.py "$OUT/spy_$who.txt" --under f_b --rows 60 > "$OUT/spy_${who}_summary.txt" 2>&1
+    python3 bench/spy_summary.py "$OUT/spy_$who.txt" --under timed_loop --rows 60 > "$OUT/spy_${who}_summary.txt" 2>&1
     head -40 "$OUT/spy_${who}_summary.txt"
     gzip -f "$OUT/spy_$who.txt"
   done

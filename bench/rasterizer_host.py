@@ -12,7 +12,9 @@ cumulative time; gsplat: by own time). Session 19's output: bench/results/s19/ho
 
 ``--loop S``: instead of the cProfile (which slows every Python call, and so overstates the Python's share), calls
 forward+backward for S seconds (a sync every 100 calls), for a sampling profiler outside the process to split the
-host's real time; ``--only`` picks one rasterizer. ``python bench/spy_summary.py spy.txt`` sums such a profile.
+host's real time; ``--only`` picks one rasterizer. ``python bench/spy_summary.py spy.txt --under timed_loop`` sums
+such a profile over the loop's calls alone, without the warm-up's (session 32's profiles, bench/results/s32/p/, were
+recorded before ``timed_loop`` existed: ``--at rasterizer_host.py:67``, the loop's call then).
 """
 
 from __future__ import annotations
@@ -32,6 +34,18 @@ sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "tests"))
 
 from bench.rasterizer import calls, gsplat_fn, make_inputs, warpgs_fn  # noqa: E402
+
+
+def timed_loop(fb, seconds: float) -> int:
+    """Calls ``fb`` for ``seconds`` (a sync every 100 calls); returns how many calls. A sampling profiler's stacks
+    of these calls pass through this function (``bench/spy_summary.py --under timed_loop``)."""
+    end, k = time.perf_counter() + seconds, 0
+    while time.perf_counter() < end:
+        for _ in range(100):
+            fb()
+        torch.cuda.synchronize()
+        k += 100
+    return k
 
 
 def main(argv=None) -> None:
@@ -61,12 +75,7 @@ def main(argv=None) -> None:
         total = (time.perf_counter() - t) * 10
         print(f"{name}: host {host:.3f} ms/call, to the end {total:.3f} ms/call", flush=True)
         if args.loop > 0:
-            end, k = time.perf_counter() + args.loop, 0
-            while time.perf_counter() < end:
-                for _ in range(100):
-                    fb()
-                torch.cuda.synchronize()
-                k += 100
+            k = timed_loop(fb, args.loop)
             print(f"{name}: {k} calls in {args.loop:.0f} s of --loop", flush=True)
             continue
         prof = cProfile.Profile()
