@@ -27,6 +27,11 @@
 #    CPU compiler, which the packed Warp lacks there; TESTS_ONLY=1 stops after them), bench/graph_check.py (plain fern, 1000 it: the graphs recorded, and every
 #    parameter and loss equal to the eager run's bit for bit), bench/train_speed.py (fern 3 views, 3000 it,
 #    DropGaussian 0.2, against the gsplat loop). Then t again for the figures of the final code.
+# M: lego 8 views, 10,000 it, seeds 0-2: more of session 17's best setting's neighbours (L found DropGaussian's recipe
+#    no better): a lower growth threshold (strategy.grow_grad2d 0.0001 / 0.00015; 0.0004 lost 0.27 dB in session 17),
+#    a higher drop rate (0.3), less opacity noise (0.6), and growth until the end (strategy.refine_stop_iter 10000 is
+#    already the run's length: instead the position learning rate's final value x10, means_lr_final 1.6e-5). Needs
+#    blender_lego in $D. Summary lines in $OUT/M.txt.
 set -u
 source "$(dirname "${BASH_SOURCE[0]}")/gpu_one.sh"
 session_env "$@"; P=$1; D=$2; R=$3; shift 3
@@ -107,6 +112,23 @@ v)
   gc plain
   timeout 240 python3 bench/train_speed.py --data-root "$D" --out "$OUT/train_speed_cuda.json" --set model.init=frustum \
     --set train.drop_rate=0.2 2>&1 | grep -v "^Module\|^Warp" | tee "$OUT/train_speed.log" | tail -12
+  ;;
+M)
+  BEST="--set train.drop_rate=0.2 --set train.opacity_noise=0.8 --set model.sh_degree=1"
+  lego() {  # NAME SEED [--set k=v ...]: the baseline on lego, 10,000 it
+    local name=$1 seed=$2; shift 2
+    sparse_run "$name" --method baseline --data blender --scene lego --views 8 --iterations 10000 --seed "$seed" \
+      --set train.eval_every=1000 "$@"
+  }
+  export -f lego
+  { for s in 0 1 2; do
+      echo "lego M_g1_s$s $s $BEST --set strategy.grow_grad2d=0.0001"
+      echo "lego M_g15_s$s $s $BEST --set strategy.grow_grad2d=0.00015"
+      echo "lego M_drop3_s$s $s $BEST --set train.drop_rate=0.3"
+      echo "lego M_noise6_s$s $s $BEST --set train.opacity_noise=0.6"
+      echo "lego M_lrf_s$s $s $BEST --set optim.means_lr_final=1.6e-5"
+    done; } | xargs -P ${JOBS:-15} -L 1 bash -c '"$@"' _ | grep -v "rc=0"
+  summary M_ M.txt
   ;;
 *) echo "unknown phase $P"; exit 2 ;;
 esac
