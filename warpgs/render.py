@@ -219,9 +219,8 @@ def _bin_gaussians(means2d, radii, depths, conics, opac_eff, colors, splats, off
     32) and the host read is the count alone: the largest depth's reduction and the tensors that gather the two
     cost the host about as much as the GPU spends on the sort's extra 8-bit pass (six instead of five at up to
     8,192 tiles; with an even count the result should end in the first buffer, sparing the native sort its copy
-    back), and a render
-    of up to a few hundred thousand Gaussians waits on its host, not on its GPU (issue 15). The order is the same
-    either way, so the render is too.
+    back), and a render of up to a few hundred thousand Gaussians waits on its host, not on its GPU (issue 15). The
+    order is the same either way, so the render is too.
 
     ``capacity``: the key buffers hold that many entries whatever the count, so nothing is read on the host
     (a CUDA graph can hold the render; ``warpgs.graphstep``): the unused entries are padding keys that sort
