@@ -7,6 +7,8 @@
 # positions' learning rate decays to 1.6e-5 instead of 1.6e-6 (optim.means_lr_final; 24.27 [24.22, 24.35] at 10,000
 # it, bench/results/s32/M.txt). Whether that holds elsewhere decides whether it can become a default (issue 14's rule:
 # the median over the scenes rises and no scene loses more than 0.3 dB).
+# A first hint on the 2-core CPU (DTU scan65, 3 views, baseline, 3000 it, seed 0; bench/results/s32/cpu_dtu_lrf.txt):
+# 22.23 with the default, 22.55 with means_lr_final=1.6e-5.
 # a: lego around it (10,000 it, seeds 0-2): means_lr_final 8e-6 and 3.2e-5, and 1.6e-5 with drop rate 0.3 (the one
 #    other neighbour above the best in session 32). Prefix a_; a.txt.
 # b: means_lr_final=1.6e-5 with each config's defaults, both methods, seeds 0-2: fern 3 views and DTU scan65 3 views
