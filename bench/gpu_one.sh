@@ -43,22 +43,44 @@ summary() {
   done | sort | tee "$OUT/$2"
 }
 
-# rasterizer_runs [bench/rasterizer.py timing arguments ...] (bench/gpu_session18.sh, gpu_session19.sh phase r):
-# gsplat installed from .device/gsplat, then bench/rasterizer.py on the three random configurations (the first again
-# at the end), fern's baseline trained into $R/fern_base unless it is there (3 views, 3000 it, frustum start), and
-# bench/rasterizer.py on its Gaussians at 1x, 2x and 3x the test view; JSON and logs in $OUT.
-rasterizer_runs() {
+# lego NAME METHOD SEED ITERATIONS [--set k=v ...]: sparse_run of Blender lego, 8 views, 10 evaluations (the lego
+# phases of bench/gpu_session31.sh to gpu_session33.sh). LEGO_BEST: session 17's best baseline setting.
+LEGO_BEST="--set train.drop_rate=0.2 --set train.opacity_noise=0.8 --set model.sh_degree=1"
+lego() {
+  local name=$1 method=$2 seed=$3 it=$4; shift 4
+  sparse_run "$name" --method "$method" --data blender --scene lego --views 8 --iterations "$it" --seed "$seed" \
+    --set train.eval_every=$((it / 10)) "$@"
+}
+export -f lego
+
+# install_gsplat: gsplat 1.5.3 from .device/gsplat into /tmp/site (its CUDA kernels compile on first use).
+install_gsplat() {
   python3 -m pip install -q --no-index --no-deps --target /tmp/site .device/gsplat/*.whl 2>/dev/null
+}
+
+# rasterizer_configs [bench/rasterizer.py timing arguments ...]: gsplat installed, then bench/rasterizer.py on the
+# random configurations $CONFIGS (default: 138k, 256k and 1M Gaussians, the first again at the end) into
+# $OUT/rasterizer_cuda.json and rasterizer.log.
+rasterizer_configs() {
+  install_gsplat
   timeout ${T:-300} python3 bench/rasterizer.py "$@" --out "$OUT/rasterizer_cuda.json" \
-    --configs 138766x648x420,256000x1280x720,1000000x1920x1080,138766x648x420 2>&1 \
-    | tee "$OUT/rasterizer.log" | grep -E "Gaussians|ratio|wrote"
+    --configs "${CONFIGS:-138766x648x420,256000x1280x720,1000000x1920x1080,138766x648x420}" 2>&1 \
+    | tee "$OUT/rasterizer.log" | grep -E "Gaussians|ratio|paired|wrote"
+}
+
+# rasterizer_runs [bench/rasterizer.py timing arguments ...] (bench/gpu_session18.sh, gpu_session19.sh phase r,
+# gpu_session32.sh t): rasterizer_configs, then fern's baseline trained into $R/fern_base unless it is there (3 views,
+# 3000 it, frustum start), and bench/rasterizer.py on its Gaussians at 1x, 2x and 3x the test view; JSON and logs in
+# $OUT.
+rasterizer_runs() {
+  rasterizer_configs "$@"
   [ -f "$R/fern_base/point_cloud.ply" ] || python3 -m warpgs.pipelines.sparse --method baseline --data llff \
     --data-root "$D" --iterations 3000 --set model.init=frustum --device cuda --no-progress --out "$R/fern_base" \
     > "$OUT/fern_base.log" 2>&1
   tail -2 "$OUT/fern_base.log"
   timeout ${T:-300} python3 bench/rasterizer.py --ply "$R/fern_base/point_cloud.ply" --data llff --data-root "$D" \
     --scales 1,2,3 "$@" --out "$OUT/rasterizer_cuda_trained.json" 2>&1 \
-    | tee "$OUT/rasterizer_trained.log" | grep -E "Gaussians|ratio|wrote"
+    | tee "$OUT/rasterizer_trained.log" | grep -E "Gaussians|ratio|paired|wrote"
 }
 
 # session_env PHASE D RUNS (bench/gpu_session20.sh on): makes RUNS and $OUT, exports the environment of the GPU runs

@@ -29,17 +29,10 @@ j)
   summary k_ k369.txt
   ;;
 o)
-  BEST="--set train.drop_rate=0.2 --set train.opacity_noise=0.8 --set model.sh_degree=1"
-  lego() {  # NAME METHOD SEED ITERATIONS [--set k=v ...]
-    local name=$1 method=$2 seed=$3 it=$4; shift 4
-    sparse_run "$name" --method "$method" --data blender --scene lego --views 8 --iterations "$it" --seed "$seed" \
-      --set train.eval_every=$((it / 10)) "$@"
-  }
-  export -f lego
   { for s in 0 1 2; do
-      echo "lego o_lego_best20k_s$s baseline $s 20000 $BEST"
+      echo "lego o_lego_best20k_s$s baseline $s 20000 $LEGO_BEST"
       for m in baseline full; do echo "lego o_lego_${m}_s$s $m $s 10000"; done
-      echo "lego o_lego_best_s$s baseline $s 10000 $BEST"
+      echo "lego o_lego_best_s$s baseline $s 10000 $LEGO_BEST"
     done
     for s in 0 1 2; do for m in baseline full; do
       echo "named o_fern_${m}_s$s $m llff fern 3 $s"

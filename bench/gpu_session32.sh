@@ -38,6 +38,7 @@ set -u
 source "$(dirname "${BASH_SOURCE[0]}")/gpu_one.sh"
 session_env "$@"; P=$1; D=$2; R=$3; shift 3
 export R D T END=$(( $(date +%s) + ${T:-540} ))  # every run of the call stops by then
+ISSUE15=138766x648x420,555000x1280x720,1100000x1920x1080,138766x648x420  # issue 15's three configurations, the first again
 case $P in
 k)
   FLOAT="--set train.path_floaters_paths=spline --set train.path_floaters_poses=3"
@@ -48,7 +49,7 @@ k)
   summary k_ k369.txt
   ;;
 p)
-  python3 -m pip install -q --no-index --no-deps --target /tmp/site .device/gsplat/*.whl 2>/dev/null
+  install_gsplat
   python3 -m pip install -q --no-index --no-deps --target /tmp/pyspy .device/pyspy/*.whl 2>/dev/null
   for who in warpgs gsplat; do
     timeout 200 /tmp/pyspy/bin/py-spy record --native --idle --threads -r 200 -f raw -o "$OUT/spy_$who.txt" -- \
@@ -58,32 +59,23 @@ p)
     head -40 "$OUT/spy_${who}_summary.txt"
     gzip -f "$OUT/spy_$who.txt"
   done
-  timeout ${T:-240} python3 bench/rasterizer.py --warmup 10 --iters 20 --rounds ${ROUNDS:-7} --out "$OUT/rasterizer_cuda.json" \
-    --configs 138766x648x420,555000x1280x720,1100000x1920x1080,138766x648x420 2>&1 | tee "$OUT/rasterizer.log" \
-    | grep -E "Gaussians|ratio|paired|wrote"
+  CONFIGS=$ISSUE15 rasterizer_configs --warmup 10 --iters 20 --rounds ${ROUNDS:-7}
   ;;
 L)
-  BEST="--set train.drop_rate=0.2 --set train.opacity_noise=0.8 --set model.sh_degree=1"
   WHITE="--set train.random_background=false"
   NOBIG="--set strategy.prune_scale3d=1000"
   BOX="--set model.init=box --set model.init_num=10000 --set model.init_box=[-1,-1,-1,1,1,1]"
-  lego() {  # NAME SEED ITERATIONS [--set k=v ...]: the baseline on lego
-    local name=$1 seed=$2 it=$3; shift 3
-    sparse_run "$name" --method baseline --data blender --scene lego --views 8 --iterations "$it" --seed "$seed" \
-      --set train.eval_every=$((it / 10)) "$@"
-  }
-  export -f lego
   { for s in 0 1 2; do
-      echo "lego L_all20k_s$s $s 20000 $BEST $WHITE $NOBIG $BOX"
-      echo "lego L_white_s$s $s 10000 $BEST $WHITE"
-      echo "lego L_nobig_s$s $s 10000 $BEST $NOBIG"
-      echo "lego L_box_s$s $s 10000 $BEST $BOX"
-      echo "lego L_all_s$s $s 10000 $BEST $WHITE $NOBIG $BOX"
+      echo "lego L_all20k_s$s baseline $s 20000 $LEGO_BEST $WHITE $NOBIG $BOX"
+      echo "lego L_white_s$s baseline $s 10000 $LEGO_BEST $WHITE"
+      echo "lego L_nobig_s$s baseline $s 10000 $LEGO_BEST $NOBIG"
+      echo "lego L_box_s$s baseline $s 10000 $LEGO_BEST $BOX"
+      echo "lego L_all_s$s baseline $s 10000 $LEGO_BEST $WHITE $NOBIG $BOX"
     done; } | xargs -P ${JOBS:-15} -L 1 bash -c '"$@"' _ | grep -v "rc=0"
   summary L_ L.txt
   ;;
 r)
-  python3 -m pip install -q --no-index --no-deps --target /tmp/site .device/gsplat/*.whl 2>/dev/null
+  install_gsplat
   timeout 240 python3 -m pytest -q -x -p no:warnings tests/test_rasterizer.py tests/test_binning.py tests/test_launch.py \
     > "$OUT/tests_cuda.log" 2>&1; tail -3 "$OUT/tests_cuda.log"
   mkdir -p /tmp/old && tar -xf .device/old.tar -C /tmp/old
@@ -94,20 +86,10 @@ r)
   done
   ;;
 t)  # (the second half of r, a call of its own)
-  python3 -m pip install -q --no-index --no-deps --target /tmp/site .device/gsplat/*.whl 2>/dev/null
-  timeout 240 python3 bench/rasterizer.py --warmup 10 --iters 20 --rounds 7 --out "$OUT/rasterizer_cuda.json" \
-    --configs 138766x648x420,555000x1280x720,1100000x1920x1080,138766x648x420 2>&1 | tee "$OUT/rasterizer.log" \
-    | grep -E "Gaussians|ratio|paired"
-  [ -f "$R/fern_base/point_cloud.ply" ] || timeout 150 python3 -m warpgs.pipelines.sparse --method baseline --data llff \
-    --data-root "$D" --iterations 3000 --set model.init=frustum --device cuda --no-progress --out "$R/fern_base" \
-    > "$OUT/fern_base.log" 2>&1
-  tail -2 "$OUT/fern_base.log"
-  timeout 200 python3 bench/rasterizer.py --ply "$R/fern_base/point_cloud.ply" --data llff --data-root "$D" \
-    --scales 1,2,3 --warmup 10 --iters 20 --rounds 7 --out "$OUT/rasterizer_cuda_trained.json" 2>&1 \
-    | tee "$OUT/rasterizer_trained.log" | grep -E "Gaussians|ratio|paired"
+  CONFIGS=$ISSUE15 rasterizer_runs --warmup 10 --iters 20 --rounds 7
   ;;
 v)
-  python3 -m pip install -q --no-index --no-deps --target /tmp/site .device/gsplat/*.whl 2>/dev/null
+  install_gsplat
   timeout 200 python3 -m pytest -q -p no:warnings tests/test_rasterizer.py tests/test_binning.py \
     tests/test_graph_fallback.py -k "cuda or fallback" > "$OUT/tests_cuda.log" 2>&1; tail -3 "$OUT/tests_cuda.log"
   [ -n "${TESTS_ONLY:-}" ] && exit 0
@@ -116,33 +98,19 @@ v)
     --set train.drop_rate=0.2 2>&1 | grep -v "^Module\|^Warp" | tee "$OUT/train_speed.log" | tail -12
   ;;
 M)
-  BEST="--set train.drop_rate=0.2 --set train.opacity_noise=0.8 --set model.sh_degree=1"
-  lego() {  # NAME SEED [--set k=v ...]: the baseline on lego, 10,000 it
-    local name=$1 seed=$2; shift 2
-    sparse_run "$name" --method baseline --data blender --scene lego --views 8 --iterations 10000 --seed "$seed" \
-      --set train.eval_every=1000 "$@"
-  }
-  export -f lego
   { for s in 0 1 2; do
-      echo "lego M_g1_s$s $s $BEST --set strategy.grow_grad2d=0.0001"
-      echo "lego M_g15_s$s $s $BEST --set strategy.grow_grad2d=0.00015"
-      echo "lego M_drop3_s$s $s $BEST --set train.drop_rate=0.3"
-      echo "lego M_noise6_s$s $s $BEST --set train.opacity_noise=0.6"
-      echo "lego M_lrf_s$s $s $BEST --set optim.means_lr_final=1.6e-5"
+      echo "lego M_g1_s$s baseline $s 10000 $LEGO_BEST --set strategy.grow_grad2d=0.0001"
+      echo "lego M_g15_s$s baseline $s 10000 $LEGO_BEST --set strategy.grow_grad2d=0.00015"
+      echo "lego M_drop3_s$s baseline $s 10000 $LEGO_BEST --set train.drop_rate=0.3"
+      echo "lego M_noise6_s$s baseline $s 10000 $LEGO_BEST --set train.opacity_noise=0.6"
+      echo "lego M_lrf_s$s baseline $s 10000 $LEGO_BEST --set optim.means_lr_final=1.6e-5"
     done; } | xargs -P ${JOBS:-15} -L 1 bash -c '"$@"' _ | grep -v "rc=0"
   summary M_ M.txt
   ;;
 N)
-  BEST="--set train.drop_rate=0.2 --set train.opacity_noise=0.8 --set model.sh_degree=1"
-  lego() {  # NAME SEED ITERATIONS [--set k=v ...]: the baseline on lego
-    local name=$1 seed=$2 it=$3; shift 3
-    sparse_run "$name" --method baseline --data blender --scene lego --views 8 --iterations "$it" --seed "$seed" \
-      --set train.eval_every=$((it / 10)) "$@"
-  }
-  export -f lego
   { for s in 0 1 2; do
-      echo "lego N_lrf20k_s$s $s 20000 $BEST --set optim.means_lr_final=1.6e-5"
-      echo "lego N_lrconst_s$s $s 10000 $BEST --set optim.means_lr_final=1.6e-4"
+      echo "lego N_lrf20k_s$s baseline $s 20000 $LEGO_BEST --set optim.means_lr_final=1.6e-5"
+      echo "lego N_lrconst_s$s baseline $s 10000 $LEGO_BEST --set optim.means_lr_final=1.6e-4"
     done; } | xargs -P ${JOBS:-6} -L 1 bash -c '"$@"' _ | grep -v "rc=0"
   summary N_ N.txt
   ;;

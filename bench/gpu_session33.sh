@@ -20,19 +20,12 @@ source "$(dirname "${BASH_SOURCE[0]}")/gpu_one.sh"
 session_env "$@"; P=$1; D=$2; R=$3; shift 3
 export R D T END=$(( $(date +%s) + ${T:-540} ))  # every run of the call stops by then
 LRF="--set optim.means_lr_final=1.6e-5"
-lego() {  # NAME METHOD SEED ITERATIONS [--set k=v ...]
-  local name=$1 method=$2 seed=$3 it=$4; shift 4
-  sparse_run "$name" --method "$method" --data blender --scene lego --views 8 --iterations "$it" --seed "$seed" \
-    --set train.eval_every=$((it / 10)) "$@"
-}
-export -f lego
 case $P in
 a)
-  BEST="--set train.drop_rate=0.2 --set train.opacity_noise=0.8 --set model.sh_degree=1"
   { for s in 0 1 2; do
-      echo "lego a_lrf8e6_s$s baseline $s 10000 $BEST --set optim.means_lr_final=8e-6"
-      echo "lego a_lrf32e6_s$s baseline $s 10000 $BEST --set optim.means_lr_final=3.2e-5"
-      echo "lego a_lrf_drop3_s$s baseline $s 10000 $BEST $LRF --set train.drop_rate=0.3"
+      echo "lego a_lrf8e6_s$s baseline $s 10000 $LEGO_BEST --set optim.means_lr_final=8e-6"
+      echo "lego a_lrf32e6_s$s baseline $s 10000 $LEGO_BEST --set optim.means_lr_final=3.2e-5"
+      echo "lego a_lrf_drop3_s$s baseline $s 10000 $LEGO_BEST $LRF --set train.drop_rate=0.3"
     done; } | xargs -P ${JOBS:-9} -L 1 bash -c '"$@"' _ | grep -v "rc=0"
   summary a_ a.txt
   ;;
