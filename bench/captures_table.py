@@ -215,8 +215,6 @@ def main(argv=None) -> int:
         return 0
     if args.session in (28, 29, 30):
         r27, r28 = Path(args.results) / "s27", Path(args.results) / "s28"
-        cyl = load(r28 / "c369.txt", "c")
-        mask_all = load(r28 / "m369.txt", "m")
         default = session28_default(Path(args.results))
         if args.session == 30:
             r30 = Path(args.results) / "s30"
@@ -235,10 +233,11 @@ def main(argv=None) -> int:
             print("\n".join(variant_table(default, {names[k]: v for k, v in variants.items()},
                                            "default (session 28)")))
             return 0
+        cyl = load(r28 / "c369.txt", "c")
         print("\n".join(table([("session 27 default", load(r27 / "h.txt", "h")),
                                ("far_field_proxy=auto", cyl), ("session 28 default", default)])))
         print()
-        print("\n".join(variant_table(cyl, {"pseudo_mask=all": mask_all}, "far_field_proxy=auto")))
+        print("\n".join(variant_table(cyl, {"pseudo_mask=all": load(r28 / "m369.txt", "m")}, "far_field_proxy=auto")))
         return 0
     if args.session == 27:
         r26, r27 = Path(args.results) / "s26", Path(args.results) / "s27"

@@ -48,13 +48,18 @@ def _row(scene: str, setting: str, machine: str, base: dict, full: dict, source:
                               gain, source]) + " |"
 
 
+def _psnrs(path: Path) -> dict[str, dict[int, float]]:
+    """{run name without its seed: {seed: test PSNR}} of a summary file (``seed_medians.read``)."""
+    return {name: {s: p for s, (p, _) in seeds.items()} for name, seeds in sm.read([path]).items()}
+
+
 def rows(results: Path) -> list[str]:
     out = ["| " + " | ".join(HEAD) + " |", "|" + "---|" * len(HEAD)]
     noarg = json.loads((results / "noarg_cpu" / "seeds_s30.json").read_text())["per_seed"]
     out.append(_row("synthetic room, 3 views", "no arguments: 128x96, 1000 it", "2-core AMD EPYC CPU",
                     {int(s): v["baseline"]["psnr"] for s, v in noarg.items()},
                     {int(s): v["full"]["psnr"] for s, v in noarg.items()}, "`noarg_cpu/seeds_s30.json`"))
-    o = {name: {s: p for s, (p, _) in seeds.items()} for name, seeds in sm.read([results / "s31" / "o.txt"]).items()}
+    o = _psnrs(results / "s31" / "o.txt")
     for scene, key, setting in (("LLFF fern, 3 views", "fern", "504x378, 3000 it"),
                                 ("DTU scan65, 3 views (masked)", "dtu", "400x300, 3000 it"),
                                 ("Blender lego, 8 views", "lego", "400x400, 10,000 it")):
@@ -66,9 +71,8 @@ def rows(results: Path) -> list[str]:
     for name, key, setting in (("M.txt", "M_lrf", "10,000 it"), ("N.txt", "N_lrf20k", "20,000 it")):
         path = results / "s32" / name
         if path.is_file():  # session 32: that setting with the position learning rate decaying to 1.6e-5
-            runs = {n: {s: p for s, (p, _) in seeds.items()} for n, seeds in sm.read([path]).items()}
             out.append(_row("Blender lego, 8 views", "that + `optim.means_lr_final=1.6e-5` (10x), " + setting, "H200",
-                            runs.get(key, {}), {}, f"`s32/{name}`"))
+                            _psnrs(path).get(key, {}), {}, f"`s32/{name}`"))
     large_source = ", ".join(f"`{p.parent.name}/{p.name}`" for p in ct.images4_default_files(results))
     for runs, setting, machine, source in (
             (ct.session28_default(results), "384x256, 3000 it", "H100", "`s28/c369.txt`, `s28/m369.txt`"),
