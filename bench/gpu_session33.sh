@@ -10,7 +10,8 @@
 # A first hint on the 2-core CPU (DTU scan65, 3 views, baseline, 3000 it, seed 0; bench/results/s32/cpu_dtu_lrf.txt):
 # 22.23 with the default, 22.55 with means_lr_final=1.6e-5.
 # a: lego around it (10,000 it, seeds 0-2): means_lr_final 8e-6 and 3.2e-5, and 1.6e-5 with drop rate 0.3 (the one
-#    other neighbour above the best in session 32). Prefix a_; a.txt.
+#    other neighbour above the best in session 32), with twice the positions' initial learning rate, and with 10k
+#    starting Gaussians instead of 15k. 15 runs. Prefix a_; a.txt.
 # b: means_lr_final=1.6e-5 with each config's defaults, both methods, seeds 0-2: fern 3 views and DTU scan65 3 views
 #    (3000 it), lego 8 views (10,000 it). Prefix b_; b.txt (compare with bench/results/s31/o.txt).
 # c: the same switch on the captures (384x256, 3000 it, castle_p30 and herz_jesus_p25 at 3 / 6 / 9 views, both methods,
@@ -26,7 +27,9 @@ a)
       echo "lego a_lrf8e6_s$s baseline $s 10000 $LEGO_BEST --set optim.means_lr_final=8e-6"
       echo "lego a_lrf32e6_s$s baseline $s 10000 $LEGO_BEST --set optim.means_lr_final=3.2e-5"
       echo "lego a_lrf_drop3_s$s baseline $s 10000 $LEGO_BEST $LRF --set train.drop_rate=0.3"
-    done; } | xargs -P ${JOBS:-9} -L 1 bash -c '"$@"' _ | grep -v "rc=0"
+      echo "lego a_lrf_lr2_s$s baseline $s 10000 $LEGO_BEST $LRF --set optim.means_lr=3.2e-4"
+      echo "lego a_lrf_init10k_s$s baseline $s 10000 $LEGO_BEST $LRF --set model.init_num=10000"
+    done; } | xargs -P ${JOBS:-15} -L 1 bash -c '"$@"' _ | grep -v "rc=0"
   summary a_ a.txt
   ;;
 b)
