@@ -39,7 +39,9 @@ median).
   10,000 it, seed 0) of session 28 (``s28/i369.txt``) -> those with session 30's default (``s30/i369.txt``);
 - session 31 (``bench/gpu_session31.sh j``): images_4, seeds 0-2, session 28's path-floater pass
   (``images4_default``: seed 0 ``s28/i369.txt``, seeds 1-2 ``s31/k369.txt``, later ``s32/k369.txt``) beside session
-  30's (``s30/i369.txt``, ``s31/j369.txt``).
+  30's (``s30/i369.txt``, ``s31/j369.txt``);
+- session 33 (``bench/gpu_session33.sh d``): images_4, the full method's pseudo-view phase from step 2000
+  (``full.baseline_fraction=0.2``, ``s33/d369.txt``) against that default.
 """
 
 from __future__ import annotations
@@ -184,8 +186,13 @@ def images4_default(results: Path) -> dict:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--results", default=str(Path(__file__).resolve().parent / "results"))
-    ap.add_argument("--session", type=int, choices=(20, 21, 22, 26, 27, 28, 29, 30, 31), default=21)
+    ap.add_argument("--session", type=int, choices=(20, 21, 22, 26, 27, 28, 29, 30, 31, 33), default=21)
     args = ap.parse_args(argv)
+    if args.session == 33:
+        d = load(Path(args.results) / "s33" / "d369.txt", "d")
+        print("\n".join(variant_table(images4_default(Path(args.results)), {"baseline_fraction=0.2": d},
+                                       "default (images_4)")))
+        return 0
     if args.session == 31:
         r30, r31 = (Path(args.results) / f"s{n}" for n in (30, 31))
         new = merged(load(r30 / "i369.txt", "i"), load(r31 / "j369.txt", "j"))

@@ -11,7 +11,7 @@ current defaults:
 - fern 3 views, DTU scan65 3 views and lego 8 views (H200, session 31): ``s31/o.txt`` (``o_<scene>_<method>_s<seed>``),
   and lego's best baseline setting (``o_lego_best``, ``o_lego_best20k``) as rows of their own, and (session 32)
   that setting with the position learning rate decaying to 1.6e-5 (``s32/M.txt`` ``M_lrf``, ``s32/N.txt``
-  ``N_lrf20k``);
+  ``N_lrf20k``) and (session 33) to 3.2e-5 (``s33/a.txt`` ``a_lrf32e6``);
 - the captures at 384x256, 3000 it (H100, session 28's runs of today's default: ``s28/c369.txt`` baselines,
   ``s28/m369.txt`` full);
 - the captures at 768x512, 10,000 it (seed 0 H100, ``s28/i369.txt``; seeds 1-2 H200, ``s31/k369.txt``, and the five
@@ -68,11 +68,13 @@ def rows(results: Path) -> list[str]:
     for key, setting in (("o_lego_best", "10,000 it"), ("o_lego_best20k", "20,000 it")):
         out.append(_row("Blender lego, 8 views", f"baseline + opacity noise 0.8, SH degree 1, {setting}", "H200",
                         o.get(key, {}), {}, "`s31/o.txt`"))
-    for name, key, setting in (("M.txt", "M_lrf", "10,000 it"), ("N.txt", "N_lrf20k", "20,000 it")):
-        path = results / "s32" / name
-        if path.is_file():  # session 32: that setting with the position learning rate decaying to 1.6e-5
-            out.append(_row("Blender lego, 8 views", "that + `optim.means_lr_final=1.6e-5` (10x), " + setting, "H200",
-                            _psnrs(path).get(key, {}), {}, f"`s32/{name}`"))
+    for name, key, lrf, setting in (("s32/M.txt", "M_lrf", "1.6e-5` (10x)", "10,000 it"),
+                                    ("s32/N.txt", "N_lrf20k", "1.6e-5` (10x)", "20,000 it"),
+                                    ("s33/a.txt", "a_lrf32e6", "3.2e-5` (20x)", "10,000 it")):
+        path = results / name
+        if path.is_file():  # sessions 32-33: that setting with the position learning rate decaying to lrf
+            out.append(_row("Blender lego, 8 views", f"that + `optim.means_lr_final={lrf}, {setting}", "H200",
+                            _psnrs(path).get(key, {}), {}, f"`{name}`"))
     large_source = ", ".join(f"`{p.parent.name}/{p.name}`" for p in ct.images4_default_files(results))
     for runs, setting, machine, source in (
             (ct.session28_default(results), "384x256, 3000 it", "H100", "`s28/c369.txt`, `s28/m369.txt`"),
