@@ -41,7 +41,10 @@ median).
   (``images4_default``: seed 0 ``s28/i369.txt``, seeds 1-2 ``s31/k369.txt``, later ``s32/k369.txt``) beside session
   30's (``s30/i369.txt``, ``s31/j369.txt``);
 - session 33 (``bench/gpu_session33.sh d``): images_4, the full method's pseudo-view phase from step 2000
-  (``full.baseline_fraction=0.2``, ``s33/d369.txt``) against that default.
+  (``full.baseline_fraction=0.2``, ``s33/d369.txt``) against that default;
+- session 34 (``bench/gpu_session34.sh p``): 384x256, the full method with SYN3R's perturbed pseudo-view poses
+  (``pseudo.trajectory.perturb_candidates=5``, translation sigma 0.1 / 0.3: ``p_pert10_...`` / ``p_pert30_...`` in
+  ``s34/p369.txt``) against session 28's default.
 """
 
 from __future__ import annotations
@@ -186,8 +189,14 @@ def images4_default(results: Path) -> dict:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--results", default=str(Path(__file__).resolve().parent / "results"))
-    ap.add_argument("--session", type=int, choices=(20, 21, 22, 26, 27, 28, 29, 30, 31, 33), default=21)
+    ap.add_argument("--session", type=int, choices=(20, 21, 22, 26, 27, 28, 29, 30, 31, 33, 34), default=21)
     args = ap.parse_args(argv)
+    if args.session == 34:
+        variants = load_variants(Path(args.results) / "s34" / "p369.txt", "p")
+        names = {"pert10": "perturb_candidates=5, sigma 0.1", "pert30": "perturb_candidates=5, sigma 0.3"}
+        print("\n".join(variant_table(session28_default(Path(args.results)),
+                                       {names.get(k, k): v for k, v in variants.items()}, "default (session 28)")))
+        return 0
     if args.session == 33:
         d = load(Path(args.results) / "s33" / "d369.txt", "d")
         print("\n".join(variant_table(images4_default(Path(args.results)), {"baseline_fraction=0.2": d},
