@@ -14,7 +14,8 @@
 # l: issue 14, lego (10,000 it, seeds 0-2) around session 33's best (means_lr_final 3.2e-5, 24.35): final rates 4.8e-5
 #    and 6.4e-5, 3.2e-5 with twice the initial rate, with 10k starting Gaussians, and at 15,000 it. 15 runs; l.txt.
 # b: means_lr_final=3.2e-5 with each config's defaults on fern, DTU and lego, both methods (18 runs; compare
-#    bench/results/s31/o.txt): whether it may become a default under issue 14's rule. Prefix b_; b.txt.
+#    bench/results/s31/o.txt): whether it may become a default under issue 14's rule; and p's perturbed poses (sigma
+#    0.1) in the full method on fern and DTU (6 runs; DTU's full method is issue 14's other unmet point). Prefix b_; b.txt.
 set -u
 source "$(dirname "${BASH_SOURCE[0]}")/gpu_one.sh"
 session_env "$@"; P=$1; D=$2; R=$3; shift 3
@@ -50,7 +51,11 @@ b)
       echo "lego b_lego_${m}_s$s $m $s 10000 $LRF"
       echo "named b_fern_${m}_s$s $m llff fern 3 $s $LRF"
       echo "named b_dtu_${m}_s$s $m dtu scan65 3 $s $LRF"
-    done; done; } | xargs -P ${JOBS:-18} -L 1 bash -c '"$@"' _ | grep -v "rc=0"
+    done; done
+    for s in 0 1 2; do
+      echo "named b_fern_pert10_full_s$s full llff fern 3 $s $PERT"
+      echo "named b_dtu_pert10_full_s$s full dtu scan65 3 $s $PERT"
+    done; } | xargs -P ${JOBS:-24} -L 1 bash -c '"$@"' _ | grep -v "rc=0"
   summary b_ b.txt
   ;;
 *) echo "unknown phase $P"; exit 2 ;;
