@@ -15,7 +15,9 @@
 #    and 6.4e-5, 3.2e-5 with twice the initial rate, with 10k starting Gaussians, and at 15,000 it. 15 runs; l.txt.
 # b: means_lr_final=3.2e-5 with each config's defaults on fern, DTU and lego, both methods (18 runs; compare
 #    bench/results/s31/o.txt): whether it may become a default under issue 14's rule; and p's perturbed poses (sigma
-#    0.1) in the full method on fern and DTU (6 runs; DTU's full method is issue 14's other unmet point). Prefix b_; b.txt.
+#    0.1) in the full method on fern and DTU, and CoR-GS's pair (train.co_reg) on DTU, both methods (12 runs; DTU's full
+#    method is issue 14's other unmet point; session 33's CPU hint, seed 0: full 22.30 -> 22.98 with the pair, baseline
+#    22.23; bench/results/s33/cpu.txt). Prefix b_; b.txt.
 set -u
 source "$(dirname "${BASH_SOURCE[0]}")/gpu_one.sh"
 session_env "$@"; P=$1; D=$2; R=$3; shift 3
@@ -55,6 +57,8 @@ b)
     for s in 0 1 2; do
       echo "named b_fern_pert10_full_s$s full llff fern 3 $s $PERT"
       echo "named b_dtu_pert10_full_s$s full dtu scan65 3 $s $PERT"
+      echo "named b_dtu_coreg_full_s$s full dtu scan65 3 $s --set train.co_reg=true"
+      echo "named b_dtu_coreg_baseline_s$s baseline dtu scan65 3 $s --set train.co_reg=true"
     done; } | xargs -P ${JOBS:-24} -L 1 bash -c '"$@"' _ | grep -v "rc=0"
   summary b_ b.txt
   ;;
