@@ -20,8 +20,9 @@
 #    (full.baseline_fraction=0.2 instead of 0.4), 6 cases x seeds 0-2, full only (the baselines are session 28/31/32's
 #    k369/i369 runs). The test curves of those runs peak at step 1000-2000 (herz 3/6/9 views, castle 3 views) and fall
 #    after; the default's pseudo phase starts at step 4000, on the fallen model. At 384x256, 3000 it, it starts at 1200,
-#    near the peak, and gains +0.40 against +0.18 at images_4. Needs images_4 in $D (copied from ./gpudata_b_tmp when
-#    there). Resumable; prefix d_; d369.txt. This session runs it in the slots of b and c (b_lrf / c_lrf keep theirs).
+#    near the peak, and gains +0.40 against +0.18 at images_4. Needs images_4 in $D (.gpudata/b). Resumable; prefix d_;
+#    d369.txt. Session 33's helper called it as phases b and c (the names then led here; b_lrf / c_lrf are the lrf runs
+#    b and c were written for), with images_4 copied in from an untracked folder of the tree.
 set -u
 source "$(dirname "${BASH_SOURCE[0]}")/gpu_one.sh"
 session_env "$@"; P=$1; D=$2; R=$3; shift 3
@@ -38,8 +39,7 @@ a)
     done; } | xargs -P ${JOBS:-15} -L 1 bash -c '"$@"' _ | grep -v "rc=0"
   summary a_ a.txt
   ;;
-b|c|d)
-  [ -d gpudata_b_tmp ] && [ ! -d "$D/castle_p30/images_4" ] && cp -r gpudata_b_tmp/* "$D"/
+d)
   { for s in 0 1 2; do for c in herz_jesus_p25 castle_p30; do for v in 3 6 9; do
       echo "d_${c}_${v}v_full_s$s full $c $v $s --set full.baseline_fraction=0.2"
     done; done; done; } | DS=4 IT=10000 xargs -P ${JOBS:-9} -L 1 bash -c 'one "$@"' _ | grep -v "rc=0"
