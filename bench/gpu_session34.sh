@@ -5,7 +5,7 @@
 #   T=seconds bash bench/gpu_session34.sh PHASE D RUNS
 # p: issue 13. SYN3R's pseudo-view poses: each interior pose of a trajectory replaced by the most uncertain of 5 perturbed
 #    candidates (pseudo.trajectory.perturb_candidates=5; translation sigma 0.1 x the distance between the two inputs, as
-#    SYN3R; and 0.3), the full method only, captures at 384x256, 3000 it, seeds 0-2 (36 runs; the default's runs are
+#    SYN3R; and 0.3; SIGMAS="10" runs only the first), the full method only, captures at 384x256, 3000 it, seeds 0-2 (36 runs; the default's runs are
 #    session 28's s28/m369.txt, its baselines s28/c369.txt; python bench/captures_table.py --session 34). Session 33 found
 #    the pseudo views hold the model only on the path through the inputs, while the capture's other frames lie 5-11 m
 #    from it at 3 views. Resumable; prefix p_; p369.txt.
@@ -17,7 +17,7 @@
 #    bench/results/s31/o.txt): whether it may become a default under issue 14's rule; and p's perturbed poses (sigma
 #    0.1) in the full method on fern and DTU, and CoR-GS's pair (train.co_reg) on DTU, both methods (12 runs; DTU's full
 #    method is issue 14's other unmet point; session 33's CPU hint, seed 0: full 22.30 -> 22.98 with the pair, baseline
-#    22.23; bench/results/s33/cpu.txt). Prefix b_; b.txt.
+#    22.23; bench/results/s33/cpu.txt). PARTS (default "coreg lrf pert") picks and orders the three sets. Prefix b_; b.txt.
 set -u
 source "$(dirname "${BASH_SOURCE[0]}")/gpu_one.sh"
 session_env "$@"; P=$1; D=$2; R=$3; shift 3
@@ -27,8 +27,9 @@ PERT="--set pseudo.trajectory.perturb_candidates=5"
 case $P in
 p)
   { for s in 0 1 2; do for c in castle_p30 herz_jesus_p25; do for v in 3 6 9; do
-      echo "p_pert10_${c}_${v}v_full_s$s full $c $v $s $PERT"
-      echo "p_pert30_${c}_${v}v_full_s$s full $c $v $s $PERT --set pseudo.trajectory.perturb_translation=0.3"
+      for sg in ${SIGMAS:-10 30}; do
+        echo "p_pert${sg}_${c}_${v}v_full_s$s full $c $v $s $PERT --set pseudo.trajectory.perturb_translation=0.$sg"
+      done
     done; done; done; } | xargs -P ${JOBS:-18} -L 1 bash -c 'one "$@"' _ | grep -v "rc=0"
   summary p_ p369.txt
   ;;
@@ -49,17 +50,19 @@ l)
   summary l_ l.txt
   ;;
 b)
-  { for s in 0 1 2; do for m in baseline full; do
-      echo "lego b_lego_${m}_s$s $m $s 10000 $LRF"
-      echo "named b_fern_${m}_s$s $m llff fern 3 $s $LRF"
-      echo "named b_dtu_${m}_s$s $m dtu scan65 3 $s $LRF"
-    done; done
-    for s in 0 1 2; do
-      echo "named b_fern_pert10_full_s$s full llff fern 3 $s $PERT"
-      echo "named b_dtu_pert10_full_s$s full dtu scan65 3 $s $PERT"
-      echo "named b_dtu_coreg_full_s$s full dtu scan65 3 $s --set train.co_reg=true"
-      echo "named b_dtu_coreg_baseline_s$s baseline dtu scan65 3 $s --set train.co_reg=true"
-    done; } | xargs -P ${JOBS:-24} -L 1 bash -c '"$@"' _ | grep -v "rc=0"
+  { for part in ${PARTS:-coreg lrf pert}; do for s in 0 1 2; do case $part in
+      coreg)
+        echo "named b_dtu_coreg_full_s$s full dtu scan65 3 $s --set train.co_reg=true"
+        echo "named b_dtu_coreg_baseline_s$s baseline dtu scan65 3 $s --set train.co_reg=true" ;;
+      lrf) for m in baseline full; do
+        echo "lego b_lego_${m}_s$s $m $s 10000 $LRF"
+        echo "named b_fern_${m}_s$s $m llff fern 3 $s $LRF"
+        echo "named b_dtu_${m}_s$s $m dtu scan65 3 $s $LRF"
+      done ;;
+      pert)
+        echo "named b_fern_pert10_full_s$s full llff fern 3 $s $PERT"
+        echo "named b_dtu_pert10_full_s$s full dtu scan65 3 $s $PERT" ;;
+    esac; done; done; } | xargs -P ${JOBS:-24} -L 1 bash -c '"$@"' _ | grep -v "rc=0"
   summary b_ b.txt
   ;;
 *) echo "unknown phase $P"; exit 2 ;;
