@@ -13,6 +13,7 @@
 #    ..." chooses it. Prefix q_; q369.txt.
 # l: issue 14, lego (10,000 it, seeds 0-2) around session 33's best (means_lr_final 3.2e-5, 24.35): final rates 4.8e-5
 #    and 6.4e-5, 3.2e-5 with twice the initial rate, with 10k starting Gaussians, and at 15,000 it. 15 runs; l.txt.
+#    ONLY=REGEX keeps the runs whose line matches (session 34's second l call: ONLY="15k|lrf64").
 # b: means_lr_final=3.2e-5 with each config's defaults on fern, DTU and lego, both methods (18 runs; compare
 #    bench/results/s31/o.txt): whether it may become a default under issue 14's rule; and p's perturbed poses (sigma
 #    0.1) in the full method on fern and DTU, and CoR-GS's pair (train.co_reg) on DTU, both methods (12 runs; DTU's full
@@ -46,7 +47,7 @@ l)
       echo "lego l_lrf32e6_lr2_s$s baseline $s 10000 $LEGO_BEST $LRF --set optim.means_lr=3.2e-4"
       echo "lego l_lrf32e6_init10k_s$s baseline $s 10000 $LEGO_BEST $LRF --set model.init_num=10000"
       echo "lego l_lrf32e6_15k_s$s baseline $s 15000 $LEGO_BEST $LRF"
-    done; } | xargs -P ${JOBS:-15} -L 1 bash -c '"$@"' _ | grep -v "rc=0"
+    done; } | grep -E -- "${ONLY:-.}" | xargs -P ${JOBS:-15} -L 1 bash -c '"$@"' _ | grep -v "rc=0"
   summary l_ l.txt
   ;;
 b)
