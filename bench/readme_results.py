@@ -11,7 +11,8 @@ current defaults:
 - fern 3 views, DTU scan65 3 views and lego 8 views (H200, session 31): ``s31/o.txt`` (``o_<scene>_<method>_s<seed>``),
   and lego's best baseline setting (``o_lego_best``, ``o_lego_best20k``) as rows of their own, and (session 32)
   that setting with the position learning rate decaying to 1.6e-5 (``s32/M.txt`` ``M_lrf``, ``s32/N.txt``
-  ``N_lrf20k``) and (session 33) to 3.2e-5 (``s33/a.txt`` ``a_lrf32e6``);
+  ``N_lrf20k``) and (session 33) to 3.2e-5 (``s33/a.txt`` ``a_lrf32e6``; session 34 at 15,000 it: ``s34/l_call2.txt``
+  ``l_lrf32e6_15k``);
 - the captures at 384x256, 3000 it (H100, session 28's runs of today's default: ``s28/c369.txt`` baselines,
   ``s28/m369.txt`` full);
 - the captures at 768x512, 10,000 it (seed 0 H100, ``s28/i369.txt``; seeds 1-2 H200, ``s31/k369.txt``, and the five
@@ -70,9 +71,10 @@ def rows(results: Path) -> list[str]:
                         o.get(key, {}), {}, "`s31/o.txt`"))
     for name, key, lrf, setting in (("s32/M.txt", "M_lrf", "1.6e-5", "10,000 it"),
                                     ("s32/N.txt", "N_lrf20k", "1.6e-5", "20,000 it"),
-                                    ("s33/a.txt", "a_lrf32e6", "3.2e-5", "10,000 it")):
+                                    ("s33/a.txt", "a_lrf32e6", "3.2e-5", "10,000 it"),
+                                    ("s34/l_call2.txt", "l_lrf32e6_15k", "3.2e-5", "15,000 it")):
         path = results / name
-        if path.is_file():  # sessions 32-33: that setting with the position learning rate decaying to lrf
+        if path.is_file():  # sessions 32-34: that setting with the position learning rate decaying to lrf
             times = f"{float(lrf) / 1.6e-6:.0f}x"  # the default final rate is 1.6e-6
             out.append(_row("Blender lego, 8 views", f"that + `optim.means_lr_final={lrf}` ({times}), {setting}",
                             "H200", _psnrs(path).get(key, {}), {}, f"`{name}`"))

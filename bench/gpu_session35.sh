@@ -1,0 +1,45 @@
+#!/usr/bin/env bash
+# GPU runs prepared in session 34 for the next session, after the packed wheels are installed in /tmp/site (and pycolmap
+# from .device/extra: DTU and the captures triangulate) and the scenes copied to $D (blender_lego and dtu_scan65 from
+# .gpudata/c, llff_fern and the captures' images_8 from .gpudata/a).
+#   T=seconds bash bench/gpu_session35.sh PHASE D RUNS          (ONLY=REGEX keeps the runs whose line matches)
+# Session 34 reached 24.49 [24.26, 24.50] on lego (issue 14 asks 24.5) with the best setting (DropGaussian 0.2, opacity
+# noise 0.8, SH degree 1, optim.means_lr_final=3.2e-5) at 15,000 it against 24.35 at 10,000. The schedule is 3D-GS's for
+# 30,000 steps (strategy.refine_stop_iter 15,000, reset_every 3000), so a 10,000-step run grows to its end and has its
+# opacities reset at step 9000, 1000 steps before the evaluation; 3D-GS keeps its last half free of both.
+# s: lego, that setting at 10,000 it with the growth (and so the resets) stopped at 9000 (no reset at 9000), 7500 (last
+#    reset at 6000) and 5000 (last reset at 3000, 3D-GS's proportion), and at 15,000 it stopped at 9000; and the full
+#    method with the setting at 15,000 it (the runs a config change for Blender would need). 15 runs; s.txt.
+# r: the same idea where runs are 3000 steps long (no reset happens; growth runs to the end): refine_stop_iter 1500 on
+#    fern and DTU (both methods, 12 runs) and on the captures at 6 and 9 views, both methods (24 runs; at 3 views the
+#    stereo start holds the geometry and nothing grows). Compare s31/o.txt and session 28's default (s28/c369.txt,
+#    m369.txt). Two calls. r.txt.
+set -u
+source "$(dirname "${BASH_SOURCE[0]}")/gpu_one.sh"
+session_env "$@"; P=$1; D=$2; R=$3; shift 3
+export R D T END=$(( $(date +%s) + ${T:-540} ))  # every run of the call stops by then
+LRF="--set optim.means_lr_final=3.2e-5"
+case $P in
+s)
+  { for s in 0 1 2; do
+      for st in 9000 7500 5000; do
+        echo "lego s_rs${st}_s$s baseline $s 10000 $LEGO_BEST $LRF --set strategy.refine_stop_iter=$st"
+      done
+      echo "lego s_15k_rs9000_s$s baseline $s 15000 $LEGO_BEST $LRF --set strategy.refine_stop_iter=9000"
+      echo "lego s_15k_full_s$s full $s 15000 $LEGO_BEST $LRF"
+    done; } | grep -E -- "${ONLY:-.}" | xargs -P ${JOBS:-15} -L 1 bash -c '"$@"' _ | grep -v "rc=0"
+  summary s_ s.txt
+  ;;
+r)
+  RS="--set strategy.refine_stop_iter=1500"
+  { for s in 0 1 2; do for m in baseline full; do
+      echo "named r_fern_${m}_s$s $m llff fern 3 $s $RS"
+      echo "named r_dtu_${m}_s$s $m dtu scan65 3 $s $RS"
+      for c in castle_p30 herz_jesus_p25; do for v in 6 9; do
+        echo "one r_${c}_${v}v_${m}_s$s $m $c $v $s $RS"
+      done; done
+    done; done; } | grep -E -- "${ONLY:-.}" | xargs -P ${JOBS:-18} -L 1 bash -c '"$@"' _ | grep -v "rc=0"
+  summary r_ r.txt
+  ;;
+*) echo "unknown phase $P"; exit 2 ;;
+esac
