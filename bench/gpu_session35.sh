@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # GPU runs prepared in session 34 for the next session, after the packed wheels are installed in /tmp/site (and pycolmap
 # from .device/extra: DTU and the captures triangulate) and the scenes copied to $D (blender_lego and dtu_scan65 from
-# .gpudata/c, llff_fern and the captures' images_8 from .gpudata/a).
+# .gpudata/c, llff_fern and the captures' images_8 from .gpudata/a; their images_4 from .gpudata/b for phase c).
 #   T=seconds bash bench/gpu_session35.sh PHASE D RUNS          (ONLY=REGEX keeps the runs whose line matches)
 # Session 34 reached 24.49 [24.26, 24.50] on lego (issue 14 asks 24.5) with the best setting (DropGaussian 0.2, opacity
 # noise 0.8, SH degree 1, optim.means_lr_final=3.2e-5) at 15,000 it against 24.35 at 10,000. The schedule is 3D-GS's for
@@ -14,6 +14,9 @@
 #    fern and DTU (both methods, 12 runs) and on the captures at 6 and 9 views, both methods (24 runs; at 3 views the
 #    stereo start holds the geometry and nothing grows). Compare s31/o.txt and session 28's default (s28/c369.txt,
 #    m369.txt). Two calls. r.txt.
+# c: the captures at images_4 (768x512, 10,000 it, where both methods' test PSNR peaks by step 2000 and then falls while
+#    the model keeps growing; resets at 3000, 6000 and 9000): refine_stop_iter 5000 at 6 and 9 views, both methods, seeds
+#    0-2 (24 runs, about three calls; compare ct.images4_default). c69.txt.
 set -u
 source "$(dirname "${BASH_SOURCE[0]}")/gpu_one.sh"
 session_env "$@"; P=$1; D=$2; R=$3; shift 3
@@ -40,6 +43,13 @@ r)
       done; done
     done; done; } | grep -E -- "${ONLY:-.}" | xargs -P ${JOBS:-18} -L 1 bash -c '"$@"' _ | grep -v "rc=0"
   summary r_ r.txt
+  ;;
+c)
+  { for s in 0 1 2; do for m in full baseline; do for c in castle_p30 herz_jesus_p25; do for v in 6 9; do
+      echo "c_${c}_${v}v_${m}_s$s $m $c $v $s --set strategy.refine_stop_iter=5000"
+    done; done; done; done; } | grep -E -- "${ONLY:-.}" | DS=4 IT=10000 xargs -P ${JOBS:-12} -L 1 bash -c 'one "$@"' _ \
+    | grep -v "rc=0"
+  summary c_ c69.txt
   ;;
 *) echo "unknown phase $P"; exit 2 ;;
 esac
