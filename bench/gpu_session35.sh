@@ -30,7 +30,7 @@ s)
       done
       echo "lego s_15k_rs9000_s$s baseline $s 15000 $LEGO_BEST $LRF --set strategy.refine_stop_iter=9000"
       echo "lego s_15k_full_s$s full $s 15000 $LEGO_BEST $LRF"
-    done; } | grep -E -- "${ONLY:-.}" | xargs -P ${JOBS:-15} -L 1 bash -c '"$@"' _ | grep -v "rc=0"
+    done; } | run_lines 15
   summary s_ s.txt
   ;;
 r)
@@ -41,14 +41,13 @@ r)
       for c in castle_p30 herz_jesus_p25; do for v in 6 9; do
         echo "one r_${c}_${v}v_${m}_s$s $m $c $v $s $RS"
       done; done
-    done; done; } | grep -E -- "${ONLY:-.}" | xargs -P ${JOBS:-18} -L 1 bash -c '"$@"' _ | grep -v "rc=0"
+    done; done; } | run_lines 18
   summary r_ r.txt
   ;;
 c)
   { for s in 0 1 2; do for m in full baseline; do for c in castle_p30 herz_jesus_p25; do for v in 6 9; do
-      echo "c_${c}_${v}v_${m}_s$s $m $c $v $s --set strategy.refine_stop_iter=5000"
-    done; done; done; done; } | grep -E -- "${ONLY:-.}" | DS=4 IT=10000 xargs -P ${JOBS:-12} -L 1 bash -c 'one "$@"' _ \
-    | grep -v "rc=0"
+      echo "one c_${c}_${v}v_${m}_s$s $m $c $v $s --set strategy.refine_stop_iter=5000"
+    done; done; done; done; } | DS=4 IT=10000 run_lines 12
   summary c_ c69.txt
   ;;
 *) echo "unknown phase $P"; exit 2 ;;
