@@ -45,6 +45,9 @@ median).
 - session 34 (``bench/gpu_session34.sh p``): 384x256, the full method with SYN3R's perturbed pseudo-view poses
   (``pseudo.trajectory.perturb_candidates=5``, translation sigma 0.1 / 0.3: ``p_pert10_...`` / ``p_pert30_...`` in
   ``s34/p369.txt``) against session 28's default.
+- session 35 (``bench/gpu_session35.sh``): both methods with growth stopped at half the run
+  (``strategy.refine_stop_iter``): at 384x256 at step 1500 of 3000 (``s35/r.txt``, 6 and 9 views) beside session
+  28's default, and at images_4 at step 5000 of 10,000 (``s35/c69.txt``) beside the images_4 default.
 """
 
 from __future__ import annotations
@@ -189,8 +192,17 @@ def images4_default(results: Path) -> dict:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--results", default=str(Path(__file__).resolve().parent / "results"))
-    ap.add_argument("--session", type=int, choices=(20, 21, 22, 26, 27, 28, 29, 30, 31, 33, 34), default=21)
+    ap.add_argument("--session", type=int, choices=(20, 21, 22, 26, 27, 28, 29, 30, 31, 33, 34, 35), default=21)
     args = ap.parse_args(argv)
+    if args.session == 35:
+        r35 = Path(args.results) / "s35"
+        print("\n".join(table([("session 28 default", session28_default(Path(args.results))),
+                               ("growth stopped at 1500", load(r35 / "r.txt", "r"))])))
+        if (r35 / "c69.txt").is_file():
+            print()
+            print("\n".join(table([("images_4 default", images4_default(Path(args.results))),
+                                   ("growth stopped at 5000", load(r35 / "c69.txt", "c"))])))
+        return 0
     if args.session == 34:
         variants = load_variants(Path(args.results) / "s34" / "p369.txt", "p")
         names = {"pert10": "perturb_candidates=5, sigma 0.1", "pert30": "perturb_candidates=5, sigma 0.3"}

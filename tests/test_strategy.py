@@ -222,3 +222,62 @@ def test_only_updates_state_is_what_step_post_backward_does(monkeypatch, pause):
         assert s.only_updates_state(step) == (not acted), (step, acted)
         seen.add(bool(acted))
     assert seen == {True, False}
+
+
+# ----------------------------------------------------------------------------------------------
+# strategy.refine_stop_fraction: growth stopped at a share of the run (warpgs.train.growth_schedule)
+
+
+def test_refine_stop_fraction_resolves_against_the_run_length():
+    from warpgs.train import growth_schedule
+
+    cfg = Config()
+    cfg.train.iterations = 3000
+    assert growth_schedule(cfg) is cfg  # 0: refine_stop_iter alone, the config untouched
+    cfg.strategy.refine_stop_fraction = 0.5
+    assert growth_schedule(cfg).strategy.refine_stop_iter == 1500
+    assert cfg.strategy.refine_stop_iter == 15_000  # the caller's config is not changed
+    cfg.train.iterations = 40_000  # 20,000 comes after refine_stop_iter: the earlier one holds
+    assert growth_schedule(cfg).strategy.refine_stop_iter == 15_000
+    cfg.train.iterations = 3001
+    assert growth_schedule(cfg).strategy.refine_stop_iter == 1500  # round(1500.5): banker's rounding, an int
+    # the full method's own fraction when set (0 too: growth as refine_stop_iter says); the baseline ignores it
+    cfg.train.iterations = 3000
+    cfg.full.refine_stop_fraction = 0.0
+    assert growth_schedule(cfg, "full").strategy.refine_stop_iter == 15_000
+    assert growth_schedule(cfg, "baseline").strategy.refine_stop_iter == 1500
+    cfg.full.refine_stop_fraction = 0.25
+    assert growth_schedule(cfg, "full").strategy.refine_stop_iter == 750
+    cfg.full.refine_stop_fraction = None
+    assert growth_schedule(cfg, "full").strategy.refine_stop_iter == 1500
+
+
+def test_refine_stop_fraction_is_the_same_training_as_the_step_it_names():
+    """On the tiny scene (growth every 20 steps from step 30): 0.7 of 100 steps trains exactly as
+    refine_stop_iter=70 (growth at 40 and 60, none at 80), and differs from growth to the end."""
+    from tests.tiny_scene import make_scene, param_copy, same_params, tiny_config
+    from warpgs.train import Trainer
+
+    def run(**strategy):
+        cfg = tiny_config(100)
+        for k, v in strategy.items():
+            setattr(cfg.strategy, k, v)
+        t = Trainer(cfg, make_scene(), None, log=lambda m: None)
+        t.train()
+        return t
+
+    frac = run(refine_stop_fraction=0.7)
+    assert frac.cfg.strategy.refine_stop_iter == 70 and frac.strategy.refine_stop_iter == 70
+    step = run(refine_stop_iter=70)
+    assert same_params(param_copy(frac), param_copy(step))
+    free = run()
+    assert len(free.model) != len(frac.model)  # the free run grew or pruned at step 80 too
+
+
+def test_a_bad_refine_stop_fraction_is_named():
+    from warpgs.config import ConfigError, load_config
+
+    with pytest.raises(ConfigError, match="refine_stop_fraction"):
+        load_config(overrides=["strategy.refine_stop_fraction=1.5"])
+    with pytest.raises(ConfigError, match="refine_stop_fraction"):
+        load_config(overrides=["full.refine_stop_fraction=-0.1"])

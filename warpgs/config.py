@@ -251,13 +251,14 @@ class FullConfig:
     pseudo_depth_smooth: float = 0.0  # weight of an edge-aware smoothness of the pseudo views' rendered depth
     #   (Monodepth's, Godard et al. CVPR 2017, on depth / its mean; edges from the pseudo view's image); 0: off
     far_field: str | None = None  # the far field for this method (train.far_field: none | elevation); None: train's
+    refine_stop_fraction: float | None = None  # strategy.refine_stop_fraction for this method; None: the strategy's
     flythrough_frames: int = 24  # frames per trajectory in flythrough.gif
 
     LIMITS = {"cycles": ">= 0", "baseline_fraction": "[0, 1)", "pseudo_weight": ">= 0", "lpips_weight": ">= 0",
               "ssim_weight": ">= 0", "depth_weight": ">= 0", "input_depth_weight": ">= 0",
               "pseudo_loss": "{lpips, l1}", "guidance": "{warped, render}", "stereo_sources": "{inputs, all}",
               "init_opacity": "(0, 1)", "max_new": ">= 0", "pseudo_mask": "{seen, reliable, all}", "growth_budget": ">= 0",
-              "drop_rate": "[0, 1)", "pseudo_depth_smooth": ">= 0", "far_field": FAR_FIELD_RULE,
+              "drop_rate": "[0, 1)", "pseudo_depth_smooth": ">= 0", "far_field": FAR_FIELD_RULE, "refine_stop_fraction": "[0, 1]",
               "flythrough_frames": ">= 0"}
 
 

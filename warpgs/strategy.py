@@ -45,6 +45,9 @@ class DefaultStrategy:
     refine_scale2d_stop_iter: int = 0  # 0 = no screen-size rules (gsplat's default)
     refine_start_iter: int = 500
     refine_stop_iter: int = 15_000
+    refine_stop_fraction: float = 0.0  # > 0: growth, pruning and the opacity resets also stop at this fraction of the
+    #   run (train.iterations) when that comes first (3D-GS: 15,000 of 30,000 steps, 0.5); 0: refine_stop_iter alone.
+    #   Resolved into refine_stop_iter by the trainer (warpgs.train.growth_schedule)
     reset_every: int = 3000
     refine_every: int = 100
     pause_refine_after_reset: int = 0
@@ -55,7 +58,8 @@ class DefaultStrategy:
 
     LIMITS = {"prune_opa": "[0, 1]", "grow_grad2d": ">= 0", "grow_scale3d": ">= 0", "grow_scale2d": ">= 0",
               "prune_scale3d": ">= 0", "prune_scale2d": ">= 0", "refine_scale2d_stop_iter": ">= 0",
-              "refine_start_iter": ">= 0", "refine_stop_iter": ">= 0", "reset_every": ">= 1", "refine_every": ">= 1",
+              "refine_start_iter": ">= 0", "refine_stop_iter": ">= 0", "refine_stop_fraction": "[0, 1]",
+              "reset_every": ">= 1", "refine_every": ">= 1",
               "pause_refine_after_reset": ">= 0", "max_gaussians": ">= 0", "unseen_min_weight": ">= 0"}
 
     # ------------------------------------------------------------------------------------------
