@@ -85,3 +85,29 @@ def test_held_training_keeps_the_gaussians_and_moves_the_means_less():
     assert moved_held < 0.3 * moved_nogrow  # Adam's steps scale with the learning rate (x 0.1 here)
     # the training views are still fitted: the colours and opacities learn at their full rates
     assert held.losses[-1] < 0.7 * held.losses[0]
+
+
+def test_a_resumed_held_run_holds_once_and_keeps_its_growth_schedule(tmp_path):
+    """The checkpoint (and config.yaml) hold the configuration as requested, not the one derived from it at run time
+    (held learning rates, growth resolved against the run's length): resuming from it derives the same again. Before
+    session 35 the held one was saved, so a resumed held run scaled its geometry's learning rates twice (x 0.01)."""
+    from warpgs.config import config_from_dict
+    from warpgs.train import read_checkpoint
+
+    cfg = tiny_config(40, hold_geometry="on")
+    cfg.strategy.refine_stop_fraction = 0.5
+    t = Trainer(cfg, make_scene(), tmp_path, log=lambda m: None)
+    assert t.cfg.optim.means_lr == pytest.approx(0.1 * cfg.optim.means_lr)
+    path = t.save_checkpoint()
+    saved = config_from_dict(read_checkpoint(path)["config"])
+    assert saved.optim == cfg.optim and saved.strategy == cfg.strategy  # as requested
+    again = Trainer(saved, make_scene(), tmp_path, log=lambda m: None)  # what --resume builds from the checkpoint
+    assert again.cfg.optim == t.cfg.optim and again.cfg.strategy == t.cfg.strategy  # held once, not twice
+    # without the hold: growth resolved against the resumed run's length, not frozen at the first run's
+    free = tiny_config(40)
+    free.strategy.refine_stop_fraction = 0.5
+    t = Trainer(free, make_scene(), tmp_path / "free", log=lambda m: None)
+    assert t.cfg.strategy.refine_stop_iter == 20
+    longer = config_from_dict(read_checkpoint(t.save_checkpoint())["config"])
+    longer.train.iterations = 100  # --resume --iterations 100
+    assert Trainer(longer, make_scene(), tmp_path / "free", log=lambda m: None).cfg.strategy.refine_stop_iter == 50

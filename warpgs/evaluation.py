@@ -96,6 +96,8 @@ def run_metrics(trainer, ev: dict, train_ev: dict, fps: float) -> dict:
         metrics["stage_times_s"]["path_floaters_s"] = round(tr.path_floaters_time, 2)
     if getattr(tr, "held", None):
         metrics["hold_geometry"] = tr.held
+    # the step growth stopped at, as the run resolved it (strategy.refine_stop_fraction; 0 when held)
+    metrics["refine_stop_iter"] = tr.cfg.strategy.refine_stop_iter
     if tr.stopped_early:
         metrics["stopped_early"] = tr.stopped_early
     if "lpips_missing" in ev:
@@ -122,7 +124,8 @@ def write_run_outputs(trainer, metrics: dict) -> None:
     trainer.save_checkpoint()
     if trainer.far_field is not None:
         trainer.far_field.save(out / "far_field.json")
-    save_config(trainer.cfg, out / "config.yaml")
+    save_config(trainer.requested_cfg, out / "config.yaml")  # as requested; what the run derived from it is recorded
+    #   in metrics.json (hold_geometry) and derived again on --resume
     write_metrics(out, metrics)
 
 

@@ -417,6 +417,9 @@ class Trainer:
     def __init__(self, cfg: Config, scene, out_dir: str | Path | None = None, *, method: Method | None = None,
                  log=None):
         self.cfg, self.scene = cfg, scene
+        # the configuration as requested: what checkpoints and config.yaml hold. self.cfg (below) is derived from it
+        # (growth_schedule, hold_geometry), and a resumed run derives it again from the saved one
+        self.requested_cfg = cfg
         self.out = Path(out_dir) if out_dir is not None else None
         self.log = log or (lambda msg: print(msg, file=sys.stderr))
         self.device = resolve_device(cfg.train.device)
@@ -1298,7 +1301,7 @@ class Trainer:
             return None
         try:
             path.parent.mkdir(parents=True, exist_ok=True)
-            _atomic_torch_save({"format": 2, "config": to_dict(self.cfg), "scene": self.scene.name,
+            _atomic_torch_save({"format": 2, "config": to_dict(self.requested_cfg), "scene": self.scene.name,
                                 "method_name": self.method.name, **self.state_dict()}, path)
         except OSError as e:
             kept = (f"the last good checkpoint {path} (step {self.saved_step}) is intact" if path.is_file()
@@ -1324,7 +1327,7 @@ class Trainer:
             path, ck = found
         saved = config_from_dict(ck["config"], str(path))
         for section in ("model", "optim", "loss", "strategy"):
-            if to_dict(getattr(saved, section)) != to_dict(getattr(self.cfg, section)):
+            if to_dict(getattr(saved, section)) != to_dict(getattr(self.requested_cfg, section)):
                 self.log(f"warpgs: note: the checkpoint's {section} config differs from this run's; using this run's")
         if ck.get("format", 1) == 1:
             ck = _upgrade_format_1(ck, self.cfg.train.sh_degree_interval)
