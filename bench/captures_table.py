@@ -189,6 +189,27 @@ def images4_default(results: Path) -> dict:
     return merged(*[load(f, "i" if f.parent.name == "s28" else "k") for f in images4_default_files(results)])
 
 
+def with_baselines(default: dict, baselines: dict) -> dict:
+    """``default`` with its baseline runs replaced by ``baselines``' where those have the case (the full runs and the
+    other cases' baselines stay)."""
+    out = {k: v for k, v in default.items() if not (k[2] == "baseline" and k in baselines)}
+    out.update({k: v for k, v in baselines.items() if k[2] == "baseline"})
+    return out
+
+
+def session35_default(results: Path) -> dict:
+    """The captures' default since session 35 at 384x256, 3000 it: the baselines at 6 and 9 views stop growing at half
+    the run (``strategy.refine_stop_fraction: 0.5``; ``s35/r.txt``); the 3-view baselines (held stereo geometry: no
+    growth either way) and the full method (which keeps growing) are session 28's runs."""
+    return with_baselines(session28_default(results), load(results / "s35" / "r.txt", "r"))
+
+
+def images4_session35(results: Path) -> dict:
+    """The same at images_4 (768x512, 10,000 it): the baselines at 6 and 9 views of ``s35/c69.txt``, the rest
+    ``images4_default``'s runs."""
+    return with_baselines(images4_default(results), load(results / "s35" / "c69.txt", "c"))
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--results", default=str(Path(__file__).resolve().parent / "results"))

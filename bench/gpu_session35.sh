@@ -21,6 +21,10 @@
 #    20,000 it (c_lego20k_s*, started first; 15,000 it gave 24.49 against 24.35 at 10,000). In two calls of one lease
 #    the full runs at images_4 did not finish; so on a machine where no run of this phase has started (a new lease,
 #    whose runs start from scratch) it runs the baselines alone (C_ALL=1: everything).
+# f (added in session 35 after r and c): the full method with its growth stopped at 0.75 of the run
+#    (full.refine_stop_fraction=0.75: step 2250 of 3000, after both pseudo-view updates at 1200 and 2100), 384x256, fern,
+#    DTU and the captures at 6 / 9 views, seeds 0-2 (18 runs, one call). A stop at half the run cost the full method
+#    up to 0.32 dB at this size (r) and gained up to 0.27 at images_4 (c). f.txt.
 set -u
 source "$(dirname "${BASH_SOURCE[0]}")/gpu_one.sh"
 session_env "$@"; P=$1; D=$2; R=$3; shift 3
@@ -56,6 +60,17 @@ c)
       echo "one c_${c}_${v}v_${m}_s$s $m $c $v $s --set strategy.refine_stop_iter=5000"
     done; done; done; done; } | DS=4 IT=10000 run_lines 15
   summary c_ c69.txt
+  ;;
+f)
+  FS="--set full.refine_stop_fraction=0.75"
+  { for s in 0 1 2; do
+      echo "named f_fern_full_s$s full llff fern 3 $s $FS"
+      echo "named f_dtu_full_s$s full dtu scan65 3 $s $FS"
+      for c in castle_p30 herz_jesus_p25; do for v in 6 9; do
+        echo "one f_${c}_${v}v_full_s$s full $c $v $s $FS"
+      done; done
+    done; } | run_lines 18
+  summary f_ f.txt
   ;;
 *) echo "unknown phase $P"; exit 2 ;;
 esac

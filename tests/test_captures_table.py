@@ -105,24 +105,43 @@ def test_readme_results_rows_from_summaries(tmp_path):
     (tmp_path / "noarg_cpu").mkdir()
     (tmp_path / "noarg_cpu" / "seeds_s30.json").write_text(json.dumps({"per_seed": {
         str(s): {"baseline": {"psnr": 20.0 + s}, "full": {"psnr": 22.0 + s}} for s in range(3)}}))
-    for d in ("s28", "s31"):
+    for d in ("s28", "s31", "s35"):
         (tmp_path / d).mkdir()
     (tmp_path / "s31" / "o.txt").write_text("o_fern_baseline_s0 21.0 10\no_fern_baseline_s1 21.4 10\no_fern_full_s0 22.0 9\n"
-                                           "o_lego_best_s0 24.0 5\n")
+                                           "o_lego_best_s0 24.0 5\no_dtu_baseline_s0 23.0 5\no_dtu_full_s0 23.5 5\n")
+    # session 35: the baselines of LLFF, DTU and the captures' 6 / 9 views (growth stopped at half the run)
+    (tmp_path / "s35" / "r.txt").write_text("r_fern_baseline_s0 21.1 10\nr_fern_baseline_s1 21.5 10\nr_fern_full_s0 30.0 9\n"
+                                           "r_castle_p30_6v_baseline_s0 18.5 1\nr_castle_p30_6v_full_s0 99.0 1\n")
+    (tmp_path / "s35" / "c69.txt").write_text("c_herz_jesus_p25_9v_baseline_s1 20.5 1\n")
     (tmp_path / "s28" / "c369.txt").write_text("c_castle_p30_3v_baseline_s0 15.0 1\nc_castle_p30_3v_full_s0 99.0 1\n")
     (tmp_path / "s28" / "m369.txt").write_text("m_castle_p30_3v_full_s0 15.5 1\n")
     (tmp_path / "s28" / "i369.txt").write_text("")
     (tmp_path / "s31" / "k369.txt").write_text("k_herz_jesus_p25_9v_full_s1 21.0 1\n")
     out = rr.rows(tmp_path)
     assert out[2].startswith("| synthetic room, 3 views |") and "| 21.00 [20.00, 22.00] | 23.00 [22.00, 24.00] | +2.00 |" in out[2]
-    fern = next(r for r in out if r.startswith("| LLFF fern"))
-    assert "| 21.20 [21.00, 21.40] (2 seeds) | 22.00 [22.00, 22.00] (1 seed) | +0.80 |" in fern
+    fern = next(r for r in out if r.startswith("| LLFF fern"))  # the baseline from s35/r.txt, the full method from o.txt
+    assert "| 21.30 [21.10, 21.50] (2 seeds) | 22.00 [22.00, 22.00] (1 seed) | +0.70 |" in fern
+    dtu = next(r for r in out if r.startswith("| DTU"))  # no session 35 baseline in this folder: none shown
+    assert "| - | 23.50 [23.50, 23.50] (1 seed) | - |" in dtu
     assert any(r.startswith("| Blender lego, 8 views | baseline + opacity noise 0.8, SH degree 1, 10,000 it") and "24.00" in r
                for r in out)
     castle = next(r for r in out if r.startswith("| castle_p30, 3 views | 384x256"))
     assert "| 15.00 [15.00, 15.00] (1 seed) | 15.50 [15.50, 15.50] (1 seed) | +0.50 |" in castle  # full from m369, not c369
+    castle6 = next(r for r in out if r.startswith("| castle_p30, 6 views | 384x256"))  # session 35's baseline alone
+    assert "| baseline H200, full H100 | 18.50 [18.50, 18.50] (1 seed) | - | - | `s35/r.txt` (baseline)" in castle6
     herz = next(r for r in out if r.startswith("| herz_jesus_p25, 9 views | 768x512"))
-    assert "| - | 21.00 [21.00, 21.00] (1 seed) | - |" in herz
+    assert "| 20.50 [20.50, 20.50] (1 seed) | 21.00 [21.00, 21.00] (1 seed) | +0.50 | `s35/c69.txt` (baseline)" in herz
+
+
+def test_with_baselines_replaces_only_the_baselines_it_has():
+    from bench.captures_table import with_baselines
+
+    default = {("a", 3, "baseline"): {0: 1.0}, ("a", 3, "full"): {0: 2.0}, ("a", 6, "baseline"): {0: 3.0},
+               ("a", 6, "full"): {0: 4.0}}
+    new = {("a", 6, "baseline"): {1: 5.0}, ("a", 6, "full"): {1: 9.0}, ("b", 9, "baseline"): {0: 6.0}}
+    assert with_baselines(default, new) == {("a", 3, "baseline"): {0: 1.0}, ("a", 3, "full"): {0: 2.0},
+                                            ("a", 6, "baseline"): {1: 5.0}, ("a", 6, "full"): {0: 4.0},
+                                            ("b", 9, "baseline"): {0: 6.0}}
 
 
 def test_readme_current_figures_match_the_committed_summaries():

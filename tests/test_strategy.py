@@ -268,6 +268,7 @@ def test_refine_stop_fraction_is_the_same_training_as_the_step_it_names():
 
     frac = run(refine_stop_fraction=0.7)
     assert frac.cfg.strategy.refine_stop_iter == 70 and frac.strategy.refine_stop_iter == 70
+    assert frac.requested_cfg.strategy.refine_stop_iter == 250  # what its checkpoints keep (tests/test_hold_geometry.py)
     step = run(refine_stop_iter=70)
     assert same_params(param_copy(frac), param_copy(step))
     free = run()

@@ -250,6 +250,10 @@ def test_run_folder_holds_the_whole_resolved_config_and_resume_keeps_it(tmp_path
     expected, _ = make_config(build_parser().parse_args(argv))
     assert saved == to_dict(expected)
     assert saved["pseudo"]["sampler"]["steps"] == 17 and saved["densify"]["filter"]["std_ratio"] == 3.5
+    # what the run derived from it is in metrics.json: nerfstudio's baseline stops growing at half the run (3 of 6)
+    import json
+    assert saved["strategy"]["refine_stop_iter"] == 15_000 and saved["strategy"]["refine_stop_fraction"] == 0.5
+    assert json.loads((out / "metrics.json").read_text())["refine_stop_iter"] == 3
 
     def keys(d, prefix=""):
         return {prefix + k for k, v in d.items() if not isinstance(v, dict)} | {
