@@ -197,19 +197,6 @@ def with_baselines(default: dict, baselines: dict) -> dict:
     return out
 
 
-def session35_default(results: Path) -> dict:
-    """The captures' default since session 35 at 384x256, 3000 it: the baselines at 6 and 9 views stop growing at half
-    the run (``strategy.refine_stop_fraction: 0.5``; ``s35/r.txt``); the 3-view baselines (held stereo geometry: no
-    growth either way) and the full method (which keeps growing) are session 28's runs."""
-    return with_baselines(session28_default(results), load(results / "s35" / "r.txt", "r"))
-
-
-def images4_session35(results: Path) -> dict:
-    """The same at images_4 (768x512, 10,000 it): the baselines at 6 and 9 views of ``s35/c69.txt``, the rest
-    ``images4_default``'s runs."""
-    return with_baselines(images4_default(results), load(results / "s35" / "c69.txt", "c"))
-
-
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--results", default=str(Path(__file__).resolve().parent / "results"))
