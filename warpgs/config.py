@@ -116,6 +116,15 @@ class TrainConfig:
     scale_reg: float = 0.0  # weight of PhysGaussian's anisotropy regulariser (Xie et al., CVPR 2024): mean over the
     #   Gaussians of max(max(s)/min(s), r) - r with r = scale_reg_ratio; 0: off
     scale_reg_ratio: float = 10.0  # r: the largest axis ratio a Gaussian keeps without penalty
+    opacity_decay: float = 0.0  # Binocular3DGS's opacity decay (Han et al., NeurIPS 2024): from
+    #   strategy.refine_start_iter on, every step multiplies each opacity by (1 - this) after the update, so what
+    #   the inputs' gradients do not hold up fades and is pruned (theirs: 0.005 a step); 0: off
+    binocular: float = 0.0  # weight of their binocular consistency on the input views (warpgs/binocular.py): the
+    #   render from the camera moved along its x axis, warped back with the input's rendered depth, against the
+    #   photo (their weight: 1); 0: off
+    binocular_shift: float = 0.1  # the largest move: this x the image width of disparity at the median depth
+    binocular_start: float = 0.5  # share of the run's steps before the term starts (theirs: 2/3 LLFF/DTU, 4/7 Blender)
+    binocular_smooth: float = 0.05  # edge-aware smoothness of the disparity (pixels) with it (theirs: 0.05)
     random_background: bool = False  # views with an alpha channel: a random background each step (no floaters
                                      # that mimic the background colour); evaluation keeps ``background``
     far_field: str = "none"  # none | elevation: behind the Gaussians, a colour per elevation band fitted on the
@@ -201,7 +210,8 @@ class TrainConfig:
 
     LIMITS = {"iterations": ">= 1", "seed": ">= 0", "sh_degree_interval": ">= 0", "checkpoint_every": ">= 0",
               "eval_every": ">= 0", "background": "[0, 1]", "drop_rate": "[0, 1)", "opacity_noise": "[0, 1]",
-              "scale_reg": ">= 0", "scale_reg_ratio": ">= 1", "max_nan_steps": ">= 1",
+              "scale_reg": ">= 0", "scale_reg_ratio": ">= 1", "max_nan_steps": ">= 1", "opacity_decay": "[0, 1)",
+              "binocular": ">= 0", "binocular_shift": "(0, 1]", "binocular_start": "[0, 1]", "binocular_smooth": ">= 0",
               "explode_factor": ">= 0", "explode_window": ">= 1", "explode_patience": ">= 1", "snapshot_every": ">= 0",
               "max_recoveries": ">= 0", "recovery_lr_factor": "(0, 1]", "cpu_threads": ">= 0", "sync_every": ">= 1",
               "far_field": FAR_FIELD_RULE, "hold_geometry": "{off, on, stereo}", "hold_means_lr": "> 0",

@@ -71,6 +71,8 @@ class StepGraph:
             return False  # a torch whose graphs cannot hold draws from the trainer's own generator
         if lc.depth_weight > 0 and lc.depth_prior == "scene" and cam.depth is not None:
             return False
+        if tr.binocular is not None and tr.binocular.active(step):
+            return False  # a second render a step, of a pose drawn on the device: not held
         if not tr.densify_only_updates_state(step) or not getattr(tr.method, "graph_safe", lambda: False)():
             return False
         # every parameter has its Adam state (the first step makes it, outside any graph)
@@ -139,7 +141,7 @@ class StepGraph:
         ptrs += [b.data_ptr() for b in render._ZERO_INPUTS.values()]  # the zeros a backward reads (it only grows)
         sc = tr.strategy
         return (tuple(ptrs), cam.width, cam.height, cam.alpha is not None, model.active_sh_degree,
-                tr.step < sc.refine_stop_iter, tr.guard.cfg.explode_factor, bg is tr.background, tuple(bg.shape),
+                tr.step < sc.refine_stop_iter, tr.decay_active(tr.step), tr.guard.cfg.explode_factor, bg is tr.background, tuple(bg.shape),
                 self.draws(tr.step))
 
     def _capture(self, cam, bg, capacity: int) -> bool:

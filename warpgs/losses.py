@@ -122,7 +122,8 @@ def scale_anisotropy_loss(log_scales: torch.Tensor, max_ratio: float) -> torch.T
     return torch.relu(ratio - max_ratio).mean()
 
 
-def edge_aware_smoothness(depth: torch.Tensor, image: torch.Tensor, eps: float = 1e-7) -> torch.Tensor:
+def edge_aware_smoothness(depth: torch.Tensor, image: torch.Tensor, eps: float = 1e-7, normalise: bool = True
+                          ) -> torch.Tensor:
     """Edge-aware smoothness of a depth map (Monodepth, Godard et al. CVPR 2017; on the mean-normalised map as
     Monodepth2): mean |d/dx D| exp(-|d/dx I|) + mean |d/dy D| exp(-|d/dy I|), with D = depth / mean(depth),
     neighbouring-pixel differences, and the image gradient averaged over its channels. Depth may change
@@ -131,7 +132,7 @@ def edge_aware_smoothness(depth: torch.Tensor, image: torch.Tensor, eps: float =
     if depth.dim() != 2 or image.dim() != 3 or image.shape[:2] != depth.shape:
         raise ValueError(f"edge_aware_smoothness: depth [H, W] and image [H, W, C] of one size expected, got "
                          f"{list(depth.shape)} and {list(image.shape)}")
-    d = depth / (depth.mean() + eps)
+    d = depth / (depth.mean() + eps) if normalise else depth
     img = image.to(d.dtype)
     wx = torch.exp(-(img[:, 1:] - img[:, :-1]).abs().mean(-1))
     wy = torch.exp(-(img[1:] - img[:-1]).abs().mean(-1))

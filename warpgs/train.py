@@ -519,6 +519,14 @@ class Trainer:
         # whoever builds the trainer (warpgs.pipelines.sparse.make_trainer), so this module imports none of them.
         self.stages: list = []
         # CoR-GS (train.co_reg): the second model of the co-regularised pair, its optimiser and strategy
+        # Binocular3DGS's terms (train.binocular, train.opacity_decay; warpgs/binocular.py)
+        self.binocular = None
+        if cfg.train.binocular > 0:
+            from warpgs.binocular import Binocular
+
+            tc = cfg.train
+            self.binocular = Binocular(tc.binocular, tc.binocular_shift, int(tc.binocular_start * cfg.train.iterations),
+                                       tc.binocular_smooth, self.device, seed)
         self.pair = None
         if cfg.train.co_reg:
             from warpgs.coreg import CoRegPair
@@ -688,6 +696,7 @@ class Trainer:
         for opt in self.optimizers:
             opt.step()
             opt.zero_grad(set_to_none=True)
+        self.decay_opacities(step)
         self.guard.healthy()
         info = self._after_update(step, out, cam)
         bad = self.nonfinite_parameters()
@@ -711,6 +720,8 @@ class Trainer:
                                 opacity_scale=self.opacity_scale(step), check_finite=False,
                                 isect_capacity=isect_capacity)
         loss, parts = self.compute_loss(out, cam)
+        if self.binocular is not None and self.binocular.active(step):
+            loss = loss + self.binocular.loss(self.model, out, cam, bg, parts)
         if self.pair is not None:  # its partner on the same view, and the two co-regularised (one backward for both)
             loss = loss + self.pair.loss(step, cam, bg, parts)
         loss.backward()
@@ -909,7 +920,21 @@ class Trainer:
         for opt in self.optimizers:
             masked_step(opt, apply, found_inf)
             opt.zero_grad(set_to_none=True)
+        self.decay_opacities(self.step if step is None else step)
         return record, apply
+
+    def decay_active(self, step: int) -> bool:
+        """Whether ``train.opacity_decay`` acts after the update of ``step``: from ``strategy.refine_start_iter`` on."""
+        return self.cfg.train.opacity_decay > 0 and step >= self.strategy.refine_start_iter
+
+    def decay_opacities(self, step: int) -> None:
+        """Binocular3DGS's opacity decay after the update of ``step`` (``train.opacity_decay``): every opacity x
+        (1 - rate), on the logits the model holds (device ops only: a CUDA graph of the step holds them)."""
+        if not self.decay_active(step):
+            return
+        with torch.no_grad():
+            o = self.model.params["opacities"]
+            o.copy_(torch.logit(torch.sigmoid(o) * (1.0 - self.cfg.train.opacity_decay), eps=1e-6))
 
     def _deferred_verdict(self, step: int, loss: torch.Tensor, inputs: torch.Tensor):
         """``DivergenceGuard.step_on_device``'s results from torch ops (record, apply, found_inf): the step's
@@ -1048,6 +1073,8 @@ class Trainer:
         if "model" in parts:
             st.update(model_state(self.model, self.optimizer, self.state, device))
         if "progress" in parts:
+            if self.binocular is not None:
+                st["binocular_gen"] = self.binocular.gen.get_state()
             st.update(step=self.step, split_gen=self.split_gen.get_state(), drop_gen=self.drop_gen.get_state(),
                       view_rng=copy.deepcopy(self.view_rng.bit_generator.state), order=list(self.order),
                       torch_rng=torch.get_rng_state(), stat_start=self.guard.stat_start, in_phase=self.in_phase)
@@ -1085,6 +1112,8 @@ class Trainer:
             self.split_gen.set_state(st["split_gen"])
             if "drop_gen" in st:
                 self.drop_gen.set_state(st["drop_gen"])
+            if self.binocular is not None and "binocular_gen" in st:
+                self.binocular.gen.set_state(st["binocular_gen"])
             self.view_rng.bit_generator.state = copy.deepcopy(st["view_rng"])
             self.order = list(st["order"])
             torch.set_rng_state(st["torch_rng"])

@@ -165,3 +165,71 @@ def reproject_uncertainty(
     dc = render[f, i, j] - guidance[f, i, j]
     energy = (ex * ex + ey * ey) * inv_s1 + wp.dot(dc, dc) * inv_s2
     uncertainty[f, i, j] = 1.0 - wp.exp(-energy)
+
+
+# ----------------------------------------------------------------------------------------------------
+# Binocular consistency (Han et al., NeurIPS 2024): a render from the input camera moved by t along its own
+# x axis, warped back into the input with the input's rendered depth. A point at depth z seen at column x in
+# the input is seen at x - fx t / z in the moved camera (same intrinsics, no rotation: a rectified pair), so
+# the warp samples the moved render along the row. Differentiable in the moved render and in the depth.
+
+
+@wp.func
+def _row_taps(w: int, x: float):
+    # the two neighbouring columns of continuous column coordinate x (centres at +0.5), their weights, and
+    # whether each lies inside the image (outside: zero padding)
+    fx = x - 0.5
+    x0 = int(wp.floor(fx))
+    a = fx - float(x0)
+    v0 = 0.0
+    v1 = 0.0
+    if x0 >= 0 and x0 < w:
+        v0 = 1.0
+    if x0 + 1 >= 0 and x0 + 1 < w:
+        v1 = 1.0
+    return wp.clamp(x0, 0, w - 1), wp.clamp(x0 + 1, 0, w - 1), a, v0, v1
+
+
+@wp.kernel
+def shift_warp(
+    moved: wp.array2d(dtype=wp.vec3),  # (H, W) render at the moved camera
+    depth: wp.array2d(dtype=float),  # (H, W) z-depth rendered at the input
+    ft: wp.array(dtype=float),  # (1,) fx * t: the disparity (pixels) of depth 1 (on the device: no host read)
+    min_depth: float,
+    warped: wp.array2d(dtype=wp.vec3),  # out (H, W): moved(x - ft / z), 0 where invalid
+    weight: wp.array2d(dtype=float),  # out (H, W): the in-image share of the two taps, 0 where no depth
+):
+    i, j = wp.tid()
+    z = depth[i, j]
+    warped[i, j] = wp.vec3(0.0, 0.0, 0.0)
+    weight[i, j] = 0.0
+    if z <= min_depth:
+        return
+    xa, xb, a, v0, v1 = _row_taps(moved.shape[1], float(j) + 0.5 - ft[0] / z)
+    warped[i, j] = moved[i, xa] * ((1.0 - a) * v0) + moved[i, xb] * (a * v1)
+    weight[i, j] = (1.0 - a) * v0 + a * v1
+
+
+@wp.kernel
+def shift_warp_backward(
+    moved: wp.array2d(dtype=wp.vec3),
+    depth: wp.array2d(dtype=float),
+    ft: wp.array(dtype=float),
+    min_depth: float,
+    v_warped: wp.array2d(dtype=wp.vec3),  # dL/d warped
+    v_moved: wp.array2d(dtype=wp.vec3),  # out, accumulated (zeroed by the caller)
+    v_depth: wp.array2d(dtype=float),  # out
+):
+    i, j = wp.tid()
+    z = depth[i, j]
+    v_depth[i, j] = 0.0
+    if z <= min_depth:
+        return
+    g = v_warped[i, j]
+    xa, xb, a, v0, v1 = _row_taps(moved.shape[1], float(j) + 0.5 - ft[0] / z)
+    if v0 > 0.0:
+        wp.atomic_add(v_moved, i, xa, g * (1.0 - a))
+    if v1 > 0.0:
+        wp.atomic_add(v_moved, i, xb, g * a)
+    # d a / d z = d (x - 0.5) / d z = ft / z^2
+    v_depth[i, j] = wp.dot(g, moved[i, xb] * v1 - moved[i, xa] * v0) * ft[0] / (z * z)

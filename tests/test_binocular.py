@@ -1,0 +1,211 @@
+"""Binocular consistency (warpgs/binocular.py, warpgs/kernels/warping.py ``shift_warp``).
+
+References are independent: torch's ``grid_sample`` (bilinear, zero padding) as the oracle of the warp and
+autograd's gradients through it, a fronto-parallel plane rendered by the rasterizer from the input and from
+the moved camera (the warp of the moved render with the true depth gives the input back), and the trainer's
+run with the term on against the same run with it off.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+
+from warpgs.binocular import moved_viewmat, shift_warp
+
+DEVICES = ["cpu"] + (["cuda"] if torch.cuda.is_available() else [])
+
+
+def oracle(moved: torch.Tensor, depth: torch.Tensor, ft: float) -> tuple[torch.Tensor, torch.Tensor]:
+    """torch's grid_sample of ``moved`` at (x - ft / z, y), zero padding, align_corners False; its weight as the
+    warp of an all-ones image; 0 where the depth is <= 0."""
+    H, W = depth.shape
+    ys, xs = torch.meshgrid(torch.arange(H, dtype=torch.float64), torch.arange(W, dtype=torch.float64),
+                            indexing="ij")
+    z = depth.double()
+    ok = z > 1e-6
+    x = xs + 0.5 - ft / torch.where(ok, z, torch.ones_like(z))
+    y = ys + 0.5
+    grid = torch.stack([2 * x / W - 1, 2 * y / H - 1], -1)[None]
+    img = moved.double().permute(2, 0, 1)[None]
+    # along the row only: sampling at the row's centre makes grid_sample's vertical weights (1, 0)
+    out = torch.nn.functional.grid_sample(img, grid, mode="bilinear", padding_mode="zeros", align_corners=False)
+    wgt = torch.nn.functional.grid_sample(torch.ones_like(img[:, :1]), grid, mode="bilinear", padding_mode="zeros",
+                                          align_corners=False)
+    return out[0].permute(1, 2, 0) * ok[..., None], wgt[0, 0] * ok
+
+
+@pytest.mark.parametrize("device", DEVICES)
+def test_shift_warp_matches_grid_sample_and_its_gradients(device):
+    g = torch.Generator().manual_seed(0)
+    H, W = 7, 11
+    moved = torch.rand(H, W, 3, generator=g)
+    depth = 1.0 + 3.0 * torch.rand(H, W, generator=g)
+    depth[2, 3] = 0.0  # no depth: nothing warped, no gradient
+    ft = 6.3  # disparities 1.6 .. 6.3 px: taps inside, across and outside the border
+    warped, weight = shift_warp(moved.to(device), depth.to(device), ft)
+    ref, ref_w = oracle(moved, depth, ft)
+    assert torch.allclose(warped.cpu().double(), ref, atol=1e-5)
+    assert torch.allclose(weight.cpu().double(), ref_w, atol=1e-5)
+    assert weight[2, 3] == 0 and (warped[2, 3] == 0).all()
+
+    v = torch.rand(H, W, 3, generator=g)
+    m1 = moved.clone().to(device).requires_grad_(True)
+    d1 = depth.clone().to(device).requires_grad_(True)
+    (shift_warp(m1, d1, ft)[0] * v.to(device)).sum().backward()
+    m2 = moved.clone().double().requires_grad_(True)
+    d2 = depth.clone().double().requires_grad_(True)
+    (oracle(m2, d2, ft)[0] * v.double()).sum().backward()
+    assert torch.allclose(m1.grad.cpu().double(), m2.grad, atol=1e-5)
+    assert torch.allclose(d1.grad.cpu().double(), d2.grad, atol=1e-4)
+    assert d1.grad[2, 3] == 0
+
+
+def test_shift_warp_depth_gradient_against_finite_differences():
+    g = torch.Generator().manual_seed(1)
+    H, W = 5, 16
+    moved = torch.rand(H, W, 3, generator=g, dtype=torch.float32)
+    depth = 2.0 + torch.rand(H, W, generator=g)
+    v = torch.rand(H, W, 3, generator=g)
+    ft = 9.0
+    d = depth.clone().requires_grad_(True)
+    (shift_warp(moved, d, ft)[0] * v).sum().backward()
+    for (i, j) in [(0, 8), (2, 12), (4, 15)]:
+        h = 1e-3
+        dp, dm = depth.clone(), depth.clone()
+        dp[i, j] += h
+        dm[i, j] -= h
+        fd = ((shift_warp(moved, dp, ft)[0] - shift_warp(moved, dm, ft)[0]) * v).sum() / (2 * h)
+        assert abs(float(fd) - float(d.grad[i, j])) < 2e-2 * max(1.0, abs(float(fd))), (i, j, float(fd),
+                                                                                          float(d.grad[i, j]))
+
+
+def test_moved_render_warped_with_true_depth_gives_the_input_back():
+    """A textured fronto-parallel plane at z = 4: rendered from the input and from the camera moved by t, the
+    moved render warped back with the input's rendered depth matches the input render inside the image."""
+    from warpgs.render import rasterize
+
+    g = np.random.default_rng(0)
+    n = 60 * 40
+    gx, gy = np.meshgrid(np.linspace(-2.4, 2.4, 60), np.linspace(-1.6, 1.6, 40))
+    means = torch.tensor(np.stack([gx.ravel(), gy.ravel(), np.full(n, 4.0)], 1), dtype=torch.float32)
+    scales = torch.full((n, 3), 0.05)
+    scales[:, 2] = 0.002
+    quats = torch.tensor([[1.0, 0, 0, 0]]).repeat(n, 1)
+    opac = torch.full((n,), 0.99)
+    colours = torch.tensor(g.random((n, 1, 3)), dtype=torch.float32)
+    W, H = 48, 32
+    K = torch.tensor([[40.0, 0, W / 2], [0, 40.0, H / 2], [0, 0, 1]])
+    vm = torch.eye(4)
+    t = torch.tensor([0.2])
+    bg = torch.zeros(3)
+    inp = rasterize(means, quats, scales, opac, colours, vm, K, W, H, sh_degree=0, background=bg)
+    mov = rasterize(means, quats, scales, opac, colours, moved_viewmat(vm, t), K, W, H, sh_degree=0, background=bg)
+    assert torch.allclose(moved_viewmat(vm, t)[0, 3], torch.tensor(-0.2))
+    assert inp.depth[H // 2, W // 2].item() == pytest.approx(4.0, abs=0.01)
+    warped, weight = shift_warp(mov.image, inp.depth, 40.0 * 0.2)  # 2 px of disparity
+    inside = weight > 0.999
+    assert inside.float().mean() > 0.8
+    err = (warped - inp.image).abs()[inside].mean()
+    err_unwarped = (mov.image - inp.image).abs()[inside].mean()
+    assert err < 0.3 * err_unwarped, (float(err), float(err_unwarped))
+
+
+def test_bad_shapes_are_named():
+    with pytest.raises(ValueError, match="shift_warp"):
+        shift_warp(torch.zeros(4, 5, 3), torch.zeros(4, 6), 1.0)
+
+
+# ----------------------------------------------------------------------------------------------
+# the trainer's switches: train.opacity_decay, train.binocular
+
+
+def test_opacity_decay_multiplies_every_opacity_each_step_from_refine_start():
+    """With the opacities' learning rate ~0 and no densification, the decay alone changes them: after the
+    steps from refine_start_iter on, each opacity is its start value x (1 - rate)^steps (analytic); the
+    same run with the decay off keeps them."""
+    from tests.tiny_scene import make_scene, tiny_config
+    from warpgs.train import Trainer
+
+    def run(decay):
+        cfg = tiny_config(12)
+        cfg.optim.opacities_lr = 1e-12
+        cfg.strategy.refine_stop_iter = 0
+        cfg.strategy.refine_start_iter = 4
+        cfg.train.opacity_decay = decay
+        t = Trainer(cfg, make_scene(), None, log=lambda m: None)
+        start = t.model.opacities.detach().clone()
+        t.train()
+        return start, t.model.opacities.detach()
+
+    start, kept = run(0.0)
+    assert torch.allclose(kept, start, atol=1e-6)
+    start, decayed = run(0.1)
+    assert torch.allclose(decayed, start * 0.9 ** 8, rtol=1e-4, atol=1e-7)  # steps 4..11
+
+
+def test_binocular_term_trains_and_checkpoints_its_draws(tmp_path):
+    """The term appears in the step's parts from binocular_start on, changes the training, and a run
+    stopped half-way and resumed from its checkpoint ends bit for bit as the run without the stop."""
+    from tests.tiny_scene import make_scene, param_copy, same_params, tiny_config
+    from warpgs.train import Trainer
+
+    def cfg_of(on):
+        cfg = tiny_config(40)
+        cfg.train.binocular = 1.0 if on else 0.0
+        cfg.train.binocular_start = 0.25
+        cfg.train.checkpoint_every = 20
+        return cfg
+
+    on = Trainer(cfg_of(True), make_scene(), None, log=lambda m: None)
+    assert on.binocular.start == 10
+    calls = []
+    term = on.binocular.loss
+    on.binocular.loss = lambda *a: (calls.append(on.step), term(*a))[1]
+    on.train()
+    assert calls == list(range(10, 40))  # every step from the start on, none before
+    off = Trainer(cfg_of(False), make_scene(), None, log=lambda m: None)
+    off.train()
+    assert not same_params(param_copy(on), param_copy(off))
+
+    whole = Trainer(cfg_of(True), make_scene(), tmp_path / "whole", log=lambda m: None)
+    whole.train()
+    half = Trainer(cfg_of(True), make_scene(), tmp_path / "half", log=lambda m: None)
+    half.train(20)
+    half.save_checkpoint()
+    resumed = Trainer(cfg_of(True), make_scene(), tmp_path / "half", log=lambda m: None)
+    resumed.load_checkpoint()
+    resumed.train()
+    assert same_params(param_copy(resumed), param_copy(whole))
+
+
+def test_binocular_loss_is_lower_with_the_true_depth():
+    """On the textured plane, the term computed with the input's rendered depth is below the term with that
+    depth 30% too far or too near (the warp then misaligns the moved render)."""
+    from types import SimpleNamespace
+
+    from warpgs.binocular import Binocular
+    from warpgs.model import GaussianModel
+
+    g = np.random.default_rng(0)
+    n = 60 * 40
+    gx, gy = np.meshgrid(np.linspace(-2.4, 2.4, 60), np.linspace(-1.6, 1.6, 40))
+    means = torch.tensor(np.stack([gx.ravel(), gy.ravel(), np.full(n, 4.0)], 1), dtype=torch.float32)
+    model = GaussianModel.from_points(means, torch.tensor(g.random((n, 3)), dtype=torch.float32), sh_degree=0,
+                                      init_opacity=0.99, init_scale=1.0)
+    W, H = 48, 32
+    K = torch.tensor([[40.0, 0, W / 2], [0, 40.0, H / 2], [0, 0, 1]])
+    vm = torch.eye(4)
+    bg = torch.zeros(3)
+    with torch.no_grad():
+        inp = model.render(vm, K, W, H, background=bg)
+    cam = SimpleNamespace(viewmat=vm, K=K, width=W, height=H, image=inp.image)
+
+    def term(scale):
+        b = Binocular(1.0, 1.0, 0, 0.0, "cpu", 0)  # the same draw of t each time (same seed): 6 px at 4 m
+        with torch.no_grad():
+            return float(b.loss(model, inp._replace(depth=inp.depth * scale), cam, bg, {}))
+
+    right = term(1.0)
+    assert right < 0.5 * term(1.3) and right < 0.5 * term(0.7)
