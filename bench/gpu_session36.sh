@@ -7,9 +7,13 @@
 #   T=seconds bash bench/gpu_session36.sh PHASE D RUNS          (ONLY=REGEX keeps the runs whose line matches)
 # a: each switch alone over the current best settings, seeds 0-2: lego's best setting at 10,000 it (s33/a.txt: 24.35),
 #    fern and DTU baselines at 3000 it (s35/r.txt: 21.36 / 23.32). 18 runs, one call. a.txt.
-# b: the captures at 384x256 (3000 it), 3 / 6 / 9 views, both methods with the switch phase a liked (SW=...),
-#    seeds 0-2. 36 runs, one call. b.txt.
-# c: lego's best setting at 15,000 it (s34: 24.49) with SW, and the fern / DTU full method with SW, seeds 0-2. c.txt.
+# b (after a: decay lego 24.80, fern 22.60, DTU 24.57; binocular DTU 25.67, fern 21.66, lego 24.34): the captures at
+#    384x256 (3000 it), 3 / 6 / 9 views, both methods, each switch and both, seed 0 (36 runs, one call). b.txt.
+# c: both switches on lego (10,000 it), fern and DTU baselines; the full method on fern and DTU with the decay and with
+#    both, seeds 0-2 (21 runs). c.txt.
+# d (after b and c: both switches raise every case; captures seed 0 baseline +0.3..+1.5): both switches at seeds 1-2 on
+#    the captures (384x256, both methods, 24 runs) and the synthetic room (its config, seeds 0-2, both methods, each
+#    switch alone and both: 18 runs). d.txt.
 set -u
 source "$(dirname "${BASH_SOURCE[0]}")/gpu_one.sh"
 session_env "$@"; P=$1; D=$2; R=$3; shift 3
@@ -17,7 +21,6 @@ export R D T END=$(( $(date +%s) + ${T:-540} ))  # every run of the call stops b
 LRF="--set optim.means_lr_final=3.2e-5"
 DEC="--set train.opacity_decay=0.005"
 BIN="--set train.binocular=1"
-SW=${SW:-$BIN}
 case $P in
 a)
   { for s in 0 1 2; do
@@ -32,18 +35,37 @@ a)
   summary a_ a.txt
   ;;
 b)
-  { for s in 0 1 2; do for m in baseline full; do for c in castle_p30 herz_jesus_p25; do for v in 3 6 9; do
-      echo "one b_${c}_${v}v_${m}_s$s $m $c $v $s $SW"
-    done; done; done; done; } | run_lines 18
+  { for m in baseline full; do for c in castle_p30 herz_jesus_p25; do for v in 3 6 9; do
+      echo "one b_${c}_${v}v_${m}_dec_s0 $m $c $v 0 $DEC"
+      echo "one b_${c}_${v}v_${m}_bin_s0 $m $c $v 0 $BIN"
+      echo "one b_${c}_${v}v_${m}_db_s0 $m $c $v 0 $DEC $BIN"
+    done; done; done; } | run_lines 18
   summary b_ b.txt
   ;;
 c)
   { for s in 0 1 2; do
-      echo "lego c_lego15k_s$s baseline $s 15000 $LEGO_BEST $LRF $SW"
-      echo "named c_fern_full_s$s full llff fern 3 $s $SW"
-      echo "named c_dtu_full_s$s full dtu scan65 3 $s $SW"
-    done; } | run_lines 9
+      echo "lego c_lego_db_s$s baseline $s 10000 $LEGO_BEST $LRF $DEC $BIN"
+      echo "named c_fern_db_s$s baseline llff fern 3 $s $DEC $BIN"
+      echo "named c_dtu_db_s$s baseline dtu scan65 3 $s $DEC $BIN"
+      for k in dec db; do
+        [ $k = dec ] && X=$DEC || X="$DEC $BIN"
+        echo "named c_fern_full_${k}_s$s full llff fern 3 $s $X"
+        echo "named c_dtu_full_${k}_s$s full dtu scan65 3 $s $X"
+      done
+    done; } | run_lines 21
   summary c_ c.txt
+  ;;
+d)
+  { for s in 1 2; do for m in baseline full; do for c in castle_p30 herz_jesus_p25; do for v in 3 6 9; do
+      echo "one b_${c}_${v}v_${m}_db_s$s $m $c $v $s $DEC $BIN"
+    done; done; done; done
+    for s in 0 1 2; do for m in baseline full; do
+      echo "sparse_run d_room_${m}_db_s$s --method $m --data synthetic --seed $s --set train.eval_every=100 $DEC $BIN"
+      echo "sparse_run d_room_${m}_dec_s$s --method $m --data synthetic --seed $s --set train.eval_every=100 $DEC"
+      echo "sparse_run d_room_${m}_bin_s$s --method $m --data synthetic --seed $s --set train.eval_every=100 $BIN"
+    done; done; } | run_lines 21
+  summary b_ b_all.txt > /dev/null
+  summary d_ d.txt
   ;;
 *) echo "unknown phase $P"; exit 2 ;;
 esac
