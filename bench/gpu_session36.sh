@@ -67,5 +67,18 @@ d)
   summary b_ b_all.txt > /dev/null
   summary d_ d.txt
   ;;
+e)
+  # blender.yaml's own defaults (not lego's best setting) with both switches, both methods, seeds 0-2 (s31/o.txt: 23.67 / 23.30)
+  { for s in 0 1 2; do for m in baseline full; do
+      echo "lego e_lego_${m}_db_s$s $m $s 10000 $DEC $BIN"
+    done; done; } | run_lines 6
+  summary e_ e.txt
+  ;;
+f)
+  # after the defaults changed (both switches in llff, dtu, blender and nerfstudio.yaml): lego's full method with
+  # blender.yaml's defaults, seeds 0-2 (phase e's full runs did not finish in its call)
+  { for s in 0 1 2; do echo "lego f_lego_full_s$s full $s 10000"; done; } | run_lines 3
+  summary f_ f.txt
+  ;;
 *) echo "unknown phase $P"; exit 2 ;;
 esac
