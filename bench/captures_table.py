@@ -48,6 +48,10 @@ median).
 - session 35 (``bench/gpu_session35.sh``): both methods with growth stopped at half the run
   (``strategy.refine_stop_iter``): at 384x256 at step 1500 of 3000 (``s35/r.txt``, 6 and 9 views) beside session
   28's default, and at images_4 at step 5000 of 10,000 (``s35/c69.txt``) beside the images_4 default.
+- session 36 (``bench/gpu_session36.sh``): Binocular3DGS's opacity decay (``train.opacity_decay=0.005``) and binocular
+  consistency (``train.binocular=1``), each alone and both (``b_..._{dec,bin,db}_s0`` in ``s36/b_all.txt``, both at
+  seeds 0-2), at 384x256 beside session 28's default with session 35's baselines; at images_4, seed 0, with both
+  as the new default (``s36/g.txt``) beside the images_4 default's seed 0.
 """
 
 from __future__ import annotations
@@ -71,6 +75,27 @@ def load(path: Path, prefix: str, ratio: str | None = None) -> dict:
             continue
         runs.setdefault((m["scene"], int(m["views"]), m["method"]), {})[int(m["seed"])] = float(parts[1])
     return runs
+
+
+SWITCHED = re.compile(r"^(?P<prefix>[a-z]+)_(?P<scene>\w+?_p\d+)_(?P<views>\d+)v_(?P<method>baseline|full)_(?P<switch>[a-z]+)"
+                      r"_s(?P<seed>\d+)$")
+
+
+def load_switched(path: Path, prefix: str) -> dict:
+    """{switch: {(scene, views, method): {seed: psnr}}} of runs named ``prefix_scene_Nv_method_SWITCH_sK``."""
+    out: dict = {}
+    for line in path.read_text().splitlines():
+        parts = line.split()
+        m = SWITCHED.match(parts[0]) if parts else None
+        if m is None or m["prefix"] != prefix:
+            continue
+        key = (m["scene"], int(m["views"]), m["method"])
+        out.setdefault(m["switch"], {}).setdefault(key, {})[int(m["seed"])] = float(parts[1])
+    return out
+
+
+def seed0(runs: dict) -> dict:
+    return {k: {0: v[0]} for k, v in runs.items() if 0 in v}
 
 
 def load_variants(path: Path, prefix: str) -> dict:
@@ -200,8 +225,26 @@ def with_baselines(default: dict, baselines: dict) -> dict:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--results", default=str(Path(__file__).resolve().parent / "results"))
-    ap.add_argument("--session", type=int, choices=(20, 21, 22, 26, 27, 28, 29, 30, 31, 33, 34, 35), default=21)
+    ap.add_argument("--session", type=int, choices=(20, 21, 22, 26, 27, 28, 29, 30, 31, 33, 34, 35, 36),
+                    default=21)
     args = ap.parse_args(argv)
+    if args.session == 36:
+        res = Path(args.results)
+        before = with_baselines(session28_default(res), load(res / "s35" / "r.txt", "r"))
+        switched = load_switched(res / "s36" / "b_all.txt", "b")
+        print("\n".join(table([("session 35 default", before), ("decay + binocular", switched["db"])])))
+        print()
+        print("seed 0, each switch alone and both (384x256, 3000 it):")
+        print()
+        for sw, label in (("dec", "opacity decay"), ("bin", "binocular"), ("db", "both")):
+            print(f"{label}:")
+            print("\n".join(seed_table(seed0(before), seed0(switched[sw]))))
+            print()
+        before4 = with_baselines(images4_default(res), load(res / "s35" / "c69.txt", "c"))
+        print("images_4 (768x512, 10,000 it), seed 0: the session 35 default -> decay + binocular:")
+        print()
+        print("\n".join(seed_table(seed0(before4), load(res / "s36" / "g.txt", "g"))))
+        return 0
     if args.session == 35:
         r35 = Path(args.results) / "s35"
         print("\n".join(table([("session 28 default", session28_default(Path(args.results))),

@@ -80,5 +80,13 @@ f)
   { for s in 0 1 2; do echo "lego f_lego_full_s$s full $s 10000"; done; } | run_lines 3
   summary f_ f.txt
   ;;
+g)
+  # the captures at images_4 (768x512, 10,000 it; issue 13's setting) with the new defaults, both methods, seed 0 (12 runs;
+  # the rows of s35/c69.txt and s28/i369.txt had neither switch). g.txt.
+  { for m in baseline full; do for c in castle_p30 herz_jesus_p25; do for v in 3 6 9; do
+      echo "one g_${c}_${v}v_${m}_s0 $m $c $v 0"
+    done; done; done; } | DS=4 IT=10000 run_lines 12
+  summary g_ g.txt
+  ;;
 *) echo "unknown phase $P"; exit 2 ;;
 esac

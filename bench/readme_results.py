@@ -4,23 +4,16 @@
 
 ``--write``: put the table between the file's ``<!-- readme_results: start -->`` and ``<!-- readme_results: end -->``.
 
-One row per scene and setting: the baseline's and the full method's test PSNR as median [min, max] over seeds 0-2,
-the full method's gain (difference of the medians), and where the runs ran. The sources are the latest runs of the
-current defaults:
+One row per scene and setting: the baseline's and the full method's test PSNR as median [min, max] over seeds 0-2
+(fewer are marked), the full method's gain (difference of the medians), and where the runs ran. The sources are the
+latest runs of the current defaults:
 - the no-argument job (synthetic room, 2-core CPU): ``noarg_cpu/seeds_s30.json``;
-- fern 3 views, DTU scan65 3 views and lego 8 views (H200, session 31): ``s31/o.txt`` (``o_<scene>_<method>_s<seed>``);
-  since session 35 fern's and DTU's baselines stop growing at half the run (``strategy.refine_stop_fraction``):
-  ``s35/r.txt`` (``r_<scene>_baseline``),
-  and lego's best baseline setting (``o_lego_best``, ``o_lego_best20k``) as rows of their own, and (session 32)
-  that setting with the position learning rate decaying to 1.6e-5 (``s32/M.txt`` ``M_lrf``, ``s32/N.txt``
-  ``N_lrf20k``) and (session 33) to 3.2e-5 (``s33/a.txt`` ``a_lrf32e6``; session 34 at 15,000 it: ``s34/l_call2.txt``
-  ``l_lrf32e6_15k``);
-- the captures at 384x256, 3000 it (H100, session 28's runs of today's default: ``s28/c369.txt`` baselines,
-  ``s28/m369.txt`` full; the baselines at 6 and 9 views, which stop growing at half the run since session 35, H200:
-  ``s35/r.txt``);
-- the captures at 768x512, 10,000 it (seed 0 H100, ``s28/i369.txt``; seeds 1-2 H200, ``s31/k369.txt``, and the five
-  runs session 31 did not finish in ``s32/k369.txt`` once it exists: bench/gpu_session32.sh k; the baselines at 6
-  and 9 views since session 35, H200: ``s35/c69.txt``).
+- since session 36 LLFF, DTU, Blender and the captures train with opacity decay and binocular consistency
+  (``train.opacity_decay``, ``train.binocular``; H200): fern and DTU ``s36/c.txt`` (``c_<scene>_db``,
+  ``c_<scene>_full_db``), lego ``s36/e.txt`` (``e_lego_baseline_db``) and ``s36/f.txt`` (``f_lego_full``), lego's
+  best setting (opacity noise 0.8, SH degree 1, ``optim.means_lr_final=3.2e-5``) ``s36/c.txt`` (``c_lego_db``);
+- the captures at 384x256, 3000 it: ``s36/b_all.txt`` (``b_<scene>_<N>v_<method>_db``);
+- the captures at 768x512, 10,000 it, seed 0: ``s36/g.txt``.
 """
 
 from __future__ import annotations
@@ -64,40 +57,22 @@ def rows(results: Path) -> list[str]:
     out.append(_row("synthetic room, 3 views", "no arguments: 128x96, 1000 it", "2-core AMD EPYC CPU",
                     {int(s): v["baseline"]["psnr"] for s, v in noarg.items()},
                     {int(s): v["full"]["psnr"] for s, v in noarg.items()}, "`noarg_cpu/seeds_s30.json`"))
-    o = _psnrs(results / "s31" / "o.txt")
-    r = _psnrs(results / "s35" / "r.txt")  # session 35: LLFF's and DTU's baselines stop growing at half the run
+    c = _psnrs(results / "s36" / "c.txt")
     for scene, key, setting in (("LLFF fern, 3 views", "fern", "504x378, 3000 it"),
                                 ("DTU scan65, 3 views (masked)", "dtu", "400x300, 3000 it")):
-        out.append(_row(scene, setting, "H200", r.get(f"r_{key}_baseline", {}), o.get(f"o_{key}_full", {}),
-                        "`s35/r.txt` (baseline), `s31/o.txt` (full)"))
-    out.append(_row("Blender lego, 8 views", "400x400, 10,000 it", "H200", o.get("o_lego_baseline", {}),
-                    o.get("o_lego_full", {}), "`s31/o.txt`"))
-    for key, setting in (("o_lego_best", "10,000 it"), ("o_lego_best20k", "20,000 it")):
-        out.append(_row("Blender lego, 8 views", f"baseline + opacity noise 0.8, SH degree 1, {setting}", "H200",
-                        o.get(key, {}), {}, "`s31/o.txt`"))
-    for name, key, lrf, setting in (("s32/M.txt", "M_lrf", "1.6e-5", "10,000 it"),
-                                    ("s32/N.txt", "N_lrf20k", "1.6e-5", "20,000 it"),
-                                    ("s33/a.txt", "a_lrf32e6", "3.2e-5", "10,000 it"),
-                                    ("s34/l_call2.txt", "l_lrf32e6_15k", "3.2e-5", "15,000 it")):
-        path = results / name
-        if path.is_file():  # sessions 32-34: that setting with the position learning rate decaying to lrf
-            times = f"{float(lrf) / 1.6e-6:.0f}x"  # the default final rate is 1.6e-6
-            out.append(_row("Blender lego, 8 views", f"that + `optim.means_lr_final={lrf}` ({times}), {setting}",
-                            "H200", _psnrs(path).get(key, {}), {}, f"`{name}`"))
-    large_source = ", ".join(f"`{p.parent.name}/{p.name}`" for p in ct.images4_default_files(results))
-    # since session 35 the baselines at 6 and 9 views stop growing at half the run (H200 runs of their own); the 3-view
-    # baselines (held stereo geometry: no growth either way) and the full method (which keeps growing) stay as they were
-    for default, new_base, setting, machine, source, new_source in (
-            (ct.session28_default(results), ct.load(results / "s35" / "r.txt", "r"), "384x256, 3000 it", "H100",
-             "`s28/c369.txt`, `s28/m369.txt`", "`s35/r.txt` (baseline), `s28/m369.txt` (full)"),
-            (ct.images4_default(results), ct.load(results / "s35" / "c69.txt", "c"), "768x512 (images_4), 10,000 it",
-             "seed 0 H100, seeds 1-2 H200", large_source, "`s35/c69.txt` (baseline), " + large_source + " (full)")):
-        runs = ct.with_baselines(default, new_base)
+        out.append(_row(scene, setting, "H200", c.get(f"c_{key}_db", {}), c.get(f"c_{key}_full_db", {}),
+                        "`s36/c.txt`"))
+    out.append(_row("Blender lego, 8 views", "400x400, 10,000 it", "H200",
+                    _psnrs(results / "s36" / "e.txt").get("e_lego_baseline_db", {}),
+                    _psnrs(results / "s36" / "f.txt").get("f_lego_full", {}), "`s36/e.txt`, `s36/f.txt`"))
+    out.append(_row("Blender lego, 8 views", "best setting: + opacity noise 0.8, SH degree 1, "
+                    "`optim.means_lr_final=3.2e-5`, 10,000 it", "H200", c.get("c_lego_db", {}), {}, "`s36/c.txt`"))
+    for runs, setting, source in (
+            (ct.load_switched(results / "s36" / "b_all.txt", "b")["db"], "384x256, 3000 it", "`s36/b_all.txt`"),
+            (ct.load(results / "s36" / "g.txt", "g"), "768x512 (images_4), 10,000 it", "`s36/g.txt`")):
         for scene, views in sorted({(s, n) for (s, n, _) in runs}):
-            new = (scene, views, "baseline") in new_base  # a baseline of session 35's default (H200)
-            out.append(_row(f"{scene}, {views} views", setting, "baseline H200, full " + machine if new else machine,
-                            runs.get((scene, views, "baseline"), {}), runs.get((scene, views, "full"), {}),
-                            new_source if new else source))
+            out.append(_row(f"{scene}, {views} views", setting, "H200", runs.get((scene, views, "baseline"), {}),
+                            runs.get((scene, views, "full"), {}), source))
     return out
 
 

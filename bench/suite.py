@@ -27,7 +27,7 @@ a run made with --jobs 1.
 The ``switches`` preset (issue 14) runs each weight-free regulariser (``SWITCHES``: the baseline and the
 full method, each alone and with one switch on) on every case of ``SWITCH_CASES`` (the synthetic room,
 fern 3 views, lego 8 views, DTU 65 3 views, castle_p30 and herz_jesus_p25 at 3, 6 and 9 views) over seeds
-0, 1 and 2: 10 x 13 x 3 = 390 runs. --scenes, --seeds and --only (switch labels) select a part of it. Runs
+0, 1 and 2: 10 x 17 x 3 = 510 runs. --scenes, --seeds and --only (switch labels) select a part of it. Runs
 repeated over seeds are one point per (scene, switch) in the charts and tables: the median, with the
 spread (min, max) as error bars and brackets. It also writes switches.md / switches.json
 (bench/switch_table.py: the table the README quotes, and issue 14's rule for which switch may become a
@@ -120,6 +120,9 @@ SWITCHES = {  # label: (method, --set overrides); the label named after its meth
     "baseline+drop+opacity_noise": ("baseline", ["train.drop_rate=0.2", "train.opacity_noise=0.8"]),
     "baseline+scale_reg": ("baseline", ["train.drop_rate=0", "train.scale_reg=0.01"]),  # r = train.scale_reg_ratio
     "baseline+co_reg": ("baseline", ["train.drop_rate=0", "train.co_reg=true"]),  # CoR-GS
+    # Binocular3DGS's two terms (session 36; the dataset configs of LLFF, DTU, Blender and the captures turn both on)
+    "baseline+opacity_decay": ("baseline", ["train.drop_rate=0", "train.opacity_decay=0.005"]),
+    "baseline+binocular": ("baseline", ["train.drop_rate=0", "train.binocular=1"]),
     "full": ("full", []),
     "full+drop": ("full", ["full.drop_rate=0.2"]),  # the captures' config has it already: there = full
     "full+opacity_noise": ("full", ["train.opacity_noise=0.8"]),
@@ -127,13 +130,16 @@ SWITCHES = {  # label: (method, --set overrides); the label named after its meth
     "full+pseudo_depth_smooth": ("full", ["full.pseudo_depth_smooth=0.1"]),  # Monodepth's weight
     "full+co_reg": ("full", ["train.co_reg=true"]),
     "full+far_field": ("full", ["full.far_field=elevation"]),  # a backdrop per elevation band (warpgs/farfield.py)
+    "full+opacity_decay": ("full", ["train.opacity_decay=0.005"]),
+    "full+binocular": ("full", ["train.binocular=1"]),
 }
 
 
 # Every row is measured without what the captures' config turned on in session 14 (configs/nerfstudio.yaml: the
 # far field and the camera path's clearance), as the table's runs were: a row that wants them names them. On the
-# other datasets these are their defaults already.
-SWITCH_BASE = ["train.far_field=none", "train.path_clearance=0"]
+# other datasets these are their defaults already. Nor with Binocular3DGS's terms, the dataset configs' default since
+# session 36 (their rows turn them on).
+SWITCH_BASE = ["train.far_field=none", "train.path_clearance=0", "train.opacity_decay=0", "train.binocular=0"]
 
 
 def switch_runs(cases=SWITCH_CASES, switches=SWITCHES, seeds=SWITCH_SEEDS) -> list[Run]:

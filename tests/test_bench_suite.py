@@ -65,7 +65,7 @@ def test_switches_preset_covers_every_case_switch_and_seed():
     from warpgs.pipelines.sparse import build_parser
 
     runs = suite.PRESETS["switches"]
-    assert len(runs) == len(suite.SWITCH_CASES) * len(suite.SWITCHES) * len(suite.SWITCH_SEEDS) == 390
+    assert len(runs) == len(suite.SWITCH_CASES) * len(suite.SWITCHES) * len(suite.SWITCH_SEEDS) == 510
     assert {(r.case, r.label, r.seed) for r in runs} == {(c, s, k) for c in suite.SWITCH_CASES
                                                           for s in suite.SWITCHES for k in suite.SWITCH_SEEDS}
     assert len({r.name for r in runs}) == len(runs)

@@ -105,32 +105,29 @@ def test_readme_results_rows_from_summaries(tmp_path):
     (tmp_path / "noarg_cpu").mkdir()
     (tmp_path / "noarg_cpu" / "seeds_s30.json").write_text(json.dumps({"per_seed": {
         str(s): {"baseline": {"psnr": 20.0 + s}, "full": {"psnr": 22.0 + s}} for s in range(3)}}))
-    for d in ("s28", "s31", "s35"):
-        (tmp_path / d).mkdir()
-    (tmp_path / "s31" / "o.txt").write_text("o_fern_baseline_s0 21.0 10\no_fern_baseline_s1 21.4 10\no_fern_full_s0 22.0 9\n"
-                                           "o_lego_best_s0 24.0 5\no_dtu_baseline_s0 23.0 5\no_dtu_full_s0 23.5 5\n")
-    # session 35: the baselines of LLFF, DTU and the captures' 6 / 9 views (growth stopped at half the run)
-    (tmp_path / "s35" / "r.txt").write_text("r_fern_baseline_s0 21.1 10\nr_fern_baseline_s1 21.5 10\nr_fern_full_s0 30.0 9\n"
-                                           "r_castle_p30_6v_baseline_s0 18.5 1\nr_castle_p30_6v_full_s0 99.0 1\n")
-    (tmp_path / "s35" / "c69.txt").write_text("c_herz_jesus_p25_9v_baseline_s1 20.5 1\n")
-    (tmp_path / "s28" / "c369.txt").write_text("c_castle_p30_3v_baseline_s0 15.0 1\nc_castle_p30_3v_full_s0 99.0 1\n")
-    (tmp_path / "s28" / "m369.txt").write_text("m_castle_p30_3v_full_s0 15.5 1\n")
-    (tmp_path / "s28" / "i369.txt").write_text("")
-    (tmp_path / "s31" / "k369.txt").write_text("k_herz_jesus_p25_9v_full_s1 21.0 1\n")
+    (tmp_path / "s36").mkdir()
+    # session 36's defaults: fern / DTU / lego's best setting in c.txt, lego's defaults in e.txt (baseline; its
+    # interrupted full runs are not read) and f.txt (full), the captures in b_all.txt (the "db" runs only) and g.txt
+    (tmp_path / "s36" / "c.txt").write_text("c_fern_db_s0 22.0 10\nc_fern_db_s1 22.4 10\nc_fern_full_db_s0 22.5 9\n"
+                                           "c_fern_full_dec_s0 99.0 9\nc_dtu_full_db_s0 25.0 5\nc_lego_db_s0 25.5 5\n")
+    (tmp_path / "s36" / "e.txt").write_text("e_lego_baseline_db_s0 24.8 5\ne_lego_full_db_s0 99.0 5\n")
+    (tmp_path / "s36" / "f.txt").write_text("f_lego_full_s0 24.4 5\n")
+    (tmp_path / "s36" / "b_all.txt").write_text("b_castle_p30_3v_baseline_db_s0 15.9 1\nb_castle_p30_3v_full_db_s0 15.8 1\n"
+                                               "b_castle_p30_3v_baseline_dec_s0 99.0 1\nb_castle_p30_3v_full_db_s1 16.0 1\n")
+    (tmp_path / "s36" / "g.txt").write_text("g_herz_jesus_p25_9v_baseline_s0 23.0 1\ng_herz_jesus_p25_9v_full_s0 22.5 1\n")
     out = rr.rows(tmp_path)
     assert out[2].startswith("| synthetic room, 3 views |") and "| 21.00 [20.00, 22.00] | 23.00 [22.00, 24.00] | +2.00 |" in out[2]
-    fern = next(r for r in out if r.startswith("| LLFF fern"))  # the baseline from s35/r.txt, the full method from o.txt
-    assert "| 21.30 [21.10, 21.50] (2 seeds) | 22.00 [22.00, 22.00] (1 seed) | +0.70 |" in fern
-    dtu = next(r for r in out if r.startswith("| DTU"))  # no session 35 baseline in this folder: none shown
-    assert "| - | 23.50 [23.50, 23.50] (1 seed) | - |" in dtu
-    assert any(r.startswith("| Blender lego, 8 views | baseline + opacity noise 0.8, SH degree 1, 10,000 it") and "24.00" in r
-               for r in out)
+    fern = next(r for r in out if r.startswith("| LLFF fern"))
+    assert "| 22.20 [22.00, 22.40] (2 seeds) | 22.50 [22.50, 22.50] (1 seed) | +0.30 |" in fern
+    dtu = next(r for r in out if r.startswith("| DTU"))  # no baseline run in this folder: none shown
+    assert "| - | 25.00 [25.00, 25.00] (1 seed) | - |" in dtu
+    lego = next(r for r in out if r.startswith("| Blender lego, 8 views | 400x400"))
+    assert "| 24.80 [24.80, 24.80] (1 seed) | 24.40 [24.40, 24.40] (1 seed) | -0.40 |" in lego
+    assert any(r.startswith("| Blender lego, 8 views | best setting") and "25.50" in r for r in out)
     castle = next(r for r in out if r.startswith("| castle_p30, 3 views | 384x256"))
-    assert "| 15.00 [15.00, 15.00] (1 seed) | 15.50 [15.50, 15.50] (1 seed) | +0.50 |" in castle  # full from m369, not c369
-    castle6 = next(r for r in out if r.startswith("| castle_p30, 6 views | 384x256"))  # session 35's baseline alone
-    assert "| baseline H200, full H100 | 18.50 [18.50, 18.50] (1 seed) | - | - | `s35/r.txt` (baseline)" in castle6
+    assert "| 15.90 [15.90, 15.90] (1 seed) | 15.90 [15.80, 16.00] (2 seeds) | +0.00 |" in castle
     herz = next(r for r in out if r.startswith("| herz_jesus_p25, 9 views | 768x512"))
-    assert "| 20.50 [20.50, 20.50] (1 seed) | 21.00 [21.00, 21.00] (1 seed) | +0.50 | `s35/c69.txt` (baseline)" in herz
+    assert "| 23.00 [23.00, 23.00] (1 seed) | 22.50 [22.50, 22.50] (1 seed) | -0.50 | `s36/g.txt`" in herz
 
 
 def test_with_baselines_replaces_only_the_baselines_it_has():

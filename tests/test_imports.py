@@ -10,7 +10,7 @@ PKG = Path(__file__).resolve().parents[1] / "warpgs"
 # lower layers may not import higher ones; one layer may import within itself
 LAYERS = [
     ["console", "runfolder", "_warp", "kernels", "configio", "geometry", "guard", "losses", "ply", "viz"],
-    ["render", "metrics", "farfield"],
+    ["render", "metrics", "farfield", "binocular"],
     ["model", "data"],
     ["strategy"],
     ["pseudo", "densify"],
