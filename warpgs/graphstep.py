@@ -141,8 +141,8 @@ class StepGraph:
         ptrs += [b.data_ptr() for b in render._ZERO_INPUTS.values()]  # the zeros a backward reads (it only grows)
         sc = tr.strategy
         return (tuple(ptrs), cam.width, cam.height, cam.alpha is not None, model.active_sh_degree,
-                tr.step < sc.refine_stop_iter, tr.decay_active(tr.step), tr.guard.cfg.explode_factor, bg is tr.background, tuple(bg.shape),
-                self.draws(tr.step))
+                tr.step < sc.refine_stop_iter, tr.decay_active(tr.step), tr.guard.cfg.explode_factor,
+                bg is tr.background, tuple(bg.shape), self.draws(tr.step))
 
     def _capture(self, cam, bg, capacity: int) -> bool:
         """Records the step (a warm-up of its forward and backward on the graph's stream first, then the capture);

@@ -518,15 +518,16 @@ class Trainer:
         # that ``finish`` calls in order, after training and before the test metrics. They are attached by
         # whoever builds the trainer (warpgs.pipelines.sparse.make_trainer), so this module imports none of them.
         self.stages: list = []
-        # CoR-GS (train.co_reg): the second model of the co-regularised pair, its optimiser and strategy
-        # Binocular3DGS's terms (train.binocular, train.opacity_decay; warpgs/binocular.py)
+        # Binocular3DGS's binocular consistency (train.binocular; warpgs/binocular.py): a moved render a step from
+        # train.binocular_start x the run on. Its opacity decay (train.opacity_decay) is decay_opacities
         self.binocular = None
         if cfg.train.binocular > 0:
             from warpgs.binocular import Binocular
 
             tc = cfg.train
-            self.binocular = Binocular(tc.binocular, tc.binocular_shift, int(tc.binocular_start * cfg.train.iterations),
+            self.binocular = Binocular(tc.binocular, tc.binocular_shift, int(tc.binocular_start * tc.iterations),
                                        tc.binocular_smooth, self.device, seed)
+        # CoR-GS (train.co_reg): the second model of the co-regularised pair, its optimiser and strategy
         self.pair = None
         if cfg.train.co_reg:
             from warpgs.coreg import CoRegPair
