@@ -8,6 +8,8 @@
 # 3000), before the binocular term starts (0.5): those views hold the model to a render made without it.
 # s: train.binocular_start=0.2 (the term from step 600, before the first pseudo views), both methods, fern, DTU and
 #    the captures at 384x256, 3 / 6 / 9 views, seeds 0-2 (48 runs, two calls; JOBS 24). Compare s36/c.txt, b_all.txt.
+# p: the full method with its pseudo views weighted 0.2 (full.pseudo_weight; SYN3R's code uses 0.05-0.2) at the default
+#    start, fern, DTU and the captures at 384x256, seeds 0-2 (24 runs, one call). p.txt.
 # i: the captures at images_4 (768x512, 10,000 it) with session 36's defaults, seeds 1-2, both methods (24 runs, about
 #    three calls); seed 0 is s36/g.txt.
 set -u
@@ -25,6 +27,17 @@ s)
       done; done
     done; done; } | run_lines 24
   summary s_ s.txt
+  ;;
+p)
+  PW="--set full.pseudo_weight=0.2"
+  { for s in 0 1 2; do
+      echo "named p_fern_full_s$s full llff fern 3 $s $PW"
+      echo "named p_dtu_full_s$s full dtu scan65 3 $s $PW"
+      for c in castle_p30 herz_jesus_p25; do for v in 3 6 9; do
+        echo "one p_${c}_${v}v_full_s$s full $c $v $s $PW"
+      done; done
+    done; } | run_lines 24
+  summary p_ p.txt
   ;;
 i)
   { for s in 1 2; do for m in full baseline; do for c in castle_p30 herz_jesus_p25; do for v in 3 6 9; do
