@@ -77,8 +77,8 @@ def load(path: Path, prefix: str, ratio: str | None = None) -> dict:
     return runs
 
 
-SWITCHED = re.compile(r"^(?P<prefix>[a-z]+)_(?P<scene>\w+?_p\d+)_(?P<views>\d+)v_(?P<method>baseline|full)_(?P<switch>[a-z]+)"
-                      r"_s(?P<seed>\d+)$")
+SWITCHED = re.compile(r"^(?P<prefix>[a-z]+)_(?P<scene>\w+?_p\d+)_(?P<views>\d+)v_(?P<method>baseline|full)"
+                      r"_(?P<switch>[a-z]+)_s(?P<seed>\d+)$")
 
 
 def load_switched(path: Path, prefix: str) -> dict:

@@ -99,8 +99,8 @@ class Binocular:
         fx = cam.K[0, 0]
         seen = depth.detach() > MIN_DEPTH
         zmed = torch.where(seen, depth.detach(), torch.nan).nanmedian().nan_to_num(1.0)
-        u = torch.rand(2, device=self.device, generator=self.gen)
-        t = (2 * u[0] - 1) * self.shift * cam.width * zmed / fx
+        u = torch.rand(1, device=self.device, generator=self.gen)
+        t = (2 * u - 1) * self.shift * cam.width * zmed / fx
         moved = model.render(moved_viewmat(cam.viewmat, t), cam.K, cam.width, cam.height, background=bg,
                              check_finite=False)
         ft = (fx * t).reshape(1)

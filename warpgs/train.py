@@ -721,7 +721,7 @@ class Trainer:
                                 opacity_scale=self.opacity_scale(step), check_finite=False,
                                 isect_capacity=isect_capacity)
         loss, parts = self.compute_loss(out, cam)
-        if self.binocular is not None and self.binocular.active(step):
+        if self.binocular_active(step):
             loss = loss + self.binocular.loss(self.model, out, cam, bg, parts)
         if self.pair is not None:  # its partner on the same view, and the two co-regularised (one backward for both)
             loss = loss + self.pair.loss(step, cam, bg, parts)
@@ -923,6 +923,10 @@ class Trainer:
             opt.zero_grad(set_to_none=True)
         self.decay_opacities(self.step if step is None else step)
         return record, apply
+
+    def binocular_active(self, step: int) -> bool:
+        """Whether ``train.binocular`` adds its term to the loss of ``step`` (from ``train.binocular_start`` on)."""
+        return self.binocular is not None and self.binocular.active(step)
 
     def decay_active(self, step: int) -> bool:
         """Whether ``train.opacity_decay`` acts after the update of ``step``: from ``strategy.refine_start_iter`` on."""
