@@ -52,6 +52,12 @@ median).
   consistency (``train.binocular=1``), each alone and both (``b_..._{dec,bin,db}_s0`` in ``s36/b_all.txt``, both at
   seeds 0-2), at 384x256 beside session 28's default with session 35's baselines; at images_4, seed 0, with both
   as the new default (``s36/g.txt``) beside the images_4 default's seed 0.
+- session 37 (``bench/gpu_session37.sh t`` and ``w``): the full method's variants against session 36's default at
+  384x256 (``s37/t.txt``, ``t_VARIANT_...``: ``s`` the binocular term from 0.2 of the run, for both methods; ``p``
+  ``full.pseudo_weight=0.2``; ``sp`` both; ``bf`` ``full.baseline_fraction=0.6``; ``r``
+  ``full.refine_stop_fraction=0.5``; ``p`` and ``sp`` at seeds 0-2, the rest at seed 0), the pseudo weights 0.1 and
+  0.05 at seed 0 (``s37/w.txt``, ``w<weight>_...``), and session 36's default beside session 37's
+  (``full.pseudo_weight=0.2``: the full runs of ``t_p_...``, the baselines unchanged).
 """
 
 from __future__ import annotations
@@ -214,6 +220,35 @@ def images4_default(results: Path) -> dict:
     return merged(*[load(f, "i" if f.parent.name == "s28" else "k") for f in images4_default_files(results)])
 
 
+WEIGHTED = re.compile(r"^w(?P<weight>[\d.]+)_(?P<rest>.+)$")
+
+
+def load_weights(path: Path) -> dict:
+    """{"pseudo_weight=W": {(scene, views, method): {seed: psnr}}} of runs named ``w<W>_scene_Nv_method_sK``."""
+    out: dict = {}
+    for line in path.read_text().splitlines():
+        parts = line.split()
+        w = WEIGHTED.match(parts[0]) if parts else None
+        m = NAME.match("w_" + w["rest"]) if w else None
+        if m is not None:
+            key = (m["scene"], int(m["views"]), m["method"])
+            out.setdefault(f"pseudo_weight={w['weight']}", {}).setdefault(key, {})[int(m["seed"])] = float(parts[1])
+    return out
+
+
+def session36_default(results: Path) -> dict:
+    """Session 36's default at 384x256, 3000 it, seeds 0-2 (decay + binocular, ``s36/b_all.txt``)."""
+    return load_switched(results / "s36" / "b_all.txt", "b")["db"]
+
+
+def session37_default(results: Path) -> dict:
+    """Session 37's default at 384x256: session 36's baselines (unchanged) and the full runs with
+    ``full.pseudo_weight=0.2`` (``t_p_...`` in ``s37/t.txt``)."""
+    s36 = session36_default(results)
+    p = load_variants(results / "s37" / "t.txt", "t")["p"]
+    return merged({k: v for k, v in s36.items() if k[2] == "baseline"}, {k: v for k, v in p.items() if k[2] == "full"})
+
+
 def with_baselines(default: dict, baselines: dict) -> dict:
     """``default`` with its baseline runs replaced by ``baselines``' where those have the case (the full runs and the
     other cases' baselines stay)."""
@@ -225,9 +260,27 @@ def with_baselines(default: dict, baselines: dict) -> dict:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--results", default=str(Path(__file__).resolve().parent / "results"))
-    ap.add_argument("--session", type=int, choices=(20, 21, 22, 26, 27, 28, 29, 30, 31, 33, 34, 35, 36),
+    ap.add_argument("--session", type=int, choices=(20, 21, 22, 26, 27, 28, 29, 30, 31, 33, 34, 35, 36, 37),
                     default=21)
     args = ap.parse_args(argv)
+    if args.session == 37:
+        res = Path(args.results)
+        default = session36_default(res)
+        names = {"s": "binocular_start=0.2 (both methods)", "p": "pseudo_weight=0.2", "bf": "baseline_fraction=0.6",
+                 "sp": "binocular_start=0.2 + pseudo_weight=0.2", "r": "full refine_stop_fraction=0.5"}
+        variants = load_variants(res / "s37" / "t.txt", "t")
+        print("variants against session 36's default (384x256, 3000 it; p and sp seeds 0-2, the rest seed 0):")
+        print()
+        print("\n".join(variant_table(default, {names[k]: v for k, v in variants.items()}, "default (session 36)")))
+        print()
+        print("seed 0 only, against session 36's default at seed 0:")
+        print()
+        seed0_variants = {names[k]: seed0(v) for k, v in variants.items()}
+        seed0_variants.update(load_weights(res / "s37" / "w.txt"))
+        print("\n".join(variant_table(seed0(default), seed0_variants, "default (session 36), seed 0")))
+        print()
+        print("\n".join(table([("session 36 default", default), ("session 37 default", session37_default(res))])))
+        return 0
     if args.session == 36:
         res = Path(args.results)
         before = with_baselines(session28_default(res), load(res / "s35" / "r.txt", "r"))

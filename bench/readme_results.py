@@ -12,8 +12,10 @@ latest runs of the current defaults:
   (``train.opacity_decay``, ``train.binocular``; H200): fern and DTU ``s36/c.txt`` (``c_<scene>_db``,
   ``c_<scene>_full_db``), lego ``s36/e.txt`` (``e_lego_baseline_db``) and ``s36/f.txt`` (``f_lego_full``), lego's
   best setting (opacity noise 0.8, SH degree 1, ``optim.means_lr_final=3.2e-5``) ``s36/c.txt`` (``c_lego_db``);
-- the captures at 384x256, 3000 it: ``s36/b_all.txt`` (``b_<scene>_<N>v_<method>_db``);
-- the captures at 768x512, 10,000 it, seed 0: ``s36/g.txt``.
+- the captures at 384x256, 3000 it: the baselines of ``s36/b_all.txt`` (``b_<scene>_<N>v_baseline_db``), the full
+  method since session 37 with ``full.pseudo_weight: 0.2`` (``s37/t.txt``, ``t_p_<scene>_<N>v_full``), as DTU's
+  full method (``t_p_dtu_full``);
+- the captures at 768x512, 10,000 it, seed 0: ``s36/g.txt`` (its full runs have session 36's pseudo weight 1.0).
 """
 
 from __future__ import annotations
@@ -58,18 +60,20 @@ def rows(results: Path) -> list[str]:
                     {int(s): v["baseline"]["psnr"] for s, v in noarg.items()},
                     {int(s): v["full"]["psnr"] for s, v in noarg.items()}, "`noarg_cpu/seeds_s30.json`"))
     c = _psnrs(results / "s36" / "c.txt")
-    for scene, key, setting in (("LLFF fern, 3 views", "fern", "504x378, 3000 it"),
-                                ("DTU scan65, 3 views (masked)", "dtu", "400x300, 3000 it")):
-        out.append(_row(scene, setting, "H200", c.get(f"c_{key}_db", {}), c.get(f"c_{key}_full_db", {}),
-                        "`s36/c.txt`"))
+    t = _psnrs(results / "s37" / "t.txt")
+    out.append(_row("LLFF fern, 3 views", "504x378, 3000 it", "H200", c.get("c_fern_db", {}),
+                    c.get("c_fern_full_db", {}), "`s36/c.txt`"))
+    out.append(_row("DTU scan65, 3 views (masked)", "400x300, 3000 it", "H200", c.get("c_dtu_db", {}),
+                    t.get("t_p_dtu_full", {}), "`s36/c.txt`, `s37/t.txt`"))
     out.append(_row("Blender lego, 8 views", "400x400, 10,000 it", "H200",
                     _psnrs(results / "s36" / "e.txt").get("e_lego_baseline_db", {}),
                     _psnrs(results / "s36" / "f.txt").get("f_lego_full", {}), "`s36/e.txt`, `s36/f.txt`"))
     out.append(_row("Blender lego, 8 views", "best setting: + opacity noise 0.8, SH degree 1, "
                     "`optim.means_lr_final=3.2e-5`, 10,000 it", "H200", c.get("c_lego_db", {}), {}, "`s36/c.txt`"))
     for runs, setting, source in (
-            (ct.load_switched(results / "s36" / "b_all.txt", "b")["db"], "384x256, 3000 it", "`s36/b_all.txt`"),
-            (ct.load(results / "s36" / "g.txt", "g"), "768x512 (images_4), 10,000 it", "`s36/g.txt`")):
+            (ct.session37_default(results), "384x256, 3000 it", "`s36/b_all.txt`, `s37/t.txt`"),
+            (ct.load(results / "s36" / "g.txt", "g"), "768x512 (images_4), 10,000 it; full: session 36's "
+             "`full.pseudo_weight=1`", "`s36/g.txt`")):
         for scene, views in sorted({(s, n) for (s, n, _) in runs}):
             out.append(_row(f"{scene}, {views} views", setting, "H200", runs.get((scene, views, "baseline"), {}),
                             runs.get((scene, views, "full"), {}), source))

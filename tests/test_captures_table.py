@@ -109,25 +109,31 @@ def test_readme_results_rows_from_summaries(tmp_path):
     # session 36's defaults: fern / DTU / lego's best setting in c.txt, lego's defaults in e.txt (baseline; its
     # interrupted full runs are not read) and f.txt (full), the captures in b_all.txt (the "db" runs only) and g.txt
     (tmp_path / "s36" / "c.txt").write_text("c_fern_db_s0 22.0 10\nc_fern_db_s1 22.4 10\nc_fern_full_db_s0 22.5 9\n"
-                                           "c_fern_full_dec_s0 99.0 9\nc_dtu_full_db_s0 25.0 5\nc_lego_db_s0 25.5 5\n")
+                                           "c_fern_full_dec_s0 99.0 9\nc_dtu_full_db_s0 98.0 5\nc_lego_db_s0 25.5 5\n")
     (tmp_path / "s36" / "e.txt").write_text("e_lego_baseline_db_s0 24.8 5\ne_lego_full_db_s0 99.0 5\n")
     (tmp_path / "s36" / "f.txt").write_text("f_lego_full_s0 24.4 5\n")
     (tmp_path / "s36" / "b_all.txt").write_text("b_castle_p30_3v_baseline_db_s0 15.9 1\nb_castle_p30_3v_full_db_s0 15.8 1\n"
                                                "b_castle_p30_3v_baseline_dec_s0 99.0 1\nb_castle_p30_3v_full_db_s1 16.0 1\n")
     (tmp_path / "s36" / "g.txt").write_text("g_herz_jesus_p25_9v_baseline_s0 23.0 1\ng_herz_jesus_p25_9v_full_s0 22.5 1\n")
+    # session 37: the full method of DTU and the captures at 384x256 with full.pseudo_weight=0.2 ("t_p_" runs only)
+    (tmp_path / "s37").mkdir()
+    (tmp_path / "s37" / "t.txt").write_text("t_p_dtu_full_s0 25.0 5\nt_s_dtu_full_s0 99.0 5\n"
+                                            "t_p_castle_p30_3v_full_s0 16.2 1\nt_p_castle_p30_3v_full_s1 16.4 1\n"
+                                            "t_sp_castle_p30_3v_full_s0 99.0 1\n")
     out = rr.rows(tmp_path)
     assert out[2].startswith("| synthetic room, 3 views |") and "| 21.00 [20.00, 22.00] | 23.00 [22.00, 24.00] | +2.00 |" in out[2]
     fern = next(r for r in out if r.startswith("| LLFF fern"))
     assert "| 22.20 [22.00, 22.40] (2 seeds) | 22.50 [22.50, 22.50] (1 seed) | +0.30 |" in fern
     dtu = next(r for r in out if r.startswith("| DTU"))  # no baseline run in this folder: none shown
-    assert "| - | 25.00 [25.00, 25.00] (1 seed) | - |" in dtu
+    assert "| - | 25.00 [25.00, 25.00] (1 seed) | - | `s36/c.txt`, `s37/t.txt` |" in dtu
     lego = next(r for r in out if r.startswith("| Blender lego, 8 views | 400x400"))
     assert "| 24.80 [24.80, 24.80] (1 seed) | 24.40 [24.40, 24.40] (1 seed) | -0.40 |" in lego
     assert any(r.startswith("| Blender lego, 8 views | best setting") and "25.50" in r for r in out)
     castle = next(r for r in out if r.startswith("| castle_p30, 3 views | 384x256"))
-    assert "| 15.90 [15.90, 15.90] (1 seed) | 15.90 [15.80, 16.00] (2 seeds) | +0.00 |" in castle
+    assert "| 15.90 [15.90, 15.90] (1 seed) | 16.30 [16.20, 16.40] (2 seeds) | +0.40 |" in castle
     herz = next(r for r in out if r.startswith("| herz_jesus_p25, 9 views | 768x512"))
     assert "| 23.00 [23.00, 23.00] (1 seed) | 22.50 [22.50, 22.50] (1 seed) | -0.50 | `s36/g.txt`" in herz
+    assert "session 36's `full.pseudo_weight=1`" in herz  # its full runs are not today's default
 
 
 def test_with_baselines_replaces_only_the_baselines_it_has():
@@ -150,3 +156,27 @@ def test_readme_current_figures_match_the_committed_summaries():
     doc = (root / "README.md").read_text()
     i, j = doc.index(rr.START) + len(rr.START), doc.index(rr.END)
     assert doc[i:j].strip("\n").splitlines() == rr.rows(root / "bench" / "results")
+
+
+def test_load_weights_reads_the_pseudo_weight_from_the_run_name(tmp_path):
+    p = tmp_path / "w.txt"
+    p.write_text("w0.1_castle_p30_9v_full_s0 24.0 10 [1.0] [2.0]\n"
+                 "w0.05_castle_p30_9v_full_s0 23.5 10 [1.0] [2.0]\n"
+                 "w0.05_herz_jesus_p25_3v_full_s1 18.0 10 [1.0] [2.0]\n"
+                 "t_p_castle_p30_9v_full_s0 99.0 10\n")  # another prefix
+    assert ct.load_weights(p) == {"pseudo_weight=0.1": {("castle_p30", 9, "full"): {0: 24.0}},
+                                  "pseudo_weight=0.05": {("castle_p30", 9, "full"): {0: 23.5},
+                                                         ("herz_jesus_p25", 3, "full"): {1: 18.0}}}
+
+
+def test_session37_default_keeps_session36s_baselines_and_takes_the_weighted_full_runs(tmp_path):
+    (tmp_path / "s36").mkdir()
+    (tmp_path / "s37").mkdir()
+    (tmp_path / "s36" / "b_all.txt").write_text("b_castle_p30_3v_baseline_db_s0 15.0 1\n"
+                                                "b_castle_p30_3v_full_db_s0 14.0 1\n"
+                                                "b_castle_p30_3v_baseline_dec_s0 99.0 1\n")  # another switch
+    (tmp_path / "s37" / "t.txt").write_text("t_p_castle_p30_3v_full_s0 16.0 1\n"
+                                            "t_s_castle_p30_3v_baseline_s0 98.0 1\n"  # another variant
+                                            "t_p_dtu_full_s0 26.0 1\n")  # not a capture
+    assert ct.session37_default(tmp_path) == {("castle_p30", 3, "baseline"): {0: 15.0},
+                                              ("castle_p30", 3, "full"): {0: 16.0}}
