@@ -249,6 +249,26 @@ def session37_default(results: Path) -> dict:
     return merged({k: v for k, v in s36.items() if k[2] == "baseline"}, {k: v for k, v in p.items() if k[2] == "full"})
 
 
+def named_variant_table(results: Path, names: dict) -> list[str]:
+    """Fern and DTU in session 37: session 36's default (``s36/c.txt``) and each variant of ``s37/t.txt`` and
+    ``s37/w.txt``, median [min, max] over the seeds each has (which the row names)."""
+    import seed_medians as sm
+
+    s36 = sm.read([results / "s36" / "c.txt"])
+    s37 = sm.read([results / "s37" / "t.txt", results / "s37" / "w.txt"])
+    rows = [("baseline (session 36 default)", "c_{}_db", s36), ("full (session 36 default)", "c_{}_full_db", s36)]
+    rows += [(f"{m}, {label}", f"t_{v}_{{}}_{m}", s37) for v, label in names.items() for m in ("baseline", "full")]
+    rows += [(f"full, pseudo_weight={w}", f"w{w}_{{}}_full", s37) for w in ("0.1", "0.05")]
+    lines = ["| run | seeds | fern 3 views | DTU scan65 3 views |", "|---|---|---|---|"]
+    for label, pattern, runs in rows:
+        got = [runs.get(pattern.format(scene), {}) for scene in ("fern", "dtu")]
+        if any(got):
+            seeds = sorted(set().union(*got))
+            lines.append(f"| {label} | {', '.join(map(str, seeds))} | "
+                         + " | ".join(cell({k: p for k, (p, _) in g.items()}) if g else "-" for g in got) + " |")
+    return lines
+
+
 def with_baselines(default: dict, baselines: dict) -> dict:
     """``default`` with its baseline runs replaced by ``baselines``' where those have the case (the full runs and the
     other cases' baselines stay)."""
@@ -280,6 +300,8 @@ def main(argv=None) -> int:
         print("\n".join(variant_table(seed0(default), seed0_variants, "default (session 36), seed 0")))
         print()
         print("\n".join(table([("session 36 default", default), ("session 37 default", session37_default(res))])))
+        print()
+        print("\n".join(named_variant_table(res, names)))
         return 0
     if args.session == 36:
         res = Path(args.results)

@@ -1,0 +1,32 @@
+#!/usr/bin/env bash
+# GPU runs prepared in session 37 for the next session (wheels in /tmp/site, pycolmap among them; scenes in $D:
+# llff_fern, dtu_scan65, blender_lego and the captures, images_4 included).
+#   T=seconds bash bench/gpu_session38.sh PHASE D RUNS          (ONLY=REGEX keeps the runs whose line matches)
+# Session 37 made full.pseudo_weight 0.2 the captures' and DTU's default (384x256, seeds 0-2: full - baseline +0.13 ->
+# +0.38 dB on average over the six capture cases; DTU -0.58 -> +0.25). The images_4 rows of the README have seed 0 of
+# session 36's default only (s36/g.txt), with the full method at weight 1.
+# i: the captures at images_4 (768x512, 10,000 it) with today's defaults: the full method at seeds 0-2 (18 runs), the
+#    baseline at seeds 1-2 (12 runs; seed 0 is s36/g.txt, the baseline did not change). About three calls. i.txt.
+# l: lego 8 views (10,000 it), the full method with full.pseudo_weight=0.2 at seeds 0-2 (3 runs; blender.yaml keeps
+#    1.0: 24.48 against the baseline's 24.80, s36/e.txt, f.txt), and fern's full method with its growth stopped at
+#    half the run (full.refine_stop_fraction=0.5: 22.98 at seed 0 in s37/t.txt) at seeds 1-2 (2 runs). l.txt.
+set -u
+source "$(dirname "${BASH_SOURCE[0]}")/gpu_one.sh"
+session_env "$@"; P=$1; D=$2; R=$3; shift 3
+export R D T END=$(( $(date +%s) + ${T:-540} ))  # every run of the call stops by then
+case $P in
+i)
+  { for s in 0 1 2; do for m in full baseline; do for c in castle_p30 herz_jesus_p25; do for v in 3 6 9; do
+      [ "$m" = baseline ] && [ "$s" = 0 ] && continue
+      echo "one i_${c}_${v}v_${m}_s$s $m $c $v $s"
+    done; done; done; done; } | DS=4 IT=10000 run_lines 12
+  summary i_ i.txt
+  ;;
+l)
+  { for s in 0 1 2; do echo "lego l_lego_full_pw02_s$s full $s 10000 --set full.pseudo_weight=0.2"; done
+    for s in 1 2; do echo "named l_fern_full_rs05_s$s full llff fern 3 $s --set full.refine_stop_fraction=0.5"; done
+  } | run_lines 5
+  summary l_ l.txt
+  ;;
+*) echo "unknown phase $P"; exit 2 ;;
+esac
