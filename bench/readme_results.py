@@ -10,11 +10,11 @@ latest runs of the current defaults:
 - the no-argument job (synthetic room, 2-core CPU): ``noarg_cpu/seeds_s30.json``;
 - since session 36 LLFF, DTU, Blender and the captures train with opacity decay and binocular consistency
   (``train.opacity_decay``, ``train.binocular``; H200): fern and DTU ``s36/c.txt`` (``c_<scene>_db``,
-  ``c_<scene>_full_db``), lego ``s36/e.txt`` (``e_lego_baseline_db``) and ``s36/f.txt`` (``f_lego_full``), lego's
+  ``c_<scene>_full_db``; DTU's full method since session 37 with ``full.pseudo_weight: 0.2``, ``s37/t.txt``,
+  ``t_p_dtu_full``), lego ``s36/e.txt`` (``e_lego_baseline_db``) and ``s36/f.txt`` (``f_lego_full``), lego's
   best setting (opacity noise 0.8, SH degree 1, ``optim.means_lr_final=3.2e-5``) ``s36/c.txt`` (``c_lego_db``);
 - the captures at 384x256, 3000 it: the baselines of ``s36/b_all.txt`` (``b_<scene>_<N>v_baseline_db``), the full
-  method since session 37 with ``full.pseudo_weight: 0.2`` (``s37/t.txt``, ``t_p_<scene>_<N>v_full``), as DTU's
-  full method (``t_p_dtu_full``);
+  method since session 37 with ``full.pseudo_weight: 0.2`` (``s37/t.txt``, ``t_p_<scene>_<N>v_full``);
 - the captures at 768x512, 10,000 it, seed 0: ``s36/g.txt`` (its full runs have session 36's pseudo weight 1.0).
 """
 
