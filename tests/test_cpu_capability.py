@@ -1,5 +1,6 @@
-"""``import warpgs`` asks torch for its AVX2 CPU kernels on x86 machines without CUDA (warpgs/__init__.py), so a
-fixed-seed CPU run gives the same figures on AVX2 and AVX-512 machines; a capability the user sets is kept."""
+"""``import warpgs`` asks torch for its AVX2 CPU kernels and MKL for its reproducible branch on x86 machines without
+CUDA (warpgs/__init__.py), so a fixed-seed CPU run gives the same figures on AVX2 and AVX-512 machines, Intel's and
+AMD's; a capability or branch the user sets is kept."""
 
 import os
 import platform
@@ -30,3 +31,34 @@ def test_warpgs_asks_for_avx2_kernels_and_keeps_a_users_choice():
     assert capability("import torch, warpgs") == "AVX2"  # torch imported first, nothing dispatched yet
     assert capability("import warpgs, torch", ATEN_CPU_CAPABILITY="default") == "DEFAULT"
     assert capability("import warpgs, torch", ATEN_CPU_CAPABILITY=own.lower()) == own
+
+
+PRODUCTS = ("import hashlib; g = torch.Generator().manual_seed(0); "
+            "p = torch.rand(300, 3, generator=g) * 10; a = torch.rand(64, 257, generator=g); "
+            "b = torch.rand(257, 64, generator=g, dtype=torch.float64); "
+            "out = [torch.cdist(p, p), a @ a.T, b.T @ b]; "  # cdist of > 25 rows goes through a matrix product
+            "print(hashlib.md5(b''.join(t.numpy().tobytes() for t in out)).hexdigest())")
+
+
+def products(code: str, **env) -> str:
+    e = {k: v for k, v in os.environ.items() if k not in ("MKL_CBWR", "MKL_ENABLE_INSTRUCTIONS")}
+    e.update(env)
+    out = subprocess.run([sys.executable, "-c", code + "; " + PRODUCTS], env=e, capture_output=True, text=True,
+                         timeout=120, check=True)
+    return out.stdout.strip().splitlines()[-1]
+
+
+@pytest.mark.skipif(not X86, reason="MKL's kernels are picked among x86 instruction sets")
+@pytest.mark.skipif(torch.cuda.is_available(), reason="GPU machines keep torch's own choice")
+def test_warpgs_asks_mkl_for_the_same_products_on_every_x86_processor():
+    """MKL's kernels for SSE4.2 and for this machine's widest instruction set (AVX2, AVX-512) round differently;
+    after ``import warpgs`` (MKL_CBWR=COMPATIBLE) both give the same bits, as another processor then does."""
+    if not torch.backends.mkl.is_available():
+        pytest.skip("this torch has no MKL")
+    # without the reproducible branch (a user's MKL_CBWR is kept), MKL's own choice per instruction set
+    own = products("import warpgs, torch", MKL_CBWR="AUTO")
+    if own == products("import warpgs, torch", MKL_CBWR="AUTO", MKL_ENABLE_INSTRUCTIONS="SSE4_2"):
+        pytest.skip("MKL gives the same bits with SSE4.2 and its widest kernels here: nothing to compare")
+    widest = products("import warpgs, torch")
+    assert products("import warpgs, torch", MKL_ENABLE_INSTRUCTIONS="SSE4_2") == widest
+    assert products("import torch, warpgs", MKL_ENABLE_INSTRUCTIONS="SSE4_2") == widest  # torch first, nothing run yet

@@ -19,6 +19,16 @@ import torch as _torch
 # CUDA device is visible (a CPU run), warpgs asks for the AVX2 kernels on x86 unless ATEN_CPU_CAPABILITY is set
 # (``avx512`` gives the wider kernels back). It must be set before torch first dispatches a CPU kernel, so here,
 # before any submodule does. GPU runs are left as they were (their figures were measured that way).
+#
+# The same holds for MKL, the BLAS of torch's x86 wheels (matrix products: torch.cdist's distances for the initial
+# scales, the weight-free video prior's DCT): it picks its kernels by the processor too, and a product rounds
+# differently on another. Session 37: on a 2-core Intel Xeon with AVX-512 the initial scales of the no-argument run
+# differed in the last bits from those MKL's AVX2 kernels give, and the baseline ended at 19.62 instead of 20.78
+# (full 22.47 / 22.52). MKL's conditional numerical reproducibility ``COMPATIBLE`` branch gives the same results on
+# every x86 processor (Intel's documentation), so CPU runs ask for it; ``MKL_CBWR`` set by the user is kept. Like
+# ATEN_CPU_CAPABILITY, MKL reads it on its first call, so it is set here.
 CPU_CAPABILITY = "avx2"
+MKL_BRANCH = "COMPATIBLE"
 if _platform.machine().lower() in ("x86_64", "amd64") and not _torch.cuda.is_available():
     _os.environ.setdefault("ATEN_CPU_CAPABILITY", CPU_CAPABILITY)
+    _os.environ.setdefault("MKL_CBWR", MKL_BRANCH)
