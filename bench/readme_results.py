@@ -7,7 +7,8 @@
 One row per scene and setting: the baseline's and the full method's test PSNR as median [min, max] over seeds 0-2
 (fewer are marked), the full method's gain (difference of the medians), and where the runs ran. The sources are the
 latest runs of the current defaults:
-- the no-argument job (synthetic room, 2-core CPU): ``noarg_cpu/seeds_s30.json``;
+- the no-argument job (synthetic room, 2-core CPU): ``noarg_cpu/seeds_s37.json`` (``bench/noarg_seeds.py``; since
+  session 37 CPU runs use MKL's reproducible branch, so the session 30 figures of ``seeds_s30.json`` are history);
 - since session 36 LLFF, DTU, Blender and the captures train with opacity decay and binocular consistency
   (``train.opacity_decay``, ``train.binocular``; H200): fern and DTU ``s36/c.txt`` (``c_<scene>_db``,
   ``c_<scene>_full_db``; DTU's full method since session 37 with ``full.pseudo_weight: 0.2``, ``s37/t.txt``,
@@ -33,6 +34,8 @@ import seed_medians as sm  # noqa: E402
 
 START, END = "<!-- readme_results: start -->", "<!-- readme_results: end -->"
 
+NOARG = "noarg_cpu/seeds_s37.json"  # the no-argument job over seeds 0-2 (bench/noarg_seeds.py)
+
 HEAD = ["scene", "setting", "machine", "baseline", "full", "full - baseline", "source"]
 
 
@@ -55,10 +58,11 @@ def _psnrs(path: Path) -> dict[str, dict[int, float]]:
 
 def rows(results: Path) -> list[str]:
     out = ["| " + " | ".join(HEAD) + " |", "|" + "---|" * len(HEAD)]
-    noarg = json.loads((results / "noarg_cpu" / "seeds_s30.json").read_text())["per_seed"]
-    out.append(_row("synthetic room, 3 views", "no arguments: 128x96, 1000 it", "2-core AMD EPYC CPU",
+    doc = json.loads((results / NOARG).read_text())
+    noarg = doc["per_seed"]
+    out.append(_row("synthetic room, 3 views", "no arguments: 128x96, 1000 it", doc["machine"],
                     {int(s): v["baseline"]["psnr"] for s, v in noarg.items()},
-                    {int(s): v["full"]["psnr"] for s, v in noarg.items()}, "`noarg_cpu/seeds_s30.json`"))
+                    {int(s): v["full"]["psnr"] for s, v in noarg.items()}, f"`{NOARG}`"))
     c = _psnrs(results / "s36" / "c.txt")
     t = _psnrs(results / "s37" / "t.txt")
     out.append(_row("LLFF fern, 3 views", "504x378, 3000 it", "H200", c.get("c_fern_db", {}),

@@ -103,7 +103,7 @@ def test_readme_results_rows_from_summaries(tmp_path):
     from bench import readme_results as rr
 
     (tmp_path / "noarg_cpu").mkdir()
-    (tmp_path / "noarg_cpu" / "seeds_s30.json").write_text(json.dumps({"per_seed": {
+    (tmp_path / "noarg_cpu" / "seeds_s37.json").write_text(json.dumps({"machine": "a 2-core test CPU", "per_seed": {
         str(s): {"baseline": {"psnr": 20.0 + s}, "full": {"psnr": 22.0 + s}} for s in range(3)}}))
     (tmp_path / "s36").mkdir()
     # session 36's defaults: fern / DTU / lego's best setting in c.txt, lego's defaults in e.txt (baseline; its
@@ -122,6 +122,7 @@ def test_readme_results_rows_from_summaries(tmp_path):
                                             "t_sp_castle_p30_3v_full_s0 99.0 1\n")
     out = rr.rows(tmp_path)
     assert out[2].startswith("| synthetic room, 3 views |") and "| 21.00 [20.00, 22.00] | 23.00 [22.00, 24.00] | +2.00 |" in out[2]
+    assert "| a 2-core test CPU |" in out[2] and "`noarg_cpu/seeds_s37.json`" in out[2]
     fern = next(r for r in out if r.startswith("| LLFF fern"))
     assert "| 22.20 [22.00, 22.40] (2 seeds) | 22.50 [22.50, 22.50] (1 seed) | +0.30 |" in fern
     dtu = next(r for r in out if r.startswith("| DTU"))  # no baseline run in this folder: none shown
