@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import platform
 import subprocess
 import tempfile
@@ -49,7 +50,7 @@ def main(argv=None) -> int:
     commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True, cwd=ROOT).stdout.strip()
     doc = {"what": "bash scripts/run.sh --seed S (the no-argument job: synthetic room, 3 views, 128x96, 1000 it, "
                    "baseline and full in two processes), seeds one after the other, nothing else running",
-           "commit": commit, "machine": args.machine or f"{cpu_name()}, {len(__import__('os').sched_getaffinity(0))} cores",
+           "commit": commit, "machine": args.machine or f"{cpu_name()}, {len(os.sched_getaffinity(0))} cores",
            "per_seed": {}}
     with tempfile.TemporaryDirectory() as tmp:
         for s in args.seeds:
