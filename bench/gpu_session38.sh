@@ -10,6 +10,10 @@
 # l: lego 8 views (10,000 it), the full method with full.pseudo_weight=0.2 at seeds 0-2 (3 runs; blender.yaml keeps
 #    1.0: 24.48 against the baseline's 24.80, s36/e.txt, f.txt), and fern's full method with its growth stopped at
 #    half the run (full.refine_stop_fraction=0.5: 22.98 at seed 0 in s37/t.txt) at seeds 1-2 (2 runs). l.txt.
+# v: the full method's settings over today's default (pseudo weight 0.2), seed 0, the six capture cases at 384x256 and
+#    DTU (28 runs, one call): c3 (full.cycles=3), rel (full.pseudo_mask=reliable), n17 (pseudo.trajectory.n_frames=17:
+#    more poses per pair of inputs), bf6 (full.baseline_fraction=0.6: the first pseudo views after the binocular term
+#    starts; at weight 1 it gave +0.21 on average, s37/t.txt). Against s37/t.txt's t_p_ runs. v.txt.
 set -u
 source "$(dirname "${BASH_SOURCE[0]}")/gpu_one.sh"
 session_env "$@"; P=$1; D=$2; R=$3; shift 3
@@ -27,6 +31,17 @@ l)
     for s in 1 2; do echo "named l_fern_full_rs05_s$s full llff fern 3 $s --set full.refine_stop_fraction=0.5"; done
   } | run_lines 5
   summary l_ l.txt
+  ;;
+v)
+  declare -A V=([c3]="--set full.cycles=3" [rel]="--set full.pseudo_mask=reliable"
+                [n17]="--set pseudo.trajectory.n_frames=17" [bf6]="--set full.baseline_fraction=0.6")
+  { for v in ${VARIANTS:-c3 rel n17 bf6}; do
+      echo "named v_${v}_dtu_full_s0 full dtu scan65 3 0 ${V[$v]}"
+      for c in castle_p30 herz_jesus_p25; do for n in 3 6 9; do
+        echo "one v_${v}_${c}_${n}v_full_s0 full $c $n 0 ${V[$v]}"
+      done; done
+    done; } | run_lines 28
+  summary v_ v.txt
   ;;
 *) echo "unknown phase $P"; exit 2 ;;
 esac
