@@ -13,12 +13,16 @@ import torch
 X86 = platform.machine().lower() in ("x86_64", "amd64")
 
 
-def capability(code: str, **env) -> str:
-    e = {k: v for k, v in os.environ.items() if k != "ATEN_CPU_CAPABILITY"}
+def last_line(code: str, unset: tuple[str, ...], **env) -> str:
+    """The last line ``code`` prints in a new interpreter, without the variables ``unset`` and with ``env``."""
+    e = {k: v for k, v in os.environ.items() if k not in unset}
     e.update(env)
-    out = subprocess.run([sys.executable, "-c", code + "; print(torch.backends.cpu.get_cpu_capability())"],
-                         env=e, capture_output=True, text=True, timeout=120, check=True)
+    out = subprocess.run([sys.executable, "-c", code], env=e, capture_output=True, text=True, timeout=120, check=True)
     return out.stdout.strip().splitlines()[-1]
+
+
+def capability(code: str, **env) -> str:
+    return last_line(code + "; print(torch.backends.cpu.get_cpu_capability())", ("ATEN_CPU_CAPABILITY",), **env)
 
 
 @pytest.mark.skipif(not X86, reason="the AVX levels are x86's")
@@ -41,11 +45,7 @@ PRODUCTS = ("import hashlib; g = torch.Generator().manual_seed(0); "
 
 
 def products(code: str, **env) -> str:
-    e = {k: v for k, v in os.environ.items() if k not in ("MKL_CBWR", "MKL_ENABLE_INSTRUCTIONS")}
-    e.update(env)
-    out = subprocess.run([sys.executable, "-c", code + "; " + PRODUCTS], env=e, capture_output=True, text=True,
-                         timeout=120, check=True)
-    return out.stdout.strip().splitlines()[-1]
+    return last_line(code + "; " + PRODUCTS, ("MKL_CBWR", "MKL_ENABLE_INSTRUCTIONS"), **env)
 
 
 @pytest.mark.skipif(not X86, reason="MKL's kernels are picked among x86 instruction sets")
