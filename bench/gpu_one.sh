@@ -38,8 +38,10 @@ export -f named
 # run_lines JOBS: runs each line on stdin (a function of this file and its arguments: sparse_run, one, named, lego),
 # ${JOBS:-JOBS} at a time, only the lines matching ${ONLY:-.} (a grep -E pattern); prints the runs that did not end
 # with rc=0 (bench/gpu_session35.sh on).
+# With NGPU > 1 (a machine of several GPUs) each run takes GPU (xargs slot mod NGPU) (bench/gpu_session38.sh on).
 run_lines() {
-  grep -E -- "${ONLY:-.}" | xargs -P "${JOBS:-$1}" -L 1 bash -c '"$@"' _ | grep -v "rc=0"
+  grep -E -- "${ONLY:-.}" | xargs -P "${JOBS:-$1}" -L 1 --process-slot-var=SLOT \
+    bash -c '[ "${NGPU:-1}" -gt 1 ] && export CUDA_VISIBLE_DEVICES=$((SLOT % NGPU)); "$@"' _ | grep -v "rc=0"
 }
 
 # summary PREFIX FILE: one line per run $R/PREFIX*/metrics.json (name, test PSNR, Gaussians, per-view PSNRs, the

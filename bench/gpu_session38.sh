@@ -14,33 +14,62 @@
 #    DTU (28 runs, one call): c3 (full.cycles=3), rel (full.pseudo_mask=reliable), n17 (pseudo.trajectory.n_frames=17:
 #    more poses per pair of inputs), bf6 (full.baseline_fraction=0.6: the first pseudo views after the binocular term
 #    starts; at weight 1 it gave +0.21 on average, s37/t.txt). Against s37/t.txt's t_p_ runs. v.txt.
+# d: DTU scan65 3 views at 10,000 iterations (configs/dtu.yaml's own train.iterations; the README's DTU rows are
+#    3000), both methods, seeds 0-2 (6 runs). d.txt.
+# q: one queue over every GPU of the machine (NGPU, from nvidia-smi): i, then d, then l, then v's c3 and bf6 at seeds
+#    0-2 (VARIANTS, SEEDS), ${JOBS:-28} runs at a time; a second call resumes what the first left. Summaries i.txt,
+#    d.txt, l.txt, v.txt.
 set -u
 source "$(dirname "${BASH_SOURCE[0]}")/gpu_one.sh"
 session_env "$@"; P=$1; D=$2; R=$3; shift 3
 export R D T END=$(( $(date +%s) + ${T:-540} ))  # every run of the call stops by then
+export NGPU=${NGPU:-$(nvidia-smi -L 2>/dev/null | grep -c GPU)}
+one4() { DS=4 IT=10000 one "$@"; }
+export -f one4
+declare -A V=([c3]="--set full.cycles=3" [rel]="--set full.pseudo_mask=reliable"
+              [n17]="--set pseudo.trajectory.n_frames=17" [bf6]="--set full.baseline_fraction=0.6")
+lines_i() {
+  for s in 0 1 2; do for m in full baseline; do for c in castle_p30 herz_jesus_p25; do for v in 3 6 9; do
+    [ "$m" = baseline ] && [ "$s" = 0 ] && continue
+    echo "one4 i_${c}_${v}v_${m}_s$s $m $c $v $s"
+  done; done; done; done
+}
+lines_d() {
+  for s in 0 1 2; do for m in baseline full; do
+    echo "sparse_run d_dtu10k_${m}_s$s --method $m --data dtu --scene scan65 --views 3 --iterations 10000 --seed $s --set train.eval_every=1000"
+  done; done
+}
+lines_l() {
+  for s in 0 1 2; do echo "lego l_lego_full_pw02_s$s full $s 10000 --set full.pseudo_weight=0.2"; done
+  for s in 1 2; do echo "named l_fern_full_rs05_s$s full llff fern 3 $s --set full.refine_stop_fraction=0.5"; done
+}
+lines_v() {
+  for s in ${SEEDS:-0}; do for v in ${VARIANTS:-c3 rel n17 bf6}; do
+    echo "named v_${v}_dtu_full_s$s full dtu scan65 3 $s ${V[$v]}"
+    for c in castle_p30 herz_jesus_p25; do for n in 3 6 9; do
+      echo "one v_${v}_${c}_${n}v_full_s$s full $c $n $s ${V[$v]}"
+    done; done
+  done; done
+}
 case $P in
+q)
+  { lines_i; lines_d; lines_l; VARIANTS=${VARIANTS:-"c3 bf6"} SEEDS=${SEEDS:-"0 1 2"} lines_v; } | run_lines 28
+  summary i_ i.txt; summary d_ d.txt; summary l_ l.txt; summary v_ v.txt
+  ;;
+d)
+  lines_d | run_lines 6
+  summary d_ d.txt
+  ;;
 i)
-  { for s in 0 1 2; do for m in full baseline; do for c in castle_p30 herz_jesus_p25; do for v in 3 6 9; do
-      [ "$m" = baseline ] && [ "$s" = 0 ] && continue
-      echo "one i_${c}_${v}v_${m}_s$s $m $c $v $s"
-    done; done; done; done; } | DS=4 IT=10000 run_lines 12
+  lines_i | run_lines 12
   summary i_ i.txt
   ;;
 l)
-  { for s in 0 1 2; do echo "lego l_lego_full_pw02_s$s full $s 10000 --set full.pseudo_weight=0.2"; done
-    for s in 1 2; do echo "named l_fern_full_rs05_s$s full llff fern 3 $s --set full.refine_stop_fraction=0.5"; done
-  } | run_lines 5
+  lines_l | run_lines 5
   summary l_ l.txt
   ;;
 v)
-  declare -A V=([c3]="--set full.cycles=3" [rel]="--set full.pseudo_mask=reliable"
-                [n17]="--set pseudo.trajectory.n_frames=17" [bf6]="--set full.baseline_fraction=0.6")
-  { for v in ${VARIANTS:-c3 rel n17 bf6}; do
-      echo "named v_${v}_dtu_full_s0 full dtu scan65 3 0 ${V[$v]}"
-      for c in castle_p30 herz_jesus_p25; do for n in 3 6 9; do
-        echo "one v_${v}_${c}_${n}v_full_s0 full $c $n 0 ${V[$v]}"
-      done; done
-    done; } | run_lines 28
+  lines_v | run_lines 28
   summary v_ v.txt
   ;;
 *) echo "unknown phase $P"; exit 2 ;;
