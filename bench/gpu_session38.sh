@@ -17,7 +17,7 @@
 # d: DTU scan65 3 views at 10,000 iterations (configs/dtu.yaml's own train.iterations; the README's DTU rows are
 #    3000), both methods, seeds 0-2 (6 runs). d.txt.
 # q: one queue over every GPU of the machine (NGPU, from nvidia-smi): i, then d, then l, then v's c3 and bf6 at seeds
-#    0-2 (VARIANTS, SEEDS), ${JOBS:-28} runs at a time; a second call resumes what the first left. Summaries i.txt,
+#    0-2 (VARIANTS, SEEDS), ${JOBS:-36} runs at a time, pairs of images_4 runs between pairs of the others; a second call resumes what the first left. Summaries i.txt,
 #    d.txt, l.txt, v.txt.
 set -u
 source "$(dirname "${BASH_SOURCE[0]}")/gpu_one.sh"
@@ -53,7 +53,12 @@ lines_v() {
 }
 case $P in
 q)
-  { lines_i; lines_d; lines_l; VARIANTS=${VARIANTS:-"c3 bf6"} SEEDS=${SEEDS:-"0 1 2"} lines_v; } | run_lines 28
+  # pairs of images_4 runs alternate with pairs of the others, so that each GPU holds about as many of each
+  lines_i > "$R/q_a.txt"
+  { lines_d; lines_l; VARIANTS=${VARIANTS:-"c3 bf6"} SEEDS=${SEEDS:-"0 1 2"} lines_v; } > "$R/q_b.txt"
+  python3 -c "import sys; a, b = (open(f).read().split(chr(10))[:-1] for f in sys.argv[1:]); out = []
+while a or b: out += a[:2] + b[:2]; a, b = a[2:], b[2:]
+print(chr(10).join(out))" "$R/q_a.txt" "$R/q_b.txt" | run_lines 36
   summary i_ i.txt; summary d_ d.txt; summary l_ l.txt; summary v_ v.txt
   ;;
 d)
