@@ -58,6 +58,11 @@ median).
   ``full.refine_stop_fraction=0.5``; ``p`` and ``sp`` at seeds 0-2, the rest at seed 0), the pseudo weights 0.1 and
   0.05 at seed 0 (``s37/w.txt``, ``w<weight>_...``), and session 36's default beside session 37's
   (``full.pseudo_weight=0.2``: the full runs of ``t_p_...``, the baselines unchanged).
+- session 38 (``bench/gpu_session38.sh q``, two H200s): ``full.cycles=3`` and ``full.baseline_fraction=0.6`` against
+  session 37's default at 384x256, seeds 0-2 (``s38/v.txt``, ``v_c3_...``, ``v_bf6_...``); session 37's default at
+  images_4 (768x512, 10,000 it, ``s38/i.txt``; the baseline's seed 0 is ``s36/g.txt``: the captures' baseline did not
+  change); DTU at 10,000 it (``s38/d.txt``), lego's full method at pseudo weight 0.2 and fern's with its growth
+  stopped at half the run (``s38/l.txt``, fern's seed 0 in ``s37/t.txt``).
 """
 
 from __future__ import annotations
@@ -269,6 +274,42 @@ def named_variant_table(results: Path, names: dict) -> list[str]:
     return lines
 
 
+def session38_images4(results: Path) -> dict:
+    """Session 37's default at images_4 (768x512, 10,000 it), seeds 0-2: ``s38/i.txt``, with the baseline's seed 0
+    from ``s36/g.txt`` (the captures' baseline has not changed since session 36)."""
+    g = load(results / "s36" / "g.txt", "g")
+    return merged({k: {0: v[0]} for k, v in g.items() if k[2] == "baseline" and 0 in v}, load(results / "s38" / "i.txt", "i"))
+
+
+def session38_named_table(results: Path) -> list[str]:
+    """DTU, lego and fern in session 38 beside the defaults they compare with, median [min, max] over the seeds each
+    row names."""
+    import seed_medians as sm
+
+    runs = sm.read([results / "s36" / "c.txt", results / "s36" / "e.txt", results / "s36" / "f.txt",
+                    results / "s37" / "t.txt", results / "s38" / "d.txt", results / "s38" / "l.txt",
+                    results / "s38" / "v.txt"])
+    fern_rs = {**runs.get("t_r_fern_full", {}), **runs.get("l_fern_full_rs05", {})}
+    rows = [("fern 3 views, 3000 it", "baseline (default)", runs.get("c_fern_db")),
+            ("fern 3 views, 3000 it", "full (session 37 default, pseudo weight 1)", runs.get("c_fern_full_db")),
+            ("fern 3 views, 3000 it", "full, full.refine_stop_fraction=0.5", fern_rs),
+            ("lego 8 views, 10,000 it", "baseline (default)", runs.get("e_lego_baseline_db")),
+            ("lego 8 views, 10,000 it", "full (session 37 default, pseudo weight 1)", runs.get("f_lego_full")),
+            ("lego 8 views, 10,000 it", "full, full.pseudo_weight=0.2", runs.get("l_lego_full_pw02")),
+            ("DTU scan65 3 views, 3000 it", "baseline (default)", runs.get("c_dtu_db")),
+            ("DTU scan65 3 views, 3000 it", "full (default, pseudo weight 0.2)", runs.get("t_p_dtu_full")),
+            ("DTU scan65 3 views, 3000 it", "full, full.cycles=3", runs.get("v_c3_dtu_full")),
+            ("DTU scan65 3 views, 3000 it", "full, full.baseline_fraction=0.6", runs.get("v_bf6_dtu_full")),
+            ("DTU scan65 3 views, 10,000 it", "baseline (default)", runs.get("d_dtu10k_baseline")),
+            ("DTU scan65 3 views, 10,000 it", "full (default)", runs.get("d_dtu10k_full"))]
+    lines = ["| scene | run | seeds | test PSNR |", "|---|---|---|---|"]
+    for scene, label, got in rows:
+        if got:
+            lines.append(f"| {scene} | {label} | {', '.join(map(str, sorted(got)))} | "
+                         f"{cell({k: p for k, (p, _) in got.items()})} |")
+    return lines
+
+
 def with_baselines(default: dict, baselines: dict) -> dict:
     """``default`` with its baseline runs replaced by ``baselines``' where those have the case (the full runs and the
     other cases' baselines stay)."""
@@ -280,9 +321,28 @@ def with_baselines(default: dict, baselines: dict) -> dict:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--results", default=str(Path(__file__).resolve().parent / "results"))
-    ap.add_argument("--session", type=int, choices=(20, 21, 22, 26, 27, 28, 29, 30, 31, 33, 34, 35, 36, 37),
+    ap.add_argument("--session", type=int, choices=(20, 21, 22, 26, 27, 28, 29, 30, 31, 33, 34, 35, 36, 37, 38),
                     default=21)
     args = ap.parse_args(argv)
+    if args.session == 38:
+        res = Path(args.results)
+        default = session37_default(res)
+        names = {"c3": "cycles=3", "bf6": "baseline_fraction=0.6"}
+        variants = load_variants(res / "s38" / "v.txt", "v")
+        print("the full method's variants against session 37's default (384x256, 3000 it, seeds 0-2):")
+        print()
+        print("\n".join(variant_table(default, {names[k]: v for k, v in variants.items()}, "default (session 37)")))
+        print()
+        print("images_4 (768x512, 10,000 it), seeds 0-2: session 36's default (full at pseudo weight 1, seed 0) and "
+              "session 37's:")
+        print()
+        print("\n".join(seed_table(seed0(load(res / "s36" / "g.txt", "g")),
+                                  seed0(session38_images4(res)))))
+        print()
+        print("\n".join(table([("images_4, session 37 default", session38_images4(res))])))
+        print()
+        print("\n".join(session38_named_table(res)))
+        return 0
     if args.session == 37:
         res = Path(args.results)
         default = session36_default(res)

@@ -14,9 +14,13 @@ latest runs of the current defaults:
   ``c_<scene>_full_db``; DTU's full method since session 37 with ``full.pseudo_weight: 0.2``, ``s37/t.txt``,
   ``t_p_dtu_full``), lego ``s36/e.txt`` (``e_lego_baseline_db``) and ``s36/f.txt`` (``f_lego_full``), lego's
   best setting (opacity noise 0.8, SH degree 1, ``optim.means_lr_final=3.2e-5``) ``s36/c.txt`` (``c_lego_db``);
+- since session 38 fern's full method stops growing at half the run (``full.refine_stop_fraction: 0.5`` in llff.yaml:
+  ``t_r_fern_full`` in ``s37/t.txt``, seed 0, and ``l_fern_full_rs05`` in ``s38/l.txt``, seeds 1-2) and lego's weighs
+  its pseudo views x 0.2 (``full.pseudo_weight: 0.2`` in blender.yaml: ``l_lego_full_pw02`` in ``s38/l.txt``);
 - the captures at 384x256, 3000 it: the baselines of ``s36/b_all.txt`` (``b_<scene>_<N>v_baseline_db``), the full
   method since session 37 with ``full.pseudo_weight: 0.2`` (``s37/t.txt``, ``t_p_<scene>_<N>v_full``);
-- the captures at 768x512, 10,000 it, seed 0: ``s36/g.txt`` (its full runs have session 36's pseudo weight 1.0).
+- the captures at 768x512, 10,000 it, seeds 0-2: ``s38/i.txt`` (the baseline's seed 0: ``s36/g.txt``;
+  ``captures_table.session38_images4``).
 """
 
 from __future__ import annotations
@@ -65,19 +69,20 @@ def rows(results: Path) -> list[str]:
                     {int(s): v["full"]["psnr"] for s, v in noarg.items()}, f"`{NOARG}`"))
     c = _psnrs(results / "s36" / "c.txt")
     t = _psnrs(results / "s37" / "t.txt")
+    ell = _psnrs(results / "s38" / "l.txt")
     out.append(_row("LLFF fern, 3 views", "504x378, 3000 it", "H200", c.get("c_fern_db", {}),
-                    c.get("c_fern_full_db", {}), "`s36/c.txt`"))
+                    {**t.get("t_r_fern_full", {}), **ell.get("l_fern_full_rs05", {})},
+                    "`s36/c.txt`, `s37/t.txt`, `s38/l.txt`"))
     out.append(_row("DTU scan65, 3 views (masked)", "400x300, 3000 it", "H200", c.get("c_dtu_db", {}),
                     t.get("t_p_dtu_full", {}), "`s36/c.txt`, `s37/t.txt`"))
     out.append(_row("Blender lego, 8 views", "400x400, 10,000 it", "H200",
                     _psnrs(results / "s36" / "e.txt").get("e_lego_baseline_db", {}),
-                    _psnrs(results / "s36" / "f.txt").get("f_lego_full", {}), "`s36/e.txt`, `s36/f.txt`"))
+                    ell.get("l_lego_full_pw02", {}), "`s36/e.txt`, `s38/l.txt`"))
     out.append(_row("Blender lego, 8 views", "best setting: + opacity noise 0.8, SH degree 1, "
                     "`optim.means_lr_final=3.2e-5`, 10,000 it", "H200", c.get("c_lego_db", {}), {}, "`s36/c.txt`"))
     for runs, setting, source in (
             (ct.session37_default(results), "384x256, 3000 it", "`s36/b_all.txt`, `s37/t.txt`"),
-            (ct.load(results / "s36" / "g.txt", "g"), "768x512 (images_4), 10,000 it; full: session 36's "
-             "`full.pseudo_weight=1`", "`s36/g.txt`")):
+            (ct.session38_images4(results), "768x512 (images_4), 10,000 it", "`s36/g.txt`, `s38/i.txt`")):
         for scene, views in sorted({(s, n) for (s, n, _) in runs}):
             out.append(_row(f"{scene}, {views} views", setting, "H200", runs.get((scene, views, "baseline"), {}),
                             runs.get((scene, views, "full"), {}), source))

@@ -119,22 +119,29 @@ def test_readme_results_rows_from_summaries(tmp_path):
     (tmp_path / "s37").mkdir()
     (tmp_path / "s37" / "t.txt").write_text("t_p_dtu_full_s0 25.0 5\nt_s_dtu_full_s0 99.0 5\n"
                                             "t_p_castle_p30_3v_full_s0 16.2 1\nt_p_castle_p30_3v_full_s1 16.4 1\n"
-                                            "t_sp_castle_p30_3v_full_s0 99.0 1\n")
+                                            "t_sp_castle_p30_3v_full_s0 99.0 1\nt_r_fern_full_s0 23.0 9\n"
+                                            "t_r_castle_p30_3v_full_s0 99.0 1\n")
+    # session 38: fern's full method with its growth stopped at half the run (seed 0 above, seeds 1-2 here), lego's
+    # with pseudo weight 0.2, the captures at images_4 (seeds 0-2; the baseline's seed 0 is g.txt's)
+    (tmp_path / "s38").mkdir()
+    (tmp_path / "s38" / "l.txt").write_text("l_fern_full_rs05_s1 23.2 9\nl_lego_full_pw02_s0 24.7 5\n")
+    (tmp_path / "s38" / "i.txt").write_text("i_herz_jesus_p25_9v_baseline_s1 23.4 1\ni_herz_jesus_p25_9v_full_s0 22.9 1\n"
+                                            "i_herz_jesus_p25_9v_full_s1 23.1 1\ni_herz_jesus_p25_9v_full_s2 23.3 1\n")
     out = rr.rows(tmp_path)
     assert out[2].startswith("| synthetic room, 3 views |") and "| 21.00 [20.00, 22.00] | 23.00 [22.00, 24.00] | +2.00 |" in out[2]
     assert "| a 2-core test CPU |" in out[2] and "`noarg_cpu/seeds_s37.json`" in out[2]
     fern = next(r for r in out if r.startswith("| LLFF fern"))
-    assert "| 22.20 [22.00, 22.40] (2 seeds) | 22.50 [22.50, 22.50] (1 seed) | +0.30 |" in fern
+    assert "| 22.20 [22.00, 22.40] (2 seeds) | 23.10 [23.00, 23.20] (2 seeds) | +0.90 |" in fern
     dtu = next(r for r in out if r.startswith("| DTU"))  # no baseline run in this folder: none shown
     assert "| - | 25.00 [25.00, 25.00] (1 seed) | - | `s36/c.txt`, `s37/t.txt` |" in dtu
     lego = next(r for r in out if r.startswith("| Blender lego, 8 views | 400x400"))
-    assert "| 24.80 [24.80, 24.80] (1 seed) | 24.40 [24.40, 24.40] (1 seed) | -0.40 |" in lego
+    assert "| 24.80 [24.80, 24.80] (1 seed) | 24.70 [24.70, 24.70] (1 seed) | -0.10 |" in lego
     assert any(r.startswith("| Blender lego, 8 views | best setting") and "25.50" in r for r in out)
     castle = next(r for r in out if r.startswith("| castle_p30, 3 views | 384x256"))
     assert "| 15.90 [15.90, 15.90] (1 seed) | 16.30 [16.20, 16.40] (2 seeds) | +0.40 |" in castle
     herz = next(r for r in out if r.startswith("| herz_jesus_p25, 9 views | 768x512"))
-    assert "| 23.00 [23.00, 23.00] (1 seed) | 22.50 [22.50, 22.50] (1 seed) | -0.50 | `s36/g.txt`" in herz
-    assert "session 36's `full.pseudo_weight=1`" in herz  # its full runs are not today's default
+    # the baseline's seeds 0 (g.txt) and 1 (i.txt); g.txt's full run (session 36's pseudo weight 1) is not read
+    assert "| 23.20 [23.00, 23.40] (2 seeds) | 23.10 [22.90, 23.30] | -0.10 | `s36/g.txt`, `s38/i.txt` |" in herz
 
 
 def test_with_baselines_replaces_only_the_baselines_it_has():

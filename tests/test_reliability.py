@@ -301,6 +301,39 @@ def test_a_failed_checkpoint_write_keeps_the_last_good_one(data, tmp_path, capsy
                     "the previous one cannot be read either")
 
 
+def test_an_interrupt_while_the_results_are_written_is_one_message_and_resume_writes_them(data, tmp_path, capsys,
+                                                                                          monkeypatch):
+    """Ctrl-C (or a batch's time limit, SIGINT) during the final evaluation: no traceback, exit code 130, a line that
+    says training is complete and how to write the results; --resume then writes them without training again."""
+    from warpgs.train import Trainer
+
+    out = tmp_path / "interrupted_finish"
+    real_evaluate, real_finish = Trainer.evaluate, Trainer.finish
+
+    def finish(self, *args, **kwargs):
+        self.finishing = True
+        return real_finish(self, *args, **kwargs)
+
+    def evaluate(self, *args, **kwargs):  # the first thing finish does after the final pruning
+        if getattr(self, "finishing", False):
+            raise KeyboardInterrupt
+        return real_evaluate(self, *args, **kwargs)
+
+    monkeypatch.setattr(Trainer, "finish", finish)
+    monkeypatch.setattr(Trainer, "evaluate", evaluate)
+    assert main(_argv(data, out, iterations=20)) == 130
+    err = capsys.readouterr().err
+    assert "Traceback" not in err, err
+    assert "stopped while writing the results; training is complete" in err and f"--resume {out}" in err
+    assert not (out / "metrics.json").exists()
+    monkeypatch.setattr(Trainer, "evaluate", real_evaluate)
+    monkeypatch.setattr(Trainer, "finish", real_finish)
+    assert main(["--resume", str(out), "--no-progress"]) == 0
+    err = capsys.readouterr().err
+    assert "at step 20 of 20" in err, err
+    assert json.loads((out / "metrics.json").read_text())["iterations"] == 20
+
+
 # ----------------------------------------------------------------------------------------------
 # loaders: the culprit by name
 

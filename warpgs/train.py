@@ -1421,10 +1421,14 @@ class Trainer:
         return self.model.save_ply(Path(path) if path is not None else self.out / "point_cloud.ply")
 
     def finish(self, baseline: dict | None = None) -> dict:
-        """After training: the final pruning (if asked), the stages, test metrics and renders, FPS, PLY, final
-        checkpoint, metrics.json, then the method's records and outputs (``baseline``: the baseline run's
+        """After training: a checkpoint of the trained state (unless one was written at this step), the final
+        pruning (if asked), the stages, test metrics and renders, FPS, PLY, final checkpoint, metrics.json, then the method's records and outputs (``baseline``: the baseline run's
         metrics, for its report)."""
         out = self.out
+        if out is not None and self.saved_step != self.step:
+            # the trained state, before the final pruning changes it: an interrupt while the results are written
+            # loses no training (--resume writes them from here, as an uninterrupted run would)
+            self.save_checkpoint()
         if self.cfg.train.path_floaters_final:
             self.remove_path_floaters(self.step)
         if self.cfg.train.prune_unseen_at_end:

@@ -291,6 +291,10 @@ def run_method(method: str, cfg, scene, out: Path, resume: bool, baseline_metric
         print(f"error: {trainer.device} ran out of memory while evaluating; the outputs in {out} are incomplete "
               f"(free the device, then run again with {resume_hint})", file=sys.stderr)
         raise RunStopped(2) from e
+    except KeyboardInterrupt as e:  # Ctrl-C, or a batch's time limit, during the final evaluation and writing
+        print(f"\nwarpgs: stopped while writing the results; training is complete and checkpointed in {out}. "
+              f"Write them with:\n  python -m warpgs.pipelines.sparse {resume_hint}", file=sys.stderr)
+        raise RunStopped(130) from e
     print_metrics(metrics, out)
     return metrics
 
