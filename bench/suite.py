@@ -42,6 +42,7 @@ import json
 import os
 import platform
 import statistics
+import signal
 import subprocess
 import sys
 import time
@@ -201,11 +202,20 @@ def command(run: Run, device: str, work: Path, data_root: str | None, resume: bo
 
 
 
-def execute(run: Run, device: str, work: Path, data_root: str | None, fresh: bool) -> dict:
-    """Runs (or reuses) one entry -> its record."""
+STOP_GRACE_S = 120.0  # after SIGINT at the time limit: the run writes its checkpoint (then it is killed)
+MIN_START_S = 20.0  # no run starts in the time limit's last seconds
+
+
+def execute(run: Run, device: str, work: Path, data_root: str | None, fresh: bool, gpu: str | None = None,
+            deadline: float | None = None) -> dict:
+    """Runs (or reuses) one entry -> its record. ``gpu``: the run's ``CUDA_VISIBLE_DEVICES`` (``gpu_slots``).
+    ``deadline`` (``time.time()`` seconds): the run is stopped then as Ctrl-C stops it (SIGINT: it keeps its
+    checkpoint), recorded as ``stopped``, and a later call goes on from its checkpoint."""
     out = work / run.name
     metrics_path = out / "metrics.json"
     rec = {"run": asdict(run), "device": device, "out": str(out)}
+    if gpu is not None:
+        rec["gpu"] = gpu
     if metrics_path.is_file() and not fresh:
         rec.update(status="finished", reused=True, metrics=_slim(json.loads(metrics_path.read_text())))
         return rec
@@ -219,12 +229,26 @@ def execute(run: Run, device: str, work: Path, data_root: str | None, fresh: boo
     out.mkdir(parents=True, exist_ok=True)
     log = out.parent / f"{run.name}.log"
     t0 = time.perf_counter()
+    stopped = False
     with open(log, "a" if resume else "w") as f:
-        proc = subprocess.run(command(run, device, work, data_root, resume), cwd=ROOT, stdout=f,
-                              stderr=subprocess.STDOUT, env={**os.environ, "PYTHONUNBUFFERED": "1"})
+        proc = subprocess.Popen(command(run, device, work, data_root, resume), cwd=ROOT, stdout=f,
+                                stderr=subprocess.STDOUT, env={**os.environ, "PYTHONUNBUFFERED": "1",
+                                                               **({"CUDA_VISIBLE_DEVICES": gpu} if gpu is not None else {})})
+        try:
+            proc.wait(timeout=None if deadline is None else max(deadline - time.time(), 0.0))
+        except subprocess.TimeoutExpired:
+            stopped = True
+            proc.send_signal(signal.SIGINT)  # the run checkpoints and says how to go on
+            try:
+                proc.wait(timeout=STOP_GRACE_S)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.wait()
     rec["wall_s"] = round(time.perf_counter() - t0, 2)
     if proc.returncode == 0 and metrics_path.is_file():
         rec.update(status="finished", metrics=_slim(json.loads(metrics_path.read_text())))
+    elif stopped:
+        rec.update(status="stopped", returncode=proc.returncode, log_tail=log.read_text()[-1500:])
     else:
         rec.update(status="failed", returncode=proc.returncode, log_tail=log.read_text()[-1500:])
     return rec
@@ -453,14 +477,40 @@ def earlier_records(path: Path, preset: str) -> list[dict]:
     return earlier.get("records", []) if earlier.get("info", {}).get("preset") == preset else []
 
 
+def visible_gpus(gpus: int | None = None) -> list[str]:
+    """The GPUs the suite spreads its runs over: the first ``gpus`` (None: all) of ``CUDA_VISIBLE_DEVICES`` where it
+    is set, else of the devices torch counts."""
+    listed = [g.strip() for g in os.environ.get("CUDA_VISIBLE_DEVICES", "").split(",") if g.strip()]
+    if not listed:
+        import torch
+
+        listed = [str(i) for i in range(torch.cuda.device_count())]
+    return listed[:gpus] if gpus else listed
+
+
+def gpu_slots(jobs: int, gpus: list[str]):
+    """A pool of ``jobs`` slots, each holding one GPU of ``gpus`` in turn (slot k: gpus[k mod len]): ``take()`` a
+    slot's GPU (None with fewer than two GPUs: runs see what the suite sees) for one run, ``give(gpu)`` it back, so
+    that each GPU holds at most ceil(jobs / len(gpus)) runs at a time."""
+    import queue
+
+    free: queue.Queue = queue.Queue()
+    for k in range(jobs):
+        free.put(gpus[k % len(gpus)] if len(gpus) > 1 else None)
+    return free.get, free.put
+
+
 def run_suite(device: str = "cpu", preset: str | None = None, out: Path | None = None, work: Path | None = None,
               jobs: int | None = None, only: list[str] | None = None, data_root: str | None = None,
               fresh: bool = False, log=print, ray: bool = False, address: str | None = None,
               scenes: list[str] | None = None, seeds: list[int] | None = None,
-              iterations: int | None = None) -> list[dict]:
+              iterations: int | None = None, gpus: int | None = None, time_limit: float | None = None) -> list[dict]:
     """Runs (a part of) a preset and writes results.json, the charts and summary.md (and for runs with cases,
     switches.md / switches.json) in ``out``; returns the records of the runs of this call. results.json
-    keeps the records of the preset's other runs from an earlier call (``earlier_records``)."""
+    keeps the records of the preset's other runs from an earlier call (``earlier_records``). On CUDA without Ray the
+    runs are spread over ``gpus`` GPUs (None: every visible one; ``gpu_slots``). ``time_limit`` (s, without Ray):
+    runs still going then are stopped and recorded as ``stopped`` (a later call goes on from their checkpoints), and
+    runs not started by then are left out of this call (their earlier records, if any, stay)."""
     preset = preset or ("full" if device.startswith("cuda") else "small")
     if preset not in PRESETS:
         raise ValueError(f"preset {preset!r}: available {', '.join(PRESETS)}")
@@ -473,7 +523,13 @@ def run_suite(device: str = "cpu", preset: str | None = None, out: Path | None =
     work.mkdir(parents=True, exist_ok=True)
     info = {"preset": preset, "device": device, "device_name": device_name(device), "jobs": jobs,
             "date": time.strftime("%Y-%m-%d %H:%M"), "runs": len(runs)}
-    log(f"suite: {len(runs)} runs of preset {preset} on {info['device_name']}, {jobs} at a time; work in {work}")
+    spread = visible_gpus(gpus) if dev_tag == "cuda" and not (ray or address) else []
+    if len(spread) > 1:
+        info["gpus"] = len(spread)
+    log(f"suite: {len(runs)} runs of preset {preset} on {info['device_name']}"
+        + (f" x {len(spread)} (GPUs {', '.join(spread)})" if len(spread) > 1 else "")
+        + f", {jobs} at a time; work in {work}")
+    take, give = gpu_slots(jobs, spread)
     records: list[dict] = []
     results_path = out / "results.json"
     earlier = earlier_records(results_path, preset)
@@ -496,8 +552,16 @@ def run_suite(device: str = "cpu", preset: str | None = None, out: Path | None =
         records.append(rec)
         return rec
 
-    def one(run: Run) -> dict:
-        rec = report(execute(run, device, work, data_root, fresh))
+    deadline = None if time_limit is None else time.time() + time_limit
+
+    def one(run: Run) -> dict | None:
+        if deadline is not None and time.time() > deadline - MIN_START_S:
+            return None  # too late to start: the next call runs it
+        gpu = take()
+        try:
+            rec = report(execute(run, device, work, data_root, fresh, gpu, deadline))
+        finally:
+            give(gpu)
         save(list(records))  # progress survives
         return rec
 
@@ -537,6 +601,10 @@ def main(argv=None) -> int:
     ap.add_argument("--seeds", default=None, help="comma-separated seeds (switches: 0,1,2)")
     ap.add_argument("--iterations", type=int, default=None, help="replace every run's budget (smoke tests)")
     ap.add_argument("--jobs", type=int, default=None, help="runs at a time (default: 2 on cpu, 6 on cuda)")
+    ap.add_argument("--time-limit", type=float, default=None, help="seconds (without --ray): then the runs still "
+                    "going are stopped at their checkpoints and the rest left for the next call")
+    ap.add_argument("--gpus", type=int, default=None, help="on cuda without --ray: spread the runs over the first N "
+                    "visible GPUs (default: all), --jobs in all")
     ap.add_argument("--data-root", default=None, help="folder holding llff_fern, blender_lego, dtu_scan65, castle_p30, "
                     "herz_jesus_p25, ...")
     ap.add_argument("--out", type=Path, default=None, help="default bench/results/suite_<device> (small, full) or "
@@ -566,7 +634,8 @@ def main(argv=None) -> int:
     try:
         records = run_suite(a.device, a.preset, a.out, a.work, a.jobs, a.only.split(",") if a.only else None,
                             a.data_root, a.fresh, ray=a.ray, address=a.address,
-                            scenes=a.scenes.split(",") if a.scenes else None, seeds=seeds, iterations=a.iterations)
+                            scenes=a.scenes.split(",") if a.scenes else None, seeds=seeds, iterations=a.iterations,
+                            gpus=a.gpus, time_limit=a.time_limit)
     except ValueError as e:  # also warpgs.pipelines.batch.BatchError: Ray is not installed
         print(f"error: {e}", file=sys.stderr)
         return 2

@@ -57,6 +57,56 @@ def test_suite_runs_records_and_charts(tmp_path, monkeypatch):
     assert "resum" in (work / "syn_base_20.log").read_text().lower()
 
 
+def test_runs_are_spread_over_the_visible_gpus_with_each_holding_its_share(tmp_path, monkeypatch):
+    """On a machine of several GPUs (bench/gpu_session38.sh's two H200s) each run gets one GPU through
+    CUDA_VISIBLE_DEVICES, every GPU is used, and none holds more than its share of --jobs at a time."""
+    import threading
+    import time
+
+    monkeypatch.setenv("CUDA_VISIBLE_DEVICES", "3,5")
+    assert suite.visible_gpus() == ["3", "5"] and suite.visible_gpus(1) == ["3"]
+    runs = [suite.Run(f"r{i}", "synthetic", "baseline", 10, [], "baseline", seed=i) for i in range(12)]
+    monkeypatch.setitem(suite.PRESETS, "tiny", runs)
+    lock, busy, peak, seen = threading.Lock(), {}, {}, []
+
+    def fake_execute(run, device, work, data_root, fresh, gpu=None):
+        with lock:
+            busy[gpu] = busy.get(gpu, 0) + 1
+            peak[gpu] = max(peak.get(gpu, 0), busy[gpu])
+            seen.append(gpu)
+        time.sleep(0.02)
+        with lock:
+            busy[gpu] -= 1
+        return {"run": suite.asdict(run), "device": device, "out": str(work / run.name), "status": "failed",
+                "returncode": 1, "log_tail": "", "gpu": gpu}
+
+    monkeypatch.setattr(suite, "execute", fake_execute)
+    monkeypatch.setattr(suite, "write_reports", lambda records, info, out: [])
+    records = suite.run_suite("cuda", "tiny", tmp_path / "out", tmp_path / "work", jobs=4, log=lambda *a: None)
+    assert len(records) == 12 and sorted(set(seen)) == ["3", "5"]
+    assert set(peak) == {"3", "5"} and max(peak.values()) == 2 and all(v <= 2 for v in peak.values()), peak  # 4 at a time, 2 per GPU
+    assert json.loads((tmp_path / "out" / "results.json").read_text())["info"]["gpus"] == 2
+    seen.clear()
+    suite.run_suite("cuda", "tiny", tmp_path / "out", tmp_path / "work", jobs=4, log=lambda *a: None, gpus=1)
+    assert set(seen) == {None}  # one GPU: the runs see what the suite sees
+
+
+def test_a_time_limit_stops_the_runs_at_their_checkpoints_and_leaves_the_rest(tmp_path, monkeypatch):
+    """--time-limit (a device call's limit): the run still going is stopped as Ctrl-C stops it (it writes its
+    checkpoint, and the next call goes on from there), the run not started is left out of this call's records."""
+    tiny = ["--set", "model.init_num=300", "--set", "eval.fps_repeats=1", "--set", "eval.save_images=false"]
+    runs = [suite.Run("long", "synthetic", "baseline", 100000, tiny, "baseline"),
+            suite.Run("queued", "synthetic", "baseline", 10, tiny, "baseline")]
+    monkeypatch.setitem(suite.PRESETS, "tiny", runs)
+    out, work = tmp_path / "out", tmp_path / "work"
+    records = suite.run_suite("cpu", "tiny", out, work, jobs=1, log=lambda *a: None, time_limit=25)
+    assert [r["run"]["name"] for r in records] == ["long"]
+    assert records[0]["status"] == "stopped" and records[0]["returncode"] == 130, records[0]
+    assert (work / "long" / "checkpoint.pt").is_file() and not (work / "long" / "metrics.json").exists()
+    assert "Continue with" in (work / "long.log").read_text()
+    assert not (work / "queued").exists()
+
+
 # ----------------------------------------------------------------------------------------------
 # issue 14: the switches preset and its table
 
