@@ -69,7 +69,7 @@ def test_runs_are_spread_over_the_visible_gpus_with_each_holding_its_share(tmp_p
     monkeypatch.setitem(suite.PRESETS, "tiny", runs)
     lock, busy, peak, seen = threading.Lock(), {}, {}, []
 
-    def fake_execute(run, device, work, data_root, fresh, gpu=None):
+    def fake_execute(run, device, work, data_root, fresh, gpu=None, deadline=None):
         with lock:
             busy[gpu] = busy.get(gpu, 0) + 1
             peak[gpu] = max(peak.get(gpu, 0), busy[gpu])
