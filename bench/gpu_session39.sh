@@ -12,8 +12,8 @@
 #    162 runs, about two calls on two H200s.
 # g: lego 8 views at 10,000 it, the same labels (18 runs).
 # r: the captures at images_4 (768x512, 10,000 it; the size --data dl3dv trains at), the full method with its growth
-#    stopped at half the run (full.refine_stop_fraction=0.5, LLFF's default since session 38: fern +0.23), seeds 0-2 (18
-#    runs). Session 38's images_4 runs of the default (s38/i.txt) are the reference: there herz_jesus_p25 loses -0.05 to
+#    stopped at half the run (full.refine_stop_fraction=0.5, LLFF's default since session 38: fern +0.23), 6 and 9 views
+#    (3 views hold their geometry and do not grow), seeds 0-2 (12 runs). Session 38's images_4 runs of the default (s38/i.txt) are the reference: there herz_jesus_p25 loses -0.05 to
 #    -0.20 against the baseline with 43k Gaussians against its 33k at 6 views; at 384x256 this setting gave herz 6 / 9
 #    views +0.09 / +0.21 and castle 9 views -0.59 at seed 0 (s37/t.txt). Through bench/gpu_one.sh's queue (every GPU). r.txt.
 # Each suite call leaves results.json, switches.md / .json, summary.md and the two charts in $OUT (from $R/suite_out).
@@ -33,7 +33,7 @@ s) suite_call synthetic,fern_3v,dtu65_3v,castle_p30_3v,castle_p30_6v,castle_p30_
 g) suite_call lego_8v ;;
 r)
   export R D END=$(( $(date +%s) + ${T:-540} )) NGPU=${NGPU:-$(nvidia-smi -L 2>/dev/null | grep -c GPU)}
-  { for s in 0 1 2; do for c in castle_p30 herz_jesus_p25; do for v in 3 6 9; do
+  { for s in 0 1 2; do for c in castle_p30 herz_jesus_p25; do for v in 6 9; do
       echo "one r_${c}_${v}v_full_s$s full $c $v $s --set full.refine_stop_fraction=0.5"
     done; done; done; } | DS=4 IT=10000 run_lines 18
   summary r_ r.txt
