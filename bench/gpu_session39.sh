@@ -13,9 +13,10 @@
 # g: lego 8 views at 10,000 it, the same labels (18 runs).
 # r: the captures at images_4 (768x512, 10,000 it; the size --data dl3dv trains at), the full method with its growth
 #    stopped at half the run (full.refine_stop_fraction=0.5, LLFF's default since session 38: fern +0.23), 6 and 9 views
-#    (3 views hold their geometry and do not grow), seeds 0-2 (12 runs). Session 38's images_4 runs of the default (s38/i.txt) are the reference: there herz_jesus_p25 loses -0.05 to
-#    -0.20 against the baseline with 43k Gaussians against its 33k at 6 views; at 384x256 this setting gave herz 6 / 9
-#    views +0.09 / +0.21 and castle 9 views -0.59 at seed 0 (s37/t.txt). Through bench/gpu_one.sh's queue (every GPU). r.txt.
+#    (3 views hold their geometry and do not grow), seeds 0-2 (12 runs). The reference is session 38's images_4 runs of
+#    the default (s38/i.txt): there herz_jesus_p25 loses -0.05 to -0.20 against the baseline, with 43k Gaussians against
+#    its 33k at 6 views. At 384x256 this setting gave herz 6 / 9 views +0.09 / +0.21 and castle 9 views -0.59 at seed 0
+#    (s37/t.txt). Through bench/gpu_one.sh's queue (every GPU). r.txt.
 # Each suite call leaves results.json, switches.md / .json, summary.md and the two charts in $OUT (from $R/suite_out).
 set -u
 source "$(dirname "${BASH_SOURCE[0]}")/gpu_one.sh"
