@@ -56,6 +56,8 @@ VARIANTS = {
     "guide_all": {"sampler": {"k": 0.0, "b": 0.0}},  # guidance on every step (tau = 0)
     "guide_all_best": {"sampler": {"k": 0.0, "b": 0.0}, "trajectory": {"guidance_source": "best"}},
     "guide_all_d0.9": {"sampler": {"k": 0.0, "b": 0.0, "delta": 0.9}},
+    "colour_affine": {"trajectory": {"guidance_colour": "affine"}},  # the warps' colours fitted to the render's
+    "colour_affine_all": {"trajectory": {"guidance_colour": "affine"}, "sampler": {"k": 0.0, "b": 0.0}},
 }
 
 
@@ -108,7 +110,8 @@ def frame_record(seq, i: int, gt: torch.Tensor, delta: float) -> dict:
     rec = {"render_psnr": _psnr(_mse(seq.renders[i], gt)), "pseudo_psnr": _psnr(_mse(seq.frames[i], gt)),
            "seen": round(float(seen.float().mean()), 4), "reliable": round(float(reliable.float().mean()), 4)}
     for name, m in (("seen", seen), ("reliable", reliable)):
-        for what, img in (("render", seq.renders[i]), ("pseudo", seq.frames[i]), ("warp", seq.warped[i])):
+        for what, img in (("render", seq.renders[i]), ("pseudo", seq.frames[i]), ("warp", seq.warped[i]),
+                          ("guide", seq.guidance[i])):
             e = _mse(img, gt, m)
             rec[f"{what}_mse_{name}"] = None if e is None else round(e, 6)
     return rec
@@ -129,6 +132,7 @@ def summarise(frames: list[dict]) -> dict:
             "render_psnr_reliable": _psnr(med("render_mse_reliable")),
             "pseudo_psnr_reliable": _psnr(med("pseudo_mse_reliable")),
             "warp_psnr_seen": _psnr(med("warp_mse_seen")), "warp_psnr_reliable": _psnr(med("warp_mse_reliable")),
+            "guide_psnr_reliable": _psnr(med("guide_mse_reliable")),
             "mse_gain_seen": None if not gain else round(float(np.mean(gain)), 6),
             "frames_improved": sum(1 for f in frames if f["pseudo_psnr"] is not None and f["render_psnr"] is not None
                                    and f["pseudo_psnr"] > f["render_psnr"])}

@@ -18,7 +18,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))
 def _seq(renders, frames, warped, U):
     from types import SimpleNamespace
 
-    return SimpleNamespace(renders=renders, frames=frames, warped=warped, uncertainty=U)
+    return SimpleNamespace(renders=renders, frames=frames, warped=warped, guidance=warped, uncertainty=U)
 
 
 def test_frame_record_and_summary_on_analytic_images():

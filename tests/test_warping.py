@@ -342,3 +342,68 @@ def test_uncertainty_separates_corrupted_depth(capture):
     assert (corrupt & vis).sum() > 300 and (~corrupt & vis).sum() > 1000
     assert aucs["full"] >= 0.9, aucs
     assert aucs["geometric"] >= 0.9, aucs
+
+
+def test_match_colour_recovers_each_sources_gain_and_offset_from_the_masked_pixels():
+    """pseudo.trajectory.guidance_colour=affine: a warp whose colours are a per-channel gain and offset of the
+    render's (one source input darker, the other with a colour cast) comes back to the render's colours, fitted on
+    the mask only (pixels outside it, where the warp is wrong, do not bias the fit); a source with too few masked
+    pixels is left as it is; the result stays in [0, 1]."""
+    from warpgs.pseudo.guidance import match_colour
+
+    g = torch.Generator().manual_seed(0)
+    render = torch.rand(2, 16, 16, 3, generator=g) * 0.8 + 0.1
+    sources = torch.zeros(2, 16, 16, dtype=torch.long)
+    sources[:, :, 8:] = 1  # the right half of each frame warped from input 1
+    gain = torch.tensor([[0.7, 0.7, 0.7], [1.2, 1.0, 0.8]])
+    offset = torch.tensor([[0.05, 0.05, 0.05], [-0.02, 0.0, 0.06]])
+    inv = (render - offset[sources]) / gain[sources]  # warp = (render - offset) / gain: the fit must undo it
+    mask = torch.ones(2, 16, 16, dtype=torch.bool)
+    mask[:, :4] = False
+    warp = inv.clone()
+    warp[:, :4] = 0.0  # wrong outside the mask: must not move the fit
+    out = match_colour(warp, render, mask, sources, min_pixels=8)
+    assert torch.allclose(out[:, 4:], render[:, 4:], atol=1e-5)
+    assert out.min() >= 0 and out.max() <= 1
+    few = mask.clone()
+    few[1, :, 8:] = False
+    few[1, 15, 15] = True  # one masked pixel of source 1 in frame 1: too few to fit
+    kept = match_colour(warp, render, few, sources, min_pixels=8)
+    assert torch.equal(kept[1, :, 8:], warp[1, :, 8:])
+    assert torch.allclose(kept[1, 4:, :8], render[1, 4:, :8], atol=1e-5)
+    # a gain beyond the allowed range is held at its bound
+    flat = match_colour(render * 0.1, render, mask, None, min_pixels=8, gain_range=(0.5, 2.0))
+    assert not torch.allclose(flat[:, 4:], render[:, 4:], atol=1e-2)
+
+
+def test_affine_guidance_colour_changes_only_the_guidance(tmp_path):
+    """generate_pseudo_views with guidance_colour=affine on a capture whose second input is darker: its guidance
+    (the warped input where reliable) moves towards the render, the raw warp and the uncertainty stay the same."""
+    from warpgs.data.scene import CameraTensors
+    from warpgs.pseudo.views import PseudoConfig, generate_pseudo_views
+
+    H = W = 24
+    K = torch.tensor([[20.0, 0, 12], [0, 20.0, 12], [0, 0, 1]])
+    yy, xx = torch.meshgrid(torch.linspace(0, 1, H), torch.linspace(0, 1, W), indexing="ij")
+    tex = torch.stack([xx, yy, 0.5 * (xx + yy)], -1) * 0.8 + 0.1
+
+    def pose(x):
+        V = torch.eye(4)
+        V[0, 3] = -x
+        return V
+
+    def render_fn(viewmat, K_, w, h):  # a fronto-parallel plane at depth 2 with the texture of the first input
+        return tex.clone(), torch.full((h, w), 2.0)
+
+    cams = [CameraTensors(name=f"{i}", viewmat=pose(0.05 * i), K=K, width=W, height=H,
+                          image=(tex * (1.0 if i == 0 else 0.6)).clamp(0, 1)) for i in range(2)]
+    raw = generate_pseudo_views(render_fn, cams, PseudoConfig.load(overrides=["trajectory.n_frames=5",
+                                                                             "uncertainty.photometric=false"]))[0]
+    aff = generate_pseudo_views(render_fn, cams, PseudoConfig.load(overrides=[
+        "trajectory.n_frames=5", "uncertainty.photometric=false", "trajectory.guidance_colour=affine"]))[0]
+    assert torch.equal(raw.warped, aff.warped) and torch.equal(raw.uncertainty, aff.uncertainty)
+    rel = aff.uncertainty < 0.5
+    assert rel.float().mean() > 0.3
+    err_raw = ((raw.guidance - raw.renders) ** 2).mean(-1)[rel].mean()
+    err_aff = ((aff.guidance - aff.renders) ** 2).mean(-1)[rel].mean()
+    assert err_aff < 0.25 * err_raw

@@ -34,12 +34,16 @@ class TrajectoryConfig:
     # nearest: the closest input camera (paper); halves: first half from the start input (SYN3R);
     # best: per pixel, the less uncertain of the trajectory's two inputs (warps both)
     guidance_source: str = "nearest"
+    # raw: the warped input's own colours | affine: per frame and source input, the gain and offset per channel that
+    # bring the warp to the render's colours in the reliable pixels (exposure, white balance; guidance.match_colour)
+    guidance_colour: str = "raw"
     # capture: the inputs in the order given (a walk-through's frames sorted by name: the capture path, as the
     # paper does for DL3DV); nearest: a nearest-neighbour path through the camera centres (any capture)
     order: str = "nearest"
 
     LIMITS = {"n_frames": ">= 2", "perturb_candidates": ">= 0", "perturb_translation": ">= 0",
-              "perturb_rotation_deg": ">= 0", "guidance_source": "{nearest, halves, best}", "order": "{capture, nearest}"}
+              "perturb_rotation_deg": ">= 0", "guidance_source": "{nearest, halves, best}", "order": "{capture, nearest}",
+              "guidance_colour": "{raw, affine}"}
 
 
 @dataclass

@@ -33,7 +33,7 @@ from warpgs.configio import apply_values, parse_override, read_yaml
 from warpgs.viz import save_image
 
 from .backends import DefaultBackendConfig, SVDConfig, make_backend
-from .guidance import PosedViews, UncertaintyConfig, WarpResult, guidance_and_uncertainty
+from .guidance import PosedViews, UncertaintyConfig, WarpResult, guidance_and_uncertainty, match_colour
 from .sampler import SamplerConfig, sample_video
 from .trajectory import (
     Trajectory,
@@ -233,7 +233,13 @@ def generate_pseudo_views(
                                       tc.perturb_rotation_deg)
         V = torch.as_tensor(traj.viewmats, dtype=torch.float32, device=dev)
         r, sources, renders, depths = warp(V, np.arange(len(traj)))
-        guidance = torch.where((r.uncertainty < cfg.sampler.delta)[..., None], r.guidance, renders)
+        reliable = r.uncertainty < cfg.sampler.delta
+        warped = r.guidance
+        if tc.guidance_colour == "affine":
+            warped = match_colour(warped, renders, reliable, sources)
+        elif tc.guidance_colour != "raw":
+            raise ValueError(f"trajectory.guidance_colour must be raw or affine, got {tc.guidance_colour!r}")
+        guidance = torch.where(reliable[..., None], warped, renders)
         res = sample_video(backend, src_images[traj.start], src_images[traj.end], guidance=guidance,
                            uncertainty=r.uncertainty, prior=renders, cfg=cfg.sampler, generator=generator)
         seq = PseudoSequence(traj.start, traj.end, V, K, W, H, res.frames.to(dev), guidance, r.guidance,
