@@ -17,6 +17,9 @@
 #    the default (s38/i.txt): there herz_jesus_p25 loses -0.05 to -0.20 against the baseline, with 43k Gaussians against
 #    its 33k at 6 views. At 384x256 this setting gave herz 6 / 9 views +0.09 / +0.21 and castle 9 views -0.59 at seed 0
 #    (s37/t.txt). Through bench/gpu_one.sh's queue (every GPU). r.txt.
+# w: the same 12 cases with the pseudo views weighted x 0.05 instead of 0.2 (SYN3R's LLFF/DTU value): at images_4
+#    herz_jesus_p25 loses on the test frames between the inputs, where the pseudo views are (6 views: frames 8 and 16,
+#    -0.38 / -0.75 dB per view; 9 views: frame 8, -0.35), not on those beyond the path. w.txt.
 # Each suite call leaves results.json, switches.md / .json, summary.md and the two charts in $OUT (from $R/suite_out).
 set -u
 source "$(dirname "${BASH_SOURCE[0]}")/gpu_one.sh"
@@ -38,6 +41,13 @@ r)
       echo "one r_${c}_${v}v_full_s$s full $c $v $s --set full.refine_stop_fraction=0.5"
     done; done; done; } | DS=4 IT=10000 run_lines 18
   summary r_ r.txt
+  ;;
+w)
+  export R D END=$(( $(date +%s) + ${T:-540} )) NGPU=${NGPU:-$(nvidia-smi -L 2>/dev/null | grep -c GPU)}
+  { for s in 0 1 2; do for c in castle_p30 herz_jesus_p25; do for v in 6 9; do
+      echo "one w_${c}_${v}v_full_s$s full $c $v $s --set full.pseudo_weight=0.05"
+    done; done; done; } | DS=4 IT=10000 run_lines 18
+  summary w_ w.txt
   ;;
 *) echo "unknown phase $P"; exit 2 ;;
 esac
