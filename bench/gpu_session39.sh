@@ -18,8 +18,8 @@
 #    its 33k at 6 views. At 384x256 this setting gave herz 6 / 9 views +0.09 / +0.21 and castle 9 views -0.59 at seed 0
 #    (s37/t.txt). Through bench/gpu_one.sh's queue (every GPU). r.txt.
 # w: the same 12 cases with the pseudo views weighted x 0.05 instead of 0.2 (SYN3R's LLFF/DTU value): at images_4
-#    herz_jesus_p25 loses on the test frames between the inputs, where the pseudo views are (6 views: frames 8 and 16,
-#    -0.38 / -0.75 dB per view; 9 views: frame 8, -0.35), not on those beyond the path. w.txt.
+#    herz_jesus_p25 loses most on test frame 8, between two inputs where the pseudo views are (-0.75 / -0.35 dB at 6 / 9
+#    views), and on frame 0 before the first input (-0.38 / -0.21). w.txt.
 # Each suite call leaves results.json, switches.md / .json, summary.md and the two charts in $OUT (from $R/suite_out).
 set -u
 source "$(dirname "${BASH_SOURCE[0]}")/gpu_one.sh"
