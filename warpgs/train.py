@@ -1422,8 +1422,8 @@ class Trainer:
 
     def finish(self, baseline: dict | None = None) -> dict:
         """After training: a checkpoint of the trained state (unless one was written at this step), the final
-        pruning (if asked), the stages, test metrics and renders, FPS, PLY, final checkpoint, metrics.json, then the method's records and outputs (``baseline``: the baseline run's
-        metrics, for its report)."""
+        pruning (if asked), the stages, test metrics and renders, FPS, PLY, final checkpoint, metrics.json, then
+        the method's records and outputs (``baseline``: the baseline run's metrics, for its report)."""
         out = self.out
         if out is not None and self.saved_step != self.step:
             # the trained state, before the final pruning changes it: an interrupt while the results are written
