@@ -93,11 +93,13 @@ rasterizer_runs() {
 }
 
 # session_env PHASE D RUNS (bench/gpu_session20.sh on): makes RUNS and $OUT, exports the environment of the GPU runs
-# (the packed wheels in /tmp/site first, one thread per process for OpenMP/MKL, CUDA tests and builds for sm_90).
+# (the packed wheels in /tmp/site first, one thread per process for OpenMP/MKL, CUDA tests and builds for sm_90, the
+# machine's GPU count NGPU).
 session_env() {
   mkdir -p "$3" "$OUT"
   export PYTHONPATH=/tmp/site:$PWD PYTHONUNBUFFERED=1 OMP_NUM_THREADS=1 MKL_NUM_THREADS=1
   export MAX_JOBS=16 TORCH_CUDA_ARCH_LIST=9.0 WARPGS_TEST_DEVICES=cuda
+  export NGPU=${NGPU:-$(nvidia-smi -L 2>/dev/null | grep -c GPU)}  # run_lines spreads the runs over them
 }
 
 # gc NAME [graph_check arguments ...] (bench/gpu_session19.sh g, gpu_session20.sh h): bench/graph_check.py on $D with

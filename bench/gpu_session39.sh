@@ -32,22 +32,18 @@ suite_call() {  # suite_call CASES
   cp "$R"/suite_out/{results.json,switches.md,switches.json,summary.md,psnr_vs_time.png,psnr_vs_gaussians.png} \
     "$R/suite.log" "$OUT/" 2>/dev/null
 }
+images4_full() {  # images4_full PREFIX [--set k=v ...]: the full method at images_4, 6 and 9 views, seeds 0-2, every GPU
+  local prefix=$1; shift
+  export R D END=$(( $(date +%s) + ${T:-540} ))
+  { for s in 0 1 2; do for c in castle_p30 herz_jesus_p25; do for v in 6 9; do
+      echo "one ${prefix}${c}_${v}v_full_s$s full $c $v $s $*"
+    done; done; done; } | DS=4 IT=10000 run_lines 18
+  summary "$prefix" "${prefix%_}.txt"
+}
 case $P in
 s) suite_call synthetic,fern_3v,dtu65_3v,castle_p30_3v,castle_p30_6v,castle_p30_9v,herz_jesus_p25_3v,herz_jesus_p25_6v,herz_jesus_p25_9v ;;
 g) suite_call lego_8v ;;
-r)
-  export R D END=$(( $(date +%s) + ${T:-540} )) NGPU=${NGPU:-$(nvidia-smi -L 2>/dev/null | grep -c GPU)}
-  { for s in 0 1 2; do for c in castle_p30 herz_jesus_p25; do for v in 6 9; do
-      echo "one r_${c}_${v}v_full_s$s full $c $v $s --set full.refine_stop_fraction=0.5"
-    done; done; done; } | DS=4 IT=10000 run_lines 18
-  summary r_ r.txt
-  ;;
-w)
-  export R D END=$(( $(date +%s) + ${T:-540} )) NGPU=${NGPU:-$(nvidia-smi -L 2>/dev/null | grep -c GPU)}
-  { for s in 0 1 2; do for c in castle_p30 herz_jesus_p25; do for v in 6 9; do
-      echo "one w_${c}_${v}v_full_s$s full $c $v $s --set full.pseudo_weight=0.05"
-    done; done; done; } | DS=4 IT=10000 run_lines 18
-  summary w_ w.txt
-  ;;
+r) images4_full r_ --set full.refine_stop_fraction=0.5 ;;
+w) images4_full w_ --set full.pseudo_weight=0.05 ;;
 *) echo "unknown phase $P"; exit 2 ;;
 esac

@@ -195,6 +195,8 @@ def generate_pseudo_views(
         trajectories = path_trajectories(src_V.double().cpu().numpy(), tc.n_frames, tc.order)
     if tc.guidance_source not in ("nearest", "halves", "best"):
         raise ValueError(f"trajectory.guidance_source must be nearest, halves or best, got {tc.guidance_source!r}")
+    if tc.guidance_colour not in ("raw", "affine"):
+        raise ValueError(f"trajectory.guidance_colour must be raw or affine, got {tc.guidance_colour!r}")
     out = []
     for traj in trajectories:
         K, W, H = src_K[traj.start], cams[traj.start].width, cams[traj.start].height
@@ -237,8 +239,6 @@ def generate_pseudo_views(
         warped = r.guidance
         if tc.guidance_colour == "affine":
             warped = match_colour(warped, renders, reliable, sources)
-        elif tc.guidance_colour != "raw":
-            raise ValueError(f"trajectory.guidance_colour must be raw or affine, got {tc.guidance_colour!r}")
         guidance = torch.where(reliable[..., None], warped, renders)
         res = sample_video(backend, src_images[traj.start], src_images[traj.end], guidance=guidance,
                            uncertainty=r.uncertainty, prior=renders, cfg=cfg.sampler, generator=generator)
