@@ -63,6 +63,8 @@ median).
   images_4 (768x512, 10,000 it, ``s38/i.txt``; the baseline's seed 0 is ``s36/g.txt``: the captures' baseline did not
   change); DTU at 10,000 it (``s38/d.txt``), lego's full method at pseudo weight 0.2 and fern's with its growth
   stopped at half the run (``s38/l.txt``, fern's seed 0 in ``s37/t.txt``).
+- session 39 (the last 290 s of two H200s): the full method at pseudo weight 0.1 against session 37's default (0.2)
+  at 384x256, seeds 0-2 (``s39/x.txt``, ``x_...``; DTU's ``x_dtu_full_sK`` beside ``s37/t.txt``'s).
 """
 
 from __future__ import annotations
@@ -321,9 +323,20 @@ def with_baselines(default: dict, baselines: dict) -> dict:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--results", default=str(Path(__file__).resolve().parent / "results"))
-    ap.add_argument("--session", type=int, choices=(20, 21, 22, 26, 27, 28, 29, 30, 31, 33, 34, 35, 36, 37, 38),
+    ap.add_argument("--session", type=int, choices=(20, 21, 22, 26, 27, 28, 29, 30, 31, 33, 34, 35, 36, 37, 38, 39),
                     default=21)
     args = ap.parse_args(argv)
+    if args.session == 39:
+        import seed_medians as sm
+        res = Path(args.results)
+        print("the full method at pseudo weight 0.1 against session 37's default, 0.2 (384x256, 3000 it, seeds 0-2):")
+        print()
+        print("\n".join(variant_table(session37_default(res), {"pseudo_weight=0.1": load(res / "s39" / "x.txt", "x")},
+                                    "default (session 37)")))
+        runs = sm.read([res / "s36" / "c.txt", res / "s37" / "t.txt", res / "s39" / "x.txt"])
+        print()
+        print("\n".join(sm.table({k: v for k, v in runs.items() if "dtu" in k})))
+        return 0
     if args.session == 38:
         res = Path(args.results)
         default = session37_default(res)

@@ -3,6 +3,7 @@
     python bench/switch_table.py                                   # bench/results/suite_cuda_switches/results.json
     python bench/switch_table.py RESULTS.json --out TABLE.md        # also write the markdown to a file
     python bench/switch_table.py --readme README.md                 # replace the README's table with it
+    python bench/switch_table.py OLD.json --readme README.md --marker switch_table_h100_s12   # another table of it
 
 The table (markdown, what the README quotes): one row per switch (run label), one column per scene (run
 case), each cell the test PSNR's median over seeds with its [min, max]; then each switch's gain against
@@ -30,7 +31,8 @@ sys.path.insert(0, str(ROOT))
 
 from warpgs.pipelines.batch_report import med_range, spread  # noqa: E402  (the batch runner's table's cells)
 
-DEFAULT_RESULTS = ROOT / "bench" / "results" / "suite_cuda_switches" / "results.json"
+# the table of today's code (session 39, two H200s); sessions 11-13's (one H100, older code) is suite_cuda_switches
+DEFAULT_RESULTS = ROOT / "bench" / "results" / "suite_cuda_h200_switches_s39" / "results.json"
 MAX_LOSS_DB = 0.3  # the most a default may cost any scene
 
 
@@ -178,6 +180,9 @@ def main(argv=None) -> int:
     ap.add_argument("--out", type=Path, default=None, help="also write the table to this file")
     ap.add_argument("--readme", type=Path, default=None,
                     help=f"replace the text between {README_START!r} and {README_END!r} in this file with the table")
+    ap.add_argument("--marker", default=MARKER,
+                    help="the markers' name, for a README holding several tables: <!-- NAME: start --> ... "
+                         "<!-- NAME: end --> (default %(default)s)")
     a = ap.parse_args(argv)
     try:
         data = json.loads(a.results.read_text())
@@ -190,7 +195,7 @@ def main(argv=None) -> int:
         a.out.write_text(text)
     if a.readme:
         try:
-            a.readme.write_text(replace_between_markers(a.readme.read_text(), text))
+            a.readme.write_text(replace_between_markers(a.readme.read_text(), text, *markers(a.marker)))
         except (OSError, ValueError) as e:
             print(f"error: {a.readme}: {e}", file=sys.stderr)
             return 2
@@ -198,7 +203,15 @@ def main(argv=None) -> int:
     return 0
 
 
-README_START, README_END = "<!-- switch_table: start -->", "<!-- switch_table: end -->"
+MARKER = "switch_table"
+
+
+def markers(name: str = MARKER) -> tuple[str, str]:
+    """The README's start and end markers of the table named ``name``."""
+    return f"<!-- {name}: start -->", f"<!-- {name}: end -->"
+
+
+README_START, README_END = markers()
 
 
 def replace_between_markers(doc: str, table: str, start: str = README_START, end: str = README_END) -> str:

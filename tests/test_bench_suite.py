@@ -228,3 +228,22 @@ def test_switch_table_replaces_only_the_text_between_the_readme_markers():
         replace_between_markers("no markers here", "x")
     with pytest.raises(ValueError):
         replace_between_markers(f"{README_END} {README_START}", "x")
+
+
+def test_switch_table_marker_names_which_of_two_readme_tables_it_rewrites(tmp_path, capsys):
+    from bench import switch_table
+
+    path = tmp_path / "results.json"
+    path.write_text(json.dumps(_fake_results()))
+    old_start, old_end = switch_table.markers("switch_table_old")
+    readme = tmp_path / "README.md"
+    doc = (f"{switch_table.README_START}\ncurrent\n{switch_table.README_END}\n"
+           f"{old_start}\nold table\n{old_end}\n")
+    readme.write_text(doc)
+    assert switch_table.main([str(path), "--readme", str(readme), "--marker", "switch_table_old"]) == 0
+    text = readme.read_text()
+    assert text.startswith(f"{switch_table.README_START}\ncurrent\n{switch_table.README_END}\n")  # untouched
+    assert "old table" not in text and "| baseline+good |" in text.split(old_start)[1]
+    capsys.readouterr()
+    assert switch_table.main([str(path), "--readme", str(readme), "--marker", "no_such_table"]) == 2
+    assert "no <!-- no_such_table: start -->" in capsys.readouterr().err
