@@ -15,6 +15,13 @@ and resolution (their code draws in ``[-0.4, 0.4]`` scene units; Blender's 400-p
 about 0.14 of the width). The draw happens on the device (no host read). The term starts at
 ``train.binocular_start`` x the run's steps (theirs: 20,000 of 30,000 on LLFF and DTU, 4000 of 7000 on
 Blender).
+
+``train.binocular_partner: path`` (ours) replaces the sideways partner by a pose of the capture path: the
+poses the pseudo views' trajectories pass through (splined centres, slerped rotations), from the input up to
+``train.binocular_reach`` x the way to each neighbouring input, one drawn per step. The moved render is warped
+back with the general reprojection (``pose_warp``: rotation and a move in any direction) and compared with the
+photo as above. On a walk-around capture the test views lie along that path, between the inputs, where a
+sideways move of the same size says nothing about the depth the path's views need.
 """
 
 from __future__ import annotations
@@ -72,6 +79,63 @@ def shift_warp(moved: torch.Tensor, depth: torch.Tensor, ft) -> tuple[torch.Tens
     return _ShiftWarp.apply(moved, depth, ft.to(depth.device))
 
 
+class _PoseWarp(torch.autograd.Function):
+    @staticmethod
+    def forward(ctx, moved, depth, rel, K):
+        moved = moved.contiguous().float()
+        depth = depth.contiguous().float()
+        rel = rel.reshape(1, 4, 4).contiguous().float()
+        K = K.reshape(1, 3, 3).contiguous().float()
+        K_inv = torch.linalg.inv_ex(K)[0].contiguous()  # (inv_ex: no check, so no host read on a GPU)
+        H, W = depth.shape
+        warped = torch.empty(H, W, 3, device=depth.device, dtype=torch.float32)
+        weight = torch.empty(H, W, device=depth.device, dtype=torch.float32)
+        dev = device_of(depth)
+        launch(kw.pose_warp, (H, W), [arg(moved, wp.vec3), arg(depth), arg(rel, wp.mat44), arg(K, wp.mat33),
+                                       arg(K_inv, wp.mat33), MIN_DEPTH, arg(warped, wp.vec3), arg(weight)],
+               dev, stream_of(dev))
+        ctx.save_for_backward(moved, depth, rel, K, K_inv)
+        ctx.mark_non_differentiable(weight)
+        return warped, weight
+
+    @staticmethod
+    def backward(ctx, v_warped, _v_weight):
+        moved, depth, rel, K, K_inv = ctx.saved_tensors
+        H, W = depth.shape
+        v_moved = torch.zeros_like(moved)
+        v_depth = torch.empty_like(depth)
+        dev = device_of(depth)
+        launch(kw.pose_warp_backward, (H, W), [arg(moved, wp.vec3), arg(depth), arg(rel, wp.mat44), arg(K, wp.mat33),
+                                                arg(K_inv, wp.mat33), MIN_DEPTH,
+                                                arg(v_warped.contiguous().float(), wp.vec3), arg(v_moved, wp.vec3),
+                                                arg(v_depth)], dev, stream_of(dev))
+        return v_moved, v_depth, None, None
+
+
+def pose_warp(moved: torch.Tensor, depth: torch.Tensor, rel: torch.Tensor, K: torch.Tensor
+              ) -> tuple[torch.Tensor, torch.Tensor]:
+    """``moved`` [H, W, 3] (the render from another camera of the same intrinsics ``K`` [3, 3]) sampled where each
+    pixel of the input, at its ``depth`` [H, W] (z-depth), lands in that camera (``rel`` [4, 4]: input camera ->
+    moved camera, ``P_moved P_input^-1``), bilinearly with zero padding -> (warped [H, W, 3], weight [H, W]: the
+    share of the four taps inside the image, 0 where the depth or the reprojected depth is <= 0).
+    Differentiable in ``moved`` and ``depth`` (Warp kernels, ``warpgs.kernels.warping.pose_warp``); ``weight``
+    is not. ``shift_warp`` is its special case of a move along x."""
+    if depth.dim() != 2 or moved.shape != (*depth.shape, 3):
+        raise ValueError(f"pose_warp: moved [H, W, 3] and depth [H, W] of one size expected, got "
+                         f"{list(moved.shape)} and {list(depth.shape)}")
+    return _PoseWarp.apply(moved, depth, rel.to(depth.device), K.to(depth.device))
+
+
+def rigid_inverse(viewmat: torch.Tensor) -> torch.Tensor:
+    """The inverse of a rigid 4x4 transform, [R^T, -R^T t] (no linear solve: nothing to check, no host read)."""
+    inv = torch.zeros_like(viewmat)
+    rt = viewmat[:3, :3].T
+    inv[:3, :3] = rt
+    inv[:3, 3] = -rt @ viewmat[:3, 3]
+    inv[3, 3] = 1.0
+    return inv
+
+
 def moved_viewmat(viewmat: torch.Tensor, t: torch.Tensor) -> torch.Tensor:
     """The world-to-camera matrix of the camera moved by ``t`` (a one-element tensor) along its own x axis:
     camera coordinates x - t, the rest unchanged."""
@@ -83,11 +147,34 @@ def moved_viewmat(viewmat: torch.Tensor, t: torch.Tensor) -> torch.Tensor:
 class Binocular:
     """The term of one trainer (module docstring); ``loss`` adds it for an input render."""
 
-    def __init__(self, weight: float, shift: float, start: int, smooth: float, device, seed: int):
+    def __init__(self, weight: float, shift: float, start: int, smooth: float, device, seed: int,
+                 path: dict[str, torch.Tensor] | None = None):
         self.weight, self.shift, self.start, self.smooth = weight, shift, start, smooth
         self.gen = torch.Generator(device=device)
         self.gen.manual_seed(int(seed) + 17)
         self.device = device
+        # partner "path": per input view (name), the poses of the capture path next to it (path_partners); a view
+        # without any keeps the shifted partner
+        self.path = {k: v.to(device=device, dtype=torch.float32) for k, v in (path or {}).items()}
+
+    @staticmethod
+    def path_partners(viewmats, names: list[str], order, reach: float, frames: int = 21) -> dict[str, torch.Tensor]:
+        """{name: [M, 4, 4]} the partner poses of each input for ``train.binocular_partner: path``: the poses of
+        the pseudo views' trajectories (``warpgs.pseudo.trajectory.path_trajectories``, ``frames`` a segment, in
+        the path ``order``) from the input up to ``reach`` x the way to each neighbouring input."""
+        import numpy as np
+
+        from warpgs.pseudo.trajectory import path_trajectories
+
+        V = np.asarray(viewmats, np.float64).reshape(-1, 4, 4)
+        out: dict[int, list] = {}
+        if len(V) < 2 or reach <= 0:
+            return {}
+        m = max(1, int(round(reach * (frames - 1))))
+        for traj in path_trajectories(V, frames, order=order):
+            out.setdefault(traj.start, []).extend(traj.viewmats[1:m + 1])
+            out.setdefault(traj.end, []).extend(traj.viewmats[frames - 1 - m:frames - 1])
+        return {names[k]: torch.as_tensor(np.stack(v), dtype=torch.float32) for k, v in out.items()}
 
     def active(self, step: int) -> bool:
         return self.weight > 0 and step >= self.start
@@ -99,12 +186,21 @@ class Binocular:
         fx = cam.K[0, 0]
         seen = depth.detach() > MIN_DEPTH
         zmed = torch.where(seen, depth.detach(), torch.nan).nanmedian().nan_to_num(1.0)
-        u = torch.rand(1, device=self.device, generator=self.gen)
-        t = (2 * u - 1) * self.shift * cam.width * zmed / fx
-        moved = model.render(moved_viewmat(cam.viewmat, t), cam.K, cam.width, cam.height, background=bg,
-                             check_finite=False)
-        ft = (fx * t).reshape(1)
-        warped, weight = shift_warp(moved.image, depth, ft)
+        partners = self.path.get(getattr(cam, "name", None))
+        if partners is not None:  # a pose of the capture path next to the input (drawn on the device)
+            k = torch.randint(len(partners), (1,), device=self.device, generator=self.gen)
+            vm = partners[k[0]]
+            rel = vm @ rigid_inverse(cam.viewmat.float())
+            moved = model.render(vm, cam.K, cam.width, cam.height, background=bg, check_finite=False)
+            warped, weight = pose_warp(moved.image, depth, rel, cam.K)
+            ft = (fx * rel[:3, 3].norm()).reshape(1)  # the disparity of depth 1, for the smoothness below
+        else:
+            u = torch.rand(1, device=self.device, generator=self.gen)
+            t = (2 * u - 1) * self.shift * cam.width * zmed / fx
+            moved = model.render(moved_viewmat(cam.viewmat, t), cam.K, cam.width, cam.height, background=bg,
+                                 check_finite=False)
+            ft = (fx * t).reshape(1)
+            warped, weight = shift_warp(moved.image, depth, ft)
         diff = (warped - cam.image).abs() * weight[..., None]
         term = diff.sum() / (3 * weight.sum() + 1e-6)
         if self.smooth > 0:

@@ -125,6 +125,9 @@ class TrainConfig:
     binocular_shift: float = 0.1  # the largest move: this x the image width of disparity at the median depth
     binocular_start: float = 0.5  # share of the run's steps before the term starts (theirs: 2/3 LLFF/DTU, 4/7 Blender)
     binocular_smooth: float = 0.05  # edge-aware smoothness of the disparity (pixels) with it (theirs: 0.05)
+    binocular_partner: str = "shift"  # shift: their partner, the camera moved along its x axis | path: a pose of the
+    #   capture path next to the input (the pseudo views' trajectories), up to binocular_reach of the way to a neighbour
+    binocular_reach: float = 0.5  # path partner: the farthest, as a share of the way to the neighbouring input
     random_background: bool = False  # views with an alpha channel: a random background each step (no floaters
                                      # that mimic the background colour); evaluation keeps ``background``
     far_field: str = "none"  # none | elevation: behind the Gaussians, a colour per elevation band fitted on the
@@ -212,6 +215,7 @@ class TrainConfig:
               "eval_every": ">= 0", "background": "[0, 1]", "drop_rate": "[0, 1)", "opacity_noise": "[0, 1]",
               "scale_reg": ">= 0", "scale_reg_ratio": ">= 1", "max_nan_steps": ">= 1", "opacity_decay": "[0, 1)",
               "binocular": ">= 0", "binocular_shift": "(0, 1]", "binocular_start": "[0, 1]", "binocular_smooth": ">= 0",
+              "binocular_partner": "{shift, path}", "binocular_reach": "(0, 1]",
               "explode_factor": ">= 0", "explode_window": ">= 1", "explode_patience": ">= 1", "snapshot_every": ">= 0",
               "max_recoveries": ">= 0", "recovery_lr_factor": "(0, 1]", "cpu_threads": ">= 0", "sync_every": ">= 1",
               "far_field": FAR_FIELD_RULE, "hold_geometry": "{off, on, stereo}", "hold_means_lr": "> 0",

@@ -233,3 +233,94 @@ def shift_warp_backward(
         wp.atomic_add(v_moved, i, xb, g * a)
     # d a / d z = d (x - 0.5) / d z = ft / z^2
     v_depth[i, j] = wp.dot(g, moved[i, xb] * v1 - moved[i, xa] * v0) * ft[0] / (z * z)
+
+
+@wp.func
+def _pose_warp_coords(depth: wp.array2d(dtype=float), rel: wp.array(dtype=wp.mat44), K: wp.array(dtype=wp.mat33),
+                      K_inv: wp.array(dtype=wp.mat33), min_depth: float, i: int, j: int):
+    # where pixel (i, j) of the input, at its depth, lands in the moved camera: (x, y, ok), with d(x, y)/dz
+    z = depth[i, j]
+    r = K_inv[0] @ pixel_ray(j, i)
+    t = transform_point(rel[0], wp.vec3(0.0, 0.0, 0.0))
+    q = transform_point(rel[0], r * z)
+    ok = 1
+    if z <= min_depth or q[2] <= min_depth:
+        ok = 0
+        q = wp.vec3(0.0, 0.0, 1.0)
+    hq = K[0] @ q
+    dh = K[0] @ (transform_point(rel[0], r) - t)  # d hq / dz (q is affine in z)
+    x = hq[0] / hq[2]
+    y = hq[1] / hq[2]
+    dxdz = (dh[0] * hq[2] - hq[0] * dh[2]) / (hq[2] * hq[2])
+    dydz = (dh[1] * hq[2] - hq[1] * dh[2]) / (hq[2] * hq[2])
+    w = float(depth.shape[1])
+    h = float(depth.shape[0])
+    if x < -1.0 or y < -1.0 or x > w + 1.0 or y > h + 1.0:  # no tap inside the image (and no int overflow)
+        ok = 0
+    return x, y, ok, dxdz, dydz
+
+
+@wp.kernel
+def pose_warp(
+    moved: wp.array2d(dtype=wp.vec3),  # (H, W) render at the moved camera (same intrinsics)
+    depth: wp.array2d(dtype=float),  # (H, W) z-depth rendered at the input
+    rel: wp.array(dtype=wp.mat44),  # (1,) input camera -> moved camera (P_moved P_input^-1), on the device
+    K: wp.array(dtype=wp.mat33),  # (1,) intrinsics (pixels)
+    K_inv: wp.array(dtype=wp.mat33),  # (1,) their inverse
+    min_depth: float,
+    warped: wp.array2d(dtype=wp.vec3),  # out (H, W): moved at the pixel's reprojection, 0 where invalid
+    weight: wp.array2d(dtype=float),  # out (H, W): the in-image share of the four taps, 0 where invalid
+):
+    # the general form of shift_warp: each input pixel, at its rendered depth, reprojected into the moved camera,
+    # and the moved render sampled there bilinearly with zero padding
+    i, j = wp.tid()
+    warped[i, j] = wp.vec3(0.0, 0.0, 0.0)
+    weight[i, j] = 0.0
+    x, y, ok, dxdz, dydz = _pose_warp_coords(depth, rel, K, K_inv, min_depth, i, j)
+    if ok == 0:
+        return
+    xa, xb, a, v0, v1 = _row_taps(moved.shape[1], x)
+    ya, yb, b, u0, u1 = _row_taps(moved.shape[0], y)
+    w00 = (1.0 - a) * (1.0 - b) * v0 * u0
+    w01 = a * (1.0 - b) * v1 * u0
+    w10 = (1.0 - a) * b * v0 * u1
+    w11 = a * b * v1 * u1
+    warped[i, j] = moved[ya, xa] * w00 + moved[ya, xb] * w01 + moved[yb, xa] * w10 + moved[yb, xb] * w11
+    weight[i, j] = w00 + w01 + w10 + w11
+
+
+@wp.kernel
+def pose_warp_backward(
+    moved: wp.array2d(dtype=wp.vec3),
+    depth: wp.array2d(dtype=float),
+    rel: wp.array(dtype=wp.mat44),
+    K: wp.array(dtype=wp.mat33),
+    K_inv: wp.array(dtype=wp.mat33),
+    min_depth: float,
+    v_warped: wp.array2d(dtype=wp.vec3),  # dL/d warped
+    v_moved: wp.array2d(dtype=wp.vec3),  # out, accumulated (zeroed by the caller)
+    v_depth: wp.array2d(dtype=float),  # out
+):
+    i, j = wp.tid()
+    v_depth[i, j] = 0.0
+    x, y, ok, dxdz, dydz = _pose_warp_coords(depth, rel, K, K_inv, min_depth, i, j)
+    if ok == 0:
+        return
+    g = v_warped[i, j]
+    xa, xb, a, v0, v1 = _row_taps(moved.shape[1], x)
+    ya, yb, b, u0, u1 = _row_taps(moved.shape[0], y)
+    if v0 * u0 > 0.0:
+        wp.atomic_add(v_moved, ya, xa, g * ((1.0 - a) * (1.0 - b)))
+    if v1 * u0 > 0.0:
+        wp.atomic_add(v_moved, ya, xb, g * (a * (1.0 - b)))
+    if v0 * u1 > 0.0:
+        wp.atomic_add(v_moved, yb, xa, g * ((1.0 - a) * b))
+    if v1 * u1 > 0.0:
+        wp.atomic_add(v_moved, yb, xb, g * (a * b))
+    m00 = moved[ya, xa] * (v0 * u0)
+    m01 = moved[ya, xb] * (v1 * u0)
+    m10 = moved[yb, xa] * (v0 * u1)
+    m11 = moved[yb, xb] * (v1 * u1)
+    d_dx = (m01 - m00) * (1.0 - b) + (m11 - m10) * b  # d warped / d x (d a / d x = 1)
+    d_dy = (m10 - m00) * (1.0 - a) + (m11 - m01) * a
+    v_depth[i, j] = wp.dot(g, d_dx * dxdz + d_dy * dydz)
