@@ -20,6 +20,8 @@
 # w: the same 12 cases with the pseudo views weighted x 0.05 instead of 0.2 (SYN3R's LLFF/DTU value): at images_4
 #    herz_jesus_p25 loses most on test frame 8, between two inputs where the pseudo views are (-0.75 / -0.35 dB at 6 / 9
 #    views), and on frame 0 before the first input (-0.38 / -0.21). w.txt.
+# Session 39 ran s and g together as one bench/suite.py call over both GPUs (--scenes ...,lego_8v; 180 runs, every one
+# finished, in three device calls: bench/results/suite_cuda_h200_switches_s39). r and w were not run (bench/gpu_session40.sh).
 # Each suite call leaves results.json, switches.md / .json, summary.md and the two charts in $OUT (from $R/suite_out).
 set -u
 source "$(dirname "${BASH_SOURCE[0]}")/gpu_one.sh"

@@ -291,21 +291,21 @@ def test_pose_warp_of_a_move_along_x_is_shift_warp_and_no_depth_warps_nothing():
 def test_path_partners_lie_on_the_capture_path_within_the_reach():
     """Three inputs on a line (x = 0, 1, 3): input 0's partners run from it a share of the way to input 1, input 1's
     to both sides, none farther than ``reach`` of the way; the first is the trajectory's second pose."""
-    from warpgs.binocular import Binocular
+    from warpgs.clearance import path_partners
     from warpgs.geometry import camera_centres
     from warpgs.pseudo.trajectory import path_trajectories
 
     V = np.stack([np.eye(4) for _ in range(3)])
     for k, x in enumerate([0.0, 1.0, 3.0]):
         V[k, 0, 3] = -x  # world-to-camera of a camera at (x, 0, 0)
-    parts = Binocular.path_partners(V, ["a", "b", "c"], "capture", reach=0.5, frames=11)
+    parts = path_partners(V, ["a", "b", "c"], "capture", reach=0.5, frames=11)
     assert {k: len(v) for k, v in parts.items()} == {"a": 5, "b": 10, "c": 5}
     xa = camera_centres(parts["a"].double().numpy())[:, 0]
     assert np.all(xa > 0) and np.all(xa <= 0.5 + 1e-6) and np.all(np.diff(xa) > 0)
     xb = camera_centres(parts["b"].double().numpy())[:, 0]
     assert np.all(np.abs(xb - 1.0) > 0) and xb.min() >= 0.5 - 1e-3 and xb.max() <= 2.0 + 0.1
     assert np.allclose(parts["a"][0].numpy(), path_trajectories(V, 11, order="capture")[0].viewmats[1], atol=1e-6)
-    assert Binocular.path_partners(V[:1], ["a"], "capture", 0.5) == {}
+    assert path_partners(V[:1], ["a"], "capture", 0.5) == {}
 
 
 def test_path_partner_term_is_lower_with_the_true_depth_and_reaches_the_depth():

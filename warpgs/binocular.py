@@ -19,7 +19,7 @@ Blender).
 ``train.binocular_partner: path`` (ours) replaces the sideways partner by a pose of the capture path: the
 poses the pseudo views' trajectories pass through (splined centres, slerped rotations), from the input up to
 ``train.binocular_reach`` x the way to each neighbouring input, one drawn per step. The moved render is warped
-back with the general reprojection (``pose_warp``: rotation and a move in any direction) and compared with the
+back with the general reprojection (``pose_warp``: a turn and a move in any direction) and compared with the
 photo as above. On a walk-around capture the test views lie along that path, between the inputs, where a
 sideways move of the same size says nothing about the depth the path's views need.
 """
@@ -153,28 +153,9 @@ class Binocular:
         self.gen = torch.Generator(device=device)
         self.gen.manual_seed(int(seed) + 17)
         self.device = device
-        # partner "path": per input view (name), the poses of the capture path next to it (path_partners); a view
-        # without any keeps the shifted partner
+        # partner "path": per input view (name), the poses of the capture path next to it
+        # (warpgs.clearance.path_partners); a view without any keeps the shifted partner
         self.path = {k: v.to(device=device, dtype=torch.float32) for k, v in (path or {}).items()}
-
-    @staticmethod
-    def path_partners(viewmats, names: list[str], order, reach: float, frames: int = 21) -> dict[str, torch.Tensor]:
-        """{name: [M, 4, 4]} the partner poses of each input for ``train.binocular_partner: path``: the poses of
-        the pseudo views' trajectories (``warpgs.pseudo.trajectory.path_trajectories``, ``frames`` a segment, in
-        the path ``order``) from the input up to ``reach`` x the way to each neighbouring input."""
-        import numpy as np
-
-        from warpgs.pseudo.trajectory import path_trajectories
-
-        V = np.asarray(viewmats, np.float64).reshape(-1, 4, 4)
-        out: dict[int, list] = {}
-        if len(V) < 2 or reach <= 0:
-            return {}
-        m = max(1, int(round(reach * (frames - 1))))
-        for traj in path_trajectories(V, frames, order=order):
-            out.setdefault(traj.start, []).extend(traj.viewmats[1:m + 1])
-            out.setdefault(traj.end, []).extend(traj.viewmats[frames - 1 - m:frames - 1])
-        return {names[k]: torch.as_tensor(np.stack(v), dtype=torch.float32) for k, v in out.items()}
 
     def active(self, step: int) -> bool:
         return self.weight > 0 and step >= self.start

@@ -20,6 +20,9 @@ neighbouring inputs, where novel views of a walk-through are taken) that sees a 
 weight, is looking at something no input constrains. It is ``bench/floaters.py``'s test with poses of the path
 for the test views (which it may not see); that test, with the test views, found the Gaussians behind every
 collapse of castle_p30 at 9 views in session 14, and removing them restored the views.
+
+``path_partners`` gives the binocular term its partners on the path (``train.binocular_partner: path``): the
+poses of the same trajectories next to each input.
 """
 
 from __future__ import annotations
@@ -161,3 +164,20 @@ class PathFloaters:
             share = w / w.sum().clamp_min(1e-9)
             found |= (w > self.ratio * w_in) & (share > self.min_share)
         return found
+
+
+def path_partners(viewmats, names: list[str], order, reach: float, frames: int = 21) -> dict[str, torch.Tensor]:
+    """{name: [M, 4, 4]} the partner poses of each input for ``train.binocular_partner: path``
+    (``warpgs.binocular``): the poses of the pseudo views' trajectories (``path_trajectories``, ``frames`` a
+    segment, in the path ``order``) from the input up to ``reach`` x the way to each neighbouring input."""
+    from warpgs.pseudo.trajectory import path_trajectories
+
+    V = np.asarray(viewmats, np.float64).reshape(-1, 4, 4)
+    out: dict[int, list] = {}
+    if len(V) < 2 or reach <= 0:
+        return {}
+    m = max(1, int(round(reach * (frames - 1))))
+    for traj in path_trajectories(V, frames, order=order):
+        out.setdefault(traj.start, []).extend(traj.viewmats[1:m + 1])
+        out.setdefault(traj.end, []).extend(traj.viewmats[frames - 1 - m:frames - 1])
+    return {names[k]: torch.as_tensor(np.stack(v), dtype=torch.float32) for k, v in out.items()}

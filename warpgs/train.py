@@ -527,9 +527,10 @@ class Trainer:
             tc = cfg.train
             path = None
             if tc.binocular_partner == "path":  # poses of the capture path next to each input (warpgs/binocular.py)
-                path = Binocular.path_partners(np.stack([c.viewmat for c in scene.train]),
-                                               [c.name for c in scene.train], cfg.pseudo.trajectory.order,
-                                               tc.binocular_reach)
+                from warpgs.clearance import path_partners
+
+                path = path_partners(np.stack([c.viewmat for c in scene.train]), [c.name for c in scene.train],
+                                     cfg.pseudo.trajectory.order, tc.binocular_reach)
             self.binocular = Binocular(tc.binocular, tc.binocular_shift, int(tc.binocular_start * tc.iterations),
                                        tc.binocular_smooth, self.device, seed, path=path)
         # CoR-GS (train.co_reg): the second model of the co-regularised pair, its optimiser and strategy
