@@ -26,6 +26,11 @@ one() {
 }
 export -f one
 
+# one4 NAME METHOD SCENE VIEWS SEED [--set k=v ...]: one at images_4 (768x512) for 10,000 iterations (the setting of
+# --data dl3dv; bench/gpu_session38.sh on).
+one4() { DS=4 IT=10000 one "$@"; }
+export -f one4
+
 # named NAME METHOD DATASET SCENE VIEWS SEED [--set k=v ...]: sparse_run on a named dataset (dtu, llff, ...) for
 # 3000 iterations, 10 evaluations.
 named() {

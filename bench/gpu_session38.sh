@@ -23,8 +23,6 @@ set -u
 source "$(dirname "${BASH_SOURCE[0]}")/gpu_one.sh"
 session_env "$@"; P=$1; D=$2; R=$3; shift 3
 export R D T END=$(( $(date +%s) + ${T:-540} ))  # every run of the call stops by then
-one4() { DS=4 IT=10000 one "$@"; }
-export -f one4
 declare -A V=([c3]="--set full.cycles=3" [rel]="--set full.pseudo_mask=reliable"
               [n17]="--set pseudo.trajectory.n_frames=17" [bf6]="--set full.baseline_fraction=0.6")
 lines_i() {

@@ -21,8 +21,6 @@ set -u
 source "$(dirname "${BASH_SOURCE[0]}")/gpu_one.sh"
 session_env "$@"; P=$1; D=$2; R=$3; shift 3
 export R D T END=$(( $(date +%s) + ${T:-540} ))  # every run of the call stops by then
-one4() { DS=4 IT=10000 one "$@"; }
-export -f one4
 lines_small() {  # lines_small PREFIX [--set k=v ...]: captures at 384x256, DTU and fern, both methods, seeds 0-2
   local p=$1; shift
   for s in 0 1 2; do for m in baseline full; do
