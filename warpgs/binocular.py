@@ -170,7 +170,7 @@ class Binocular:
         partners = self.path.get(getattr(cam, "name", None))
         if partners is not None:  # a pose of the capture path next to the input (drawn on the device)
             k = torch.randint(len(partners), (1,), device=self.device, generator=self.gen)
-            vm = partners[k[0]]
+            vm = partners.index_select(0, k)[0]  # (no host read of k)
             rel = vm @ rigid_inverse(cam.viewmat.float())
             moved = model.render(vm, cam.K, cam.width, cam.height, background=bg, check_finite=False)
             warped, weight = pose_warp(moved.image, depth, rel, cam.K)
