@@ -166,7 +166,6 @@ class Binocular:
         depth = out.depth
         fx = cam.K[0, 0]
         seen = depth.detach() > MIN_DEPTH
-        zmed = torch.where(seen, depth.detach(), torch.nan).nanmedian().nan_to_num(1.0)
         partners = self.path.get(getattr(cam, "name", None))
         if partners is not None:  # a pose of the capture path next to the input (drawn on the device)
             k = torch.randint(len(partners), (1,), device=self.device, generator=self.gen)
@@ -176,6 +175,7 @@ class Binocular:
             warped, weight = pose_warp(moved.image, depth, rel, cam.K)
             ft = (fx * rel[:3, 3].norm()).reshape(1)  # the disparity of depth 1, for the smoothness below
         else:
+            zmed = torch.where(seen, depth.detach(), torch.nan).nanmedian().nan_to_num(1.0)
             u = torch.rand(1, device=self.device, generator=self.gen)
             t = (2 * u - 1) * self.shift * cam.width * zmed / fx
             moved = model.render(moved_viewmat(cam.viewmat, t), cam.K, cam.width, cam.height, background=bg,
