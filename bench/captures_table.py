@@ -63,6 +63,10 @@ median).
   images_4 (768x512, 10,000 it, ``s38/i.txt``; the baseline's seed 0 is ``s36/g.txt``: the captures' baseline did not
   change); DTU at 10,000 it (``s38/d.txt``), lego's full method at pseudo weight 0.2 and fern's with its growth
   stopped at half the run (``s38/l.txt``, fern's seed 0 in ``s37/t.txt``).
+- session 40 (``bench/gpu_session40.sh``, prepared in session 39): the binocular term's partner on the capture path
+  (``train.binocular_partner=path``), both methods, seeds 0-2: at 384x256 against session 37's default (``s40/p.txt``,
+  ``p_...``; ``s40/h.txt``, ``h_...``: reach 0.25), DTU and fern beside their defaults; at images_4 against session
+  38's (``s40/i.txt``, ``i_...``). The tables of the files present are printed.
 - session 39 (the last 290 s of two H200s): the full method at pseudo weight 0.1 against session 37's default (0.2)
   at 384x256, seeds 0-2 (``s39/x.txt``, ``x_...``; DTU's ``x_dtu_full_sK`` beside ``s37/t.txt``'s).
 """
@@ -312,6 +316,30 @@ def session38_named_table(results: Path) -> list[str]:
     return lines
 
 
+def session40_tables(results: Path) -> list[list[str]]:
+    """Session 40's tables (module docstring), for the summaries present: each variant of the binocular partner
+    beside the default it changes, both methods (their full - baseline in the last column), then DTU's and fern's
+    runs beside their defaults."""
+    import seed_medians as sm
+
+    d40 = results / "s40"
+    out = []
+    for prefix, label in (("p", "path partner"), ("h", "path partner, reach 0.25")):
+        path = d40 / f"{prefix}.txt"
+        if path.is_file():
+            out.append([f"{label}, 384x256, 3000 it, seeds 0-2, against session 37's default:", ""]
+                       + table([("session 37 default", session37_default(results)), (label, load(path, prefix))]))
+            runs = sm.read([results / "s36" / "c.txt", results / "s37" / "t.txt", results / "s38" / "l.txt", path])
+            keep = ("c_dtu_db", "t_p_dtu_full", "c_fern_db", "t_r_fern_full", "l_fern_full_rs05",
+                    f"{prefix}_dtu_baseline", f"{prefix}_dtu_full", f"{prefix}_fern_baseline", f"{prefix}_fern_full")
+            out.append(sm.table({k: v for k, v in runs.items() if k in keep}))
+    if (d40 / "i.txt").is_file():
+        out.append(["path partner at images_4 (768x512, 10,000 it), seeds 0-2, against session 38's default:", ""]
+                   + table([("session 38 default", session38_images4(results)),
+                            ("path partner", load(d40 / "i.txt", "i"))]))
+    return out
+
+
 def with_baselines(default: dict, baselines: dict) -> dict:
     """``default`` with its baseline runs replaced by ``baselines``' where those have the case (the full runs and the
     other cases' baselines stay)."""
@@ -323,9 +351,12 @@ def with_baselines(default: dict, baselines: dict) -> dict:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--results", default=str(Path(__file__).resolve().parent / "results"))
-    ap.add_argument("--session", type=int, choices=(20, 21, 22, 26, 27, 28, 29, 30, 31, 33, 34, 35, 36, 37, 38, 39),
+    ap.add_argument("--session", type=int, choices=(20, 21, 22, 26, 27, 28, 29, 30, 31, 33, 34, 35, 36, 37, 38, 39, 40),
                     default=21)
     args = ap.parse_args(argv)
+    if args.session == 40:
+        print("\n\n".join("\n".join(t) for t in session40_tables(Path(args.results))) or "no s40 summaries yet")
+        return 0
     if args.session == 39:
         import seed_medians as sm
         res = Path(args.results)

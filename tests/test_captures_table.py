@@ -188,3 +188,34 @@ def test_session37_default_keeps_session36s_baselines_and_takes_the_weighted_ful
                                             "t_p_dtu_full_s0 26.0 1\n")  # not a capture
     assert ct.session37_default(tmp_path) == {("castle_p30", 3, "baseline"): {0: 15.0},
                                               ("castle_p30", 3, "full"): {0: 16.0}}
+
+
+def test_session40_tables_put_each_partner_run_beside_the_default_it_changes(tmp_path, capsys):
+    for d in ("s36", "s37", "s38", "s40"):
+        (tmp_path / d).mkdir()
+    (tmp_path / "s36" / "b_all.txt").write_text("b_castle_p30_6v_baseline_db_s0 20.0 1\nb_castle_p30_6v_baseline_db_s1 20.2 1\n"
+                                               "b_castle_p30_6v_full_db_s0 99.0 1\n")
+    (tmp_path / "s36" / "c.txt").write_text("c_dtu_db_s0 26.4 5\nc_fern_db_s0 22.8 9\nc_dtu_full_dec_s0 99.0 5\n")
+    (tmp_path / "s37" / "t.txt").write_text("t_p_castle_p30_6v_full_s0 20.7 1\nt_p_dtu_full_s0 26.6 5\n"
+                                            "t_r_fern_full_s0 23.0 9\n")
+    (tmp_path / "s38" / "l.txt").write_text("l_fern_full_rs05_s1 22.9 9\n")
+    (tmp_path / "s36" / "g.txt").write_text("g_castle_p30_9v_baseline_s0 24.3 1\n")
+    (tmp_path / "s38" / "i.txt").write_text("i_castle_p30_9v_full_s0 24.6 1\n")
+    assert ct.main(["--results", str(tmp_path), "--session", "40"]) == 0
+    assert capsys.readouterr().out.strip() == "no s40 summaries yet"
+    (tmp_path / "s40" / "p.txt").write_text("p_castle_p30_6v_baseline_s0 20.5 1\np_castle_p30_6v_full_s0 21.5 1\n"
+                                            "p_dtu_baseline_s0 26.0 5\np_dtu_full_s0 27.5 5\np_fern_full_s0 23.1 9\n")
+    (tmp_path / "s40" / "i.txt").write_text("i_castle_p30_9v_baseline_s0 24.0 1\ni_castle_p30_9v_full_s0 25.0 1\n")
+    tables = ct.session40_tables(tmp_path)
+    assert len(tables) == 3  # p's captures, p's DTU and fern, i's captures (no h.txt)
+    row = next(r for r in tables[0] if r.startswith("| castle_p30 | 6 |"))
+    # session 37's default (baseline median 20.10, full 20.70), then the path partner's, and its full - baseline
+    assert row == ("| castle_p30 | 6 | 20.10 [20.00, 20.20] | 20.70 [20.70, 20.70] | 20.50 [20.50, 20.50] | "
+                   "21.50 [21.50, 21.50] | +1.00 |")
+    named = "\n".join(tables[1])
+    for name in ("c_dtu_db", "t_p_dtu_full", "p_dtu_baseline", "p_dtu_full", "c_fern_db", "t_r_fern_full",
+                 "l_fern_full_rs05", "p_fern_full"):
+        assert f"| {name} |" in named
+    assert "c_dtu_full_dec" not in named and "castle" not in named
+    row = next(r for r in tables[2] if r.startswith("| castle_p30 | 9 |"))
+    assert row.endswith("| 24.00 [24.00, 24.00] | 25.00 [25.00, 25.00] | +1.00 |")
