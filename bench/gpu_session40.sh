@@ -17,6 +17,7 @@
 # r, w: session 39's r and w (the full method at images_4 with its growth stopped at half the run / pseudo weight 0.05;
 #    not run in session 39, whose device time went to the switch table): bash bench/gpu_session39.sh r|w.
 # q: p then i in one queue over every GPU of the machine.
+# Copy the summaries to bench/results/s40/; python bench/captures_table.py --session 40 prints the tables.
 set -u
 source "$(dirname "${BASH_SOURCE[0]}")/gpu_one.sh"
 session_env "$@"; P=$1; D=$2; R=$3; shift 3
