@@ -16,7 +16,8 @@
 #    calls). Against s36/g.txt + s38/i.txt. i.txt.
 # r, w: session 39's r and w (the full method at images_4 with its growth stopped at half the run / pseudo weight 0.05;
 #    not run in session 39, whose device time went to the switch table): bash bench/gpu_session39.sh r|w.
-# q: p then i in one queue over every GPU of the machine.
+# t: the binocular tests on CUDA first (pose_warp and the path partner have run on the CPU only): about 30 s.
+# q: t, then p and i in one queue over every GPU of the machine (nothing runs if t fails).
 # Copy the summaries to bench/results/s40/; python bench/captures_table.py --session 40 prints the tables.
 set -u
 source "$(dirname "${BASH_SOURCE[0]}")/gpu_one.sh"
@@ -37,10 +38,18 @@ lines_i() {
     echo "one4 i_${c}_${v}v_${m}_s$s $m $c $v $s --set train.binocular_partner=path"
   done; done; done; done
 }
+cuda_tests() {  # once per machine: a passed run leaves $R/t_ok
+  [ -f "$R/t_ok" ] && return 0
+  timeout 200 python3 -m pytest -q -p no:cacheprovider tests/test_binocular.py 2>&1 | tail -3 | tee "$OUT/t.log"
+  grep -q " passed" "$OUT/t.log" && ! grep -q "failed\|error" "$OUT/t.log" && python3 -c "import torch; assert torch.cuda.is_available()" \
+    && touch "$R/t_ok"
+}
 case $P in
+t) cuda_tests ;;
 p) lines_small p --set train.binocular_partner=path | run_lines 48; summary p_ p.txt ;;
 h) lines_small h --set train.binocular_partner=path --set train.binocular_reach=0.25 | run_lines 48; summary h_ h.txt ;;
 i) lines_i | run_lines 24; summary i_ i.txt ;;
-q) { lines_small p --set train.binocular_partner=path; lines_i; } | run_lines 48; summary p_ p.txt; summary i_ i.txt ;;
+q) cuda_tests || { echo "the CUDA tests failed: no runs"; exit 1; }
+   { lines_small p --set train.binocular_partner=path; lines_i; } | run_lines 48; summary p_ p.txt; summary i_ i.txt ;;
 *) echo "unknown phase $P"; exit 2 ;;
 esac
