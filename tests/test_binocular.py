@@ -215,13 +215,6 @@ def test_binocular_loss_is_lower_with_the_true_depth():
 # the general warp (pose_warp) and the capture path's partner (train.binocular_partner: path)
 
 
-def _rotation(axis, angle: float) -> torch.Tensor:
-    a = torch.tensor(axis, dtype=torch.float64)
-    a = a / a.norm()
-    k = torch.tensor([[0, -a[2], a[1]], [a[2], 0, -a[0]], [-a[1], a[0], 0]], dtype=torch.float64)
-    return torch.eye(3, dtype=torch.float64) + np.sin(angle) * k + (1 - np.cos(angle)) * k @ k
-
-
 def pose_oracle(moved: torch.Tensor, depth: torch.Tensor, rel: torch.Tensor, K: torch.Tensor):
     """torch's grid_sample of ``moved`` where each pixel at its depth reprojects (float64, differentiable in
     ``moved`` and ``depth`` through the grid); its weight as the warp of an all-ones image."""
@@ -242,12 +235,15 @@ def pose_oracle(moved: torch.Tensor, depth: torch.Tensor, rel: torch.Tensor, K: 
 @pytest.mark.parametrize("device", DEVICES)
 def test_pose_warp_matches_grid_sample_and_its_gradients(device):
     from warpgs.binocular import pose_warp
+    from warpgs.geometry import axis_angle_to_rotmat
 
     g = torch.Generator().manual_seed(3)
     H, W = 7, 9
     K = torch.tensor([[8.0, 0, 4.5], [0, 8.0, 3.5], [0, 0, 1]])
     rel = torch.eye(4, dtype=torch.float64)
-    rel[:3, :3] = _rotation([0.2, 1.0, 0.1], 0.08)  # a turn and a move in every axis: taps inside and outside
+    axis = np.array([0.2, 1.0, 0.1])
+    rel[:3, :3] = torch.as_tensor(axis_angle_to_rotmat(0.08 * axis / np.linalg.norm(axis)))  # a turn and a move in
+    # every axis: taps inside and outside
     rel[:3, 3] = torch.tensor([0.15, -0.05, 0.1], dtype=torch.float64)
     moved = torch.rand(H, W, 3, generator=g)
     depth = 2.0 + torch.rand(H, W, generator=g)

@@ -85,30 +85,27 @@ class _PoseWarp(torch.autograd.Function):
         moved = moved.contiguous().float()
         depth = depth.contiguous().float()
         rel = rel.reshape(1, 4, 4).contiguous().float()
-        K = K.reshape(1, 3, 3).contiguous().float()
-        K_inv = torch.linalg.inv_ex(K)[0].contiguous()  # (inv_ex: no check, so no host read on a GPU)
+        K = K.reshape(1, 3, 3).contiguous().float()  # (inverted in the kernel)
         H, W = depth.shape
         warped = torch.empty(H, W, 3, device=depth.device, dtype=torch.float32)
         weight = torch.empty(H, W, device=depth.device, dtype=torch.float32)
         dev = device_of(depth)
         launch(kw.pose_warp, (H, W), [arg(moved, wp.vec3), arg(depth), arg(rel, wp.mat44), arg(K, wp.mat33),
-                                       arg(K_inv, wp.mat33), MIN_DEPTH, arg(warped, wp.vec3), arg(weight)],
-               dev, stream_of(dev))
-        ctx.save_for_backward(moved, depth, rel, K, K_inv)
+                                       MIN_DEPTH, arg(warped, wp.vec3), arg(weight)], dev, stream_of(dev))
+        ctx.save_for_backward(moved, depth, rel, K)
         ctx.mark_non_differentiable(weight)
         return warped, weight
 
     @staticmethod
     def backward(ctx, v_warped, _v_weight):
-        moved, depth, rel, K, K_inv = ctx.saved_tensors
+        moved, depth, rel, K = ctx.saved_tensors
         H, W = depth.shape
         v_moved = torch.zeros_like(moved)
         v_depth = torch.empty_like(depth)
         dev = device_of(depth)
         launch(kw.pose_warp_backward, (H, W), [arg(moved, wp.vec3), arg(depth), arg(rel, wp.mat44), arg(K, wp.mat33),
-                                                arg(K_inv, wp.mat33), MIN_DEPTH,
-                                                arg(v_warped.contiguous().float(), wp.vec3), arg(v_moved, wp.vec3),
-                                                arg(v_depth)], dev, stream_of(dev))
+                                                MIN_DEPTH, arg(v_warped.contiguous().float(), wp.vec3),
+                                                arg(v_moved, wp.vec3), arg(v_depth)], dev, stream_of(dev))
         return v_moved, v_depth, None, None
 
 

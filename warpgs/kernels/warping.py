@@ -237,10 +237,11 @@ def shift_warp_backward(
 
 @wp.func
 def _pose_warp_coords(depth: wp.array2d(dtype=float), rel: wp.array(dtype=wp.mat44), K: wp.array(dtype=wp.mat33),
-                      K_inv: wp.array(dtype=wp.mat33), min_depth: float, i: int, j: int):
-    # where pixel (i, j) of the input, at its depth, lands in the moved camera: (x, y, ok), with d(x, y)/dz
+                      min_depth: float, i: int, j: int):
+    # where pixel (i, j) of the input, at its depth, lands in the moved camera: (x, y, ok), with d(x, y)/dz. K is
+    # inverted here (a 3x3 per thread): no solver on the host or the GPU for it
     z = depth[i, j]
-    r = K_inv[0] @ pixel_ray(j, i)
+    r = wp.inverse(K[0]) @ pixel_ray(j, i)
     t = transform_point(rel[0], wp.vec3(0.0, 0.0, 0.0))
     q = transform_point(rel[0], r * z)
     ok = 1
@@ -266,7 +267,6 @@ def pose_warp(
     depth: wp.array2d(dtype=float),  # (H, W) z-depth rendered at the input
     rel: wp.array(dtype=wp.mat44),  # (1,) input camera -> moved camera (P_moved P_input^-1), on the device
     K: wp.array(dtype=wp.mat33),  # (1,) intrinsics (pixels)
-    K_inv: wp.array(dtype=wp.mat33),  # (1,) their inverse
     min_depth: float,
     warped: wp.array2d(dtype=wp.vec3),  # out (H, W): moved at the pixel's reprojection, 0 where invalid
     weight: wp.array2d(dtype=float),  # out (H, W): the in-image share of the four taps, 0 where invalid
@@ -276,7 +276,7 @@ def pose_warp(
     i, j = wp.tid()
     warped[i, j] = wp.vec3(0.0, 0.0, 0.0)
     weight[i, j] = 0.0
-    x, y, ok, dxdz, dydz = _pose_warp_coords(depth, rel, K, K_inv, min_depth, i, j)
+    x, y, ok, dxdz, dydz = _pose_warp_coords(depth, rel, K, min_depth, i, j)
     if ok == 0:
         return
     xa, xb, a, v0, v1 = _row_taps(moved.shape[1], x)
@@ -295,7 +295,6 @@ def pose_warp_backward(
     depth: wp.array2d(dtype=float),
     rel: wp.array(dtype=wp.mat44),
     K: wp.array(dtype=wp.mat33),
-    K_inv: wp.array(dtype=wp.mat33),
     min_depth: float,
     v_warped: wp.array2d(dtype=wp.vec3),  # dL/d warped
     v_moved: wp.array2d(dtype=wp.vec3),  # out, accumulated (zeroed by the caller)
@@ -303,7 +302,7 @@ def pose_warp_backward(
 ):
     i, j = wp.tid()
     v_depth[i, j] = 0.0
-    x, y, ok, dxdz, dydz = _pose_warp_coords(depth, rel, K, K_inv, min_depth, i, j)
+    x, y, ok, dxdz, dydz = _pose_warp_coords(depth, rel, K, min_depth, i, j)
     if ok == 0:
         return
     g = v_warped[i, j]
