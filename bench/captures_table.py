@@ -65,7 +65,8 @@ median).
   stopped at half the run (``s38/l.txt``, fern's seed 0 in ``s37/t.txt``).
 - session 40 (``bench/gpu_session40.sh``, prepared in session 39): the binocular term's partner on the capture path
   (``train.binocular_partner=path``), both methods, seeds 0-2: at 384x256 against session 37's default (``s40/p.txt``,
-  ``p_...``; ``s40/h.txt``, ``h_...``: reach 0.25), DTU and fern beside their defaults; at images_4 against session
+  ``p_...``; ``s40/h.txt``, ``h_...``: reach 0.25; ``s40/b.txt``, ``b_...``: the term from 0.25 of the run, no fern),
+  DTU and fern beside their defaults; at images_4 against session
   38's (``s40/i.txt``, ``i_...``). The tables of the files present are printed.
 - session 39 (the last 290 s of two H200s): the full method at pseudo weight 0.1 against session 37's default (0.2)
   at 384x256, seeds 0-2 (``s39/x.txt``, ``x_...``; DTU's ``x_dtu_full_sK`` beside ``s37/t.txt``'s).
@@ -324,7 +325,8 @@ def session40_tables(results: Path) -> list[list[str]]:
 
     d40 = results / "s40"
     out = []
-    for prefix, label in (("p", "path partner"), ("h", "path partner, reach 0.25")):
+    for prefix, label in (("p", "path partner"), ("h", "path partner, reach 0.25"),
+                          ("b", "binocular term from 0.25 of the run")):
         path = d40 / f"{prefix}.txt"
         if path.is_file():
             out.append([f"{label}, 384x256, 3000 it, seeds 0-2, against session 37's default:", ""]

@@ -16,8 +16,14 @@
 #    calls). Against s36/g.txt + s38/i.txt. i.txt.
 # r, w: session 39's r and w (the full method at images_4 with its growth stopped at half the run / pseudo weight 0.05;
 #    not run in session 39, whose device time went to the switch table): bash bench/gpu_session39.sh r|w.
+# b (session 40): the binocular term from 0.25 of the run (train.binocular_start=0.25; default 0.5), both methods, the
+#    captures at 384x256 and DTU, seeds 0-2 (42 runs). The full method makes its first pseudo views at 0.4 of the run
+#    (full.baseline_fraction), before the term starts at 0.5: they hold the model to renders made without it (session
+#    37). From 0.25 on, the pseudo views are made from a model the term has already shaped. b.txt.
 # t: the binocular tests on CUDA first (pose_warp and the path partner have run on the CPU only): about 30 s.
 # q: t, then p and i in one queue over every GPU of the machine (nothing runs if t fails).
+# z (session 40): t, then p, b and i in one queue (the order of priority; a call that ends first leaves the rest for
+#    the next call, which resumes).
 # Copy the summaries to bench/results/s40/; python bench/captures_table.py --session 40 prints the tables.
 set -u
 source "$(dirname "${BASH_SOURCE[0]}")/gpu_one.sh"
@@ -47,9 +53,13 @@ cuda_tests() {  # once per machine: a passed run leaves $R/t_ok
 case $P in
 t) cuda_tests ;;
 p) lines_small p --set train.binocular_partner=path | run_lines 48; summary p_ p.txt ;;
+b) lines_small b --set train.binocular_start=0.25 | grep -v _fern_ | run_lines 48; summary b_ b.txt ;;
 h) lines_small h --set train.binocular_partner=path --set train.binocular_reach=0.25 | run_lines 48; summary h_ h.txt ;;
 i) lines_i | run_lines 24; summary i_ i.txt ;;
 q) cuda_tests || { echo "the CUDA tests failed: no runs"; exit 1; }
    { lines_small p --set train.binocular_partner=path; lines_i; } | run_lines 48; summary p_ p.txt; summary i_ i.txt ;;
+z) cuda_tests || { echo "the CUDA tests failed: no runs"; exit 1; }
+   { lines_small p --set train.binocular_partner=path; lines_small b --set train.binocular_start=0.25 | grep -v _fern_
+     lines_i; } | run_lines 48; summary p_ p.txt; summary b_ b.txt; summary i_ i.txt ;;
 *) echo "unknown phase $P"; exit 2 ;;
 esac
