@@ -14,7 +14,7 @@ import torch
 
 from warpgs.binocular import moved_viewmat, shift_warp
 
-DEVICES = ["cpu"] + (["cuda"] if torch.cuda.is_available() else [])
+from devices import DEVICES  # noqa: E402 (tests/devices.py: WARPGS_TEST_DEVICES restricts them)
 
 
 def oracle(moved: torch.Tensor, depth: torch.Tensor, ft: float) -> tuple[torch.Tensor, torch.Tensor]:

@@ -2,7 +2,6 @@
 analytic facts. Runs on the CPU, and on CUDA too when a GPU is present."""
 
 import math
-import os
 
 import pytest
 import torch
@@ -11,8 +10,7 @@ import reference as ref
 from warpgs.kernels.rasterize import tile_size_for
 from warpgs.render import eval_sh, means2d_grad_norm, rasterize
 
-# WARPGS_TEST_DEVICES=cuda restricts the run (the GPU machine's packed Warp has no CPU compiler).
-DEVICES = os.environ.get("WARPGS_TEST_DEVICES", "cpu" + (",cuda" if torch.cuda.is_available() else "")).split(",")
+from devices import DEVICES  # noqa: E402 (tests/devices.py: WARPGS_TEST_DEVICES restricts them)
 
 
 def look_at_viewmat(eye, target, up=(0.0, -1.0, 0.0)):

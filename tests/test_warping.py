@@ -25,7 +25,7 @@ from warpgs.pseudo.guidance import (
 from warpgs.render import rasterize
 
 
-DEVICES = ["cpu"] + (["cuda"] if torch.cuda.is_available() else [])
+from devices import DEVICES  # noqa: E402 (tests/devices.py: WARPGS_TEST_DEVICES restricts them)
 
 
 @pytest.fixture(params=DEVICES)
