@@ -317,6 +317,24 @@ def session38_named_table(results: Path) -> list[str]:
     return lines
 
 
+def change_lines(default: dict, variant: dict, label: str) -> list[str]:
+    """Over the cases both have: the mean change of each method's median from ``default`` to ``variant``, and the
+    variant's full method against the default's baseline (the comparison issue 13 makes when only the full method
+    takes the variant), mean and worst."""
+    keys = sorted({(s, n) for (s, n, _) in default} & {(s, n) for (s, n, _) in variant})
+    med = statistics.median
+    change = {m: [med(variant[(s, n, m)].values()) - med(default[(s, n, m)].values()) for s, n in keys
+                  if default.get((s, n, m)) and variant.get((s, n, m))] for m in ("baseline", "full")}
+    mixed = [med(variant[(s, n, "full")].values()) - med(default[(s, n, "baseline")].values()) for s, n in keys
+             if variant.get((s, n, "full")) and default.get((s, n, "baseline"))]
+    lines = ["- mean change of the medians against the default (" + label + "): "
+             + ", ".join(f"{m} {sum(v) / len(v):+.2f} dB (worst {min(v):+.2f})" for m, v in change.items() if v)]
+    if mixed:
+        lines.append(f"- {label} in the full method only, against the default baseline: mean {sum(mixed) / len(mixed):+.2f} dB, "
+                     f"worst {min(mixed):+.2f} dB over {len(mixed)} cases")
+    return lines
+
+
 def session40_tables(results: Path) -> list[list[str]]:
     """Session 40's tables (module docstring), for the summaries present: each variant of the binocular partner
     beside the default it changes, both methods (their full - baseline in the last column), then DTU's and fern's
@@ -329,16 +347,18 @@ def session40_tables(results: Path) -> list[list[str]]:
                           ("b", "binocular term from 0.25 of the run")):
         path = d40 / f"{prefix}.txt"
         if path.is_file():
+            default, variant = session37_default(results), load(path, prefix)
             out.append([f"{label}, 384x256, 3000 it, seeds 0-2, against session 37's default:", ""]
-                       + table([("session 37 default", session37_default(results)), (label, load(path, prefix))]))
+                       + table([("session 37 default", default), (label, variant)]) + change_lines(default, variant, label))
             runs = sm.read([results / "s36" / "c.txt", results / "s37" / "t.txt", results / "s38" / "l.txt", path])
             keep = ("c_dtu_db", "t_p_dtu_full", "c_fern_db", "t_r_fern_full", "l_fern_full_rs05",
                     f"{prefix}_dtu_baseline", f"{prefix}_dtu_full", f"{prefix}_fern_baseline", f"{prefix}_fern_full")
             out.append(sm.table({k: v for k, v in runs.items() if k in keep}))
     if (d40 / "i.txt").is_file():
+        default, variant = session38_images4(results), load(d40 / "i.txt", "i")
         out.append(["path partner at images_4 (768x512, 10,000 it), seeds 0-2, against session 38's default:", ""]
-                   + table([("session 38 default", session38_images4(results)),
-                            ("path partner", load(d40 / "i.txt", "i"))]))
+                   + table([("session 38 default", default), ("path partner", variant)])
+                   + change_lines(default, variant, "path partner"))
     return out
 
 

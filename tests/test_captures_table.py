@@ -219,3 +219,12 @@ def test_session40_tables_put_each_partner_run_beside_the_default_it_changes(tmp
     assert "c_dtu_full_dec" not in named and "castle" not in named
     row = next(r for r in tables[2] if r.startswith("| castle_p30 | 9 |"))
     assert row.endswith("| 24.00 [24.00, 24.00] | 25.00 [25.00, 25.00] | +1.00 |")
+    # the changes against the default: baseline 20.10 -> 20.50, full 20.70 -> 21.50; the variant's full method
+    # against the default's baseline 21.50 - 20.10
+    assert "- mean change of the medians against the default (path partner): baseline +0.40 dB (worst +0.40), " \
+           "full +0.80 dB (worst +0.80)" in tables[0]
+    assert ("- path partner in the full method only, against the default baseline: mean +1.40 dB, worst +1.40 dB "
+            "over 1 cases") in tables[0]
+    # at images_4 the default's full method has its seed 0 only (24.6), the baseline's from s36/g.txt (24.3)
+    assert "- path partner in the full method only, against the default baseline: mean +0.70 dB, worst +0.70 dB " \
+           "over 1 cases" in tables[2]
