@@ -68,6 +68,9 @@ median).
   ``p_...``; ``s40/h.txt``, ``h_...``: reach 0.25; ``s40/b.txt``, ``b_...``: the term from 0.25 of the run, no fern),
   DTU and fern beside their defaults; at images_4 against session
   38's (``s40/i.txt``, ``i_...``). The tables of the files present are printed.
+- session 41 (``bench/gpu_session41.sh``, prepared in session 40): the full method with ``full.path_consistency`` 1.0
+  and 0.3 against session 37's default at 384x256, seeds 0-2 (``s41/c.txt``, ``c_pc10_...``, ``c_pc03_...``; DTU and
+  fern beside their defaults), and 1.0 at images_4 against session 38's (``s41/i.txt``, ``i_...``).
 - session 39 (the last 290 s of two H200s): the full method at pseudo weight 0.1 against session 37's default (0.2)
   at 384x256, seeds 0-2 (``s39/x.txt``, ``x_...``; DTU's ``x_dtu_full_sK`` beside ``s37/t.txt``'s).
 """
@@ -362,6 +365,30 @@ def session40_tables(results: Path) -> list[list[str]]:
     return out
 
 
+def session41_tables(results: Path) -> list[list[str]]:
+    """Session 41's tables (module docstring), for the summaries present: each weight of ``full.path_consistency``
+    as a variant of the full method against the default's baseline, then DTU's and fern's runs beside their defaults."""
+    import seed_medians as sm
+
+    d41 = results / "s41"
+    names = {"pc10": "path_consistency=1.0", "pc03": "path_consistency=0.3"}
+    out = []
+    if (d41 / "c.txt").is_file():
+        variants = {names.get(k, k): v for k, v in load_variants(d41 / "c.txt", "c").items()}
+        out.append(["the full method with full.path_consistency, 384x256, 3000 it, seeds 0-2, against session 37's "
+                    "default:", ""] + variant_table(session37_default(results), variants, "default (session 37)"))
+        runs = sm.read([results / "s36" / "c.txt", results / "s37" / "t.txt", results / "s38" / "l.txt", d41 / "c.txt"])
+        keep = ("c_dtu_db", "t_p_dtu_full", "c_fern_db", "t_r_fern_full", "l_fern_full_rs05",
+                *(f"c_{k}_{scene}_full" for k in names for scene in ("dtu", "fern")))
+        out.append(sm.table({k: v for k, v in runs.items() if k in keep}))
+    if (d41 / "i.txt").is_file():
+        out.append(["the full method with full.path_consistency=1.0 at images_4 (768x512, 10,000 it), seeds 0-2, against "
+                    "session 38's default:", ""]
+                   + variant_table(session38_images4(results), {names["pc10"]: load(d41 / "i.txt", "i")},
+                                   "default (session 38)"))
+    return out
+
+
 def with_baselines(default: dict, baselines: dict) -> dict:
     """``default`` with its baseline runs replaced by ``baselines``' where those have the case (the full runs and the
     other cases' baselines stay)."""
@@ -373,9 +400,12 @@ def with_baselines(default: dict, baselines: dict) -> dict:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--results", default=str(Path(__file__).resolve().parent / "results"))
-    ap.add_argument("--session", type=int, choices=(20, 21, 22, 26, 27, 28, 29, 30, 31, 33, 34, 35, 36, 37, 38, 39, 40),
+    ap.add_argument("--session", type=int, choices=(20, 21, 22, 26, 27, 28, 29, 30, 31, 33, 34, 35, 36, 37, 38, 39, 40, 41),
                     default=21)
     args = ap.parse_args(argv)
+    if args.session == 41:
+        print("\n\n".join("\n".join(t) for t in session41_tables(Path(args.results))) or "no s41 summaries yet")
+        return 0
     if args.session == 40:
         print("\n\n".join("\n".join(t) for t in session40_tables(Path(args.results))) or "no s40 summaries yet")
         return 0

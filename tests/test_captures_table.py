@@ -228,3 +228,26 @@ def test_session40_tables_put_each_partner_run_beside_the_default_it_changes(tmp
     # at images_4 the default's full method has its seed 0 only (24.6), the baseline's from s36/g.txt (24.3)
     assert "- path partner in the full method only, against the default baseline: mean +0.70 dB, worst +0.70 dB " \
            "over 1 cases" in tables[2]
+
+
+def test_session41_tables_put_each_weight_beside_the_default_baseline(tmp_path):
+    for d in ("s36", "s37", "s38", "s41"):
+        (tmp_path / d).mkdir()
+    (tmp_path / "s36" / "b_all.txt").write_text("b_castle_p30_6v_baseline_db_s0 20.0 1\nb_castle_p30_6v_baseline_db_s1 20.2 1\n")
+    (tmp_path / "s36" / "c.txt").write_text("c_dtu_db_s0 26.4 5\nc_fern_db_s0 22.8 9\n")
+    (tmp_path / "s37" / "t.txt").write_text("t_p_castle_p30_6v_full_s0 20.7 1\nt_p_dtu_full_s0 26.6 5\n")
+    (tmp_path / "s38" / "l.txt").write_text("")
+    (tmp_path / "s36" / "g.txt").write_text("g_castle_p30_9v_baseline_s0 24.3 1\n")
+    (tmp_path / "s38" / "i.txt").write_text("i_castle_p30_9v_full_s0 24.6 1\n")
+    assert ct.session41_tables(tmp_path) == []
+    (tmp_path / "s41" / "c.txt").write_text("c_pc10_castle_p30_6v_full_s0 21.0 1\nc_pc10_castle_p30_6v_full_s1 21.4 1\n"
+                                            "c_pc03_castle_p30_6v_full_s0 20.5 1\nc_pc10_dtu_full_s0 27.5 5\n")
+    (tmp_path / "s41" / "i.txt").write_text("i_castle_p30_9v_full_s0 25.3 1\n")
+    tables = ct.session41_tables(tmp_path)
+    assert len(tables) == 3
+    text = "\n".join(tables[0])
+    # the baseline's median 20.10: 1.0 gives 21.20 (+1.10), 0.3 gives 20.50 (+0.40); the default's full 20.70 (+0.60)
+    assert "| default (session 37) | 20.70 (+0.60) |" in text
+    assert "| path_consistency=1.0 | 21.20 (+1.10) |" in text and "| path_consistency=0.3 | 20.50 (+0.40) |" in text
+    assert "| c_pc10_dtu_full |" in "\n".join(tables[1]) and "| t_p_dtu_full |" in "\n".join(tables[1])
+    assert "| path_consistency=1.0 | 25.30 (+1.00) |" in "\n".join(tables[2])

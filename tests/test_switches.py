@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 import torch
 
-from tiny_scene import make_scene, param_copy, same_params, small_full_trainer, tiny_config
+from tiny_scene import make_scene, param_copy, record_loss_parts, same_params, small_full_trainer, tiny_config
 from warpgs import losses
 from warpgs.config import ConfigError, load_config
 from warpgs.train import Trainer
@@ -238,15 +238,7 @@ def test_full_method_pseudo_depth_smoothness_switch(tmp_path, monkeypatch):
         assert tr.cfg.full.pseudo_depth_smooth == 0
         off_losses, _ = _losses_of_a_run(tr)
     _, tr = small_full_trainer(tmp_path / "on", "--set", "full.pseudo_depth_smooth=0.5")
-    parts_seen = []
-    loss_terms = tr.method.loss_terms
-
-    def record(out, cam, loss, parts):
-        total = loss_terms(out, cam, loss, parts)
-        parts_seen.append(dict(parts))
-        return total
-
-    tr.method.loss_terms = record
+    parts_seen = record_loss_parts(tr)
     on_losses, _ = _losses_of_a_run(tr)
     with_pseudo = [p for p in parts_seen if "pseudo" in p]
     assert with_pseudo and all("pseudo_depth_smooth" in p for p in with_pseudo)

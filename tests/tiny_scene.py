@@ -145,3 +145,17 @@ def small_full_trainer(tmp_path, *extra):
     cfg, _ = make_config(args)
     return cfg, make_trainer(cfg, stress_scene("views_3", downscale=4), tmp_path)
 
+
+
+def record_loss_parts(trainer) -> list[dict]:
+    """Wraps ``trainer.method.loss_terms``: the list it returns gets the parts of every step's loss, in order."""
+    seen: list[dict] = []
+    loss_terms = trainer.method.loss_terms
+
+    def record(out, cam, loss, parts):
+        total = loss_terms(out, cam, loss, parts)
+        seen.append(dict(parts))
+        return total
+
+    trainer.method.loss_terms = record
+    return seen

@@ -266,6 +266,9 @@ class FullConfig:
     #   (Monodepth's, Godard et al. CVPR 2017, on depth / its mean; edges from the pseudo view's image); 0: off
     far_field: str | None = None  # the far field for this method (train.far_field: none | elevation); None: train's
     refine_stop_fraction: float | None = None  # strategy.refine_stop_fraction for this method; None: the strategy's
+    path_consistency: float = 0.0  # weight of the two inputs' agreement at each pseudo view trained on: the photos of
+    #   the inputs it lies between, warped into it with its rendered depth (warpgs.binocular.pose_warp), compared
+    #   (L1 where both land); its gradient reaches the depth each step, unlike the pseudo view's fixed image. 0: off
     flythrough_frames: int = 24  # frames per trajectory in flythrough.gif
 
     LIMITS = {"cycles": ">= 0", "baseline_fraction": "[0, 1)", "pseudo_weight": ">= 0", "lpips_weight": ">= 0",
@@ -273,7 +276,7 @@ class FullConfig:
               "pseudo_loss": "{lpips, l1}", "guidance": "{warped, render}", "stereo_sources": "{inputs, all}",
               "init_opacity": "(0, 1)", "max_new": ">= 0", "pseudo_mask": "{seen, reliable, all}", "growth_budget": ">= 0",
               "drop_rate": "[0, 1)", "pseudo_depth_smooth": ">= 0", "far_field": FAR_FIELD_RULE, "refine_stop_fraction": "[0, 1]",
-              "flythrough_frames": ">= 0"}
+              "path_consistency": ">= 0", "flythrough_frames": ">= 0"}
 
 
 IMPORTANCE_VIEWS = ("train", "virtual", "pseudo")

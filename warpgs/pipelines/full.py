@@ -95,6 +95,11 @@ class FullMethod(Method):
             trainer.drop_rate = self.settings.drop_rate
         if self.settings.far_field is not None:
             trainer.far_field = trainer.fit_far_field(self.settings.far_field, getattr(trainer.scene, "geometry", None))
+        if self.settings.path_consistency > 0:  # the pseudo views carry their start input's intrinsics and size
+            Ks = torch.stack([torch.as_tensor(c.K, dtype=torch.float32).cpu() for c in trainer.train_cams])
+            if len({(c.width, c.height) for c in trainer.train_cams}) > 1 or not torch.allclose(Ks, Ks[:1].expand_as(Ks)):
+                raise ValueError("full.path_consistency needs input views of one size and one camera matrix (K); "
+                                 "these differ: set full.path_consistency=0")
         self.pseudo_cams: list = []
         self.pseudo_order: list[int] = []
         self.pseudo_rng = np.random.default_rng(cfg.train.seed + 3)
@@ -160,6 +165,13 @@ class FullMethod(Method):
                 sm = losses.edge_aware_smoothness(po.depth, pc.image)
                 loss = loss + self.settings.pseudo_depth_smooth * sm
                 parts["pseudo_depth_smooth"] = sm
+            if self.settings.path_consistency > 0:
+                pair = pseudo_pair(pc.name, len(tr.train_cams))
+                if pair is not None:
+                    a, b = (tr.train_cams[k] for k in pair)
+                    pcl = two_view_consistency(po.depth, pc, a, b)
+                    loss = loss + self.settings.path_consistency * pcl
+                    parts["path_consistency"] = pcl
         return loss
 
     def graph_safe(self) -> bool:
@@ -410,6 +422,30 @@ class FullMethod(Method):
                              self.pseudo_config().trajectory.order)
             write_report(tr.out, metrics, self.history, baseline)
         return metrics
+
+
+def pseudo_pair(name: str, n_inputs: int) -> tuple[int, int] | None:
+    """The indices of the two inputs a pseudo view lies between, from its name (``c{cycle}_{start}_{end}_{frame}``,
+    ``FullMethod.update_pseudo_views``; checkpoints keep the names); None for a name of another form."""
+    parts = name.split("_")
+    if len(parts) != 4 or not (parts[1].isdigit() and parts[2].isdigit()):
+        return None
+    a, b = int(parts[1]), int(parts[2])
+    return (a, b) if a != b and max(a, b) < n_inputs else None
+
+
+def two_view_consistency(depth: torch.Tensor, view, a, b) -> torch.Tensor:
+    """``full.path_consistency``'s term for one pseudo view ``view`` (its rendered ``depth`` [H, W]): the photos of
+    inputs ``a`` and ``b`` warped into it with that depth (``pose_warp``), mean absolute difference over the pixels
+    both land in. Zero at the true depth of a surface both inputs see alike; its gradient reaches ``depth`` only.
+    The inputs must share the view's intrinsics and size (the pseudo views' are their start input's)."""
+    from warpgs.binocular import pose_warp, rigid_inverse
+
+    inv = rigid_inverse(view.viewmat.float())
+    wa, ma = pose_warp(a.image, depth, a.viewmat.float() @ inv, view.K)
+    wb, mb = pose_warp(b.image, depth, b.viewmat.float() @ inv, view.K)
+    both = ma * mb
+    return ((wa - wb).abs().mean(-1) * both).sum() / (both.sum() + 1e-6)
 
 
 def inputs_plane_sweep(cams, bounds, stereo_cfg):
