@@ -291,6 +291,40 @@ def session38_images4(results: Path) -> dict:
     return merged({k: {0: v[0]} for k, v in g.items() if k[2] == "baseline" and 0 in v}, load(results / "s38" / "i.txt", "i"))
 
 
+# The runs of today's defaults on fern, DTU and lego: (summary file under bench/results, run name without its seed),
+# later entries adding seeds (bench/readme_results.py's table and the session tables beside which variants are put)
+NAMED_DEFAULTS = {
+    ("fern", "baseline"): [("s36/c.txt", "c_fern_db")],
+    ("fern", "full"): [("s37/t.txt", "t_r_fern_full"), ("s38/l.txt", "l_fern_full_rs05")],  # seed 0, seeds 1-2
+    ("dtu", "baseline"): [("s36/c.txt", "c_dtu_db")],
+    ("dtu", "full"): [("s37/t.txt", "t_p_dtu_full")],
+    ("lego", "baseline"): [("s36/e.txt", "e_lego_baseline_db")],
+    ("lego", "full"): [("s38/l.txt", "l_lego_full_pw02")],
+}
+
+
+def named_default(results: Path, scene: str, method: str) -> dict[int, tuple[float, int]]:
+    """{seed: (test PSNR, Gaussians)} of today's default on ``scene`` (fern, dtu, lego) for ``method``."""
+    import seed_medians as sm
+
+    out: dict = {}
+    for file, name in NAMED_DEFAULTS[(scene, method)]:
+        out.update(sm.read([results / file]).get(name, {}))
+    return out
+
+
+def named_beside_defaults(results: Path, path: Path, names: list[str]) -> list[str]:
+    """``seed_medians.table`` of fern's and DTU's defaults (both methods), then the runs ``names`` of summary ``path``."""
+    import seed_medians as sm
+
+    rows = {f"{scene} {method} (default)": named_default(results, scene, method)
+            for scene in ("dtu", "fern") for method in ("baseline", "full")}
+    rows = {k: v for k, v in rows.items() if v}
+    runs = sm.read([path])
+    rows.update({n: runs[n] for n in names if n in runs})
+    return sm.table(rows)
+
+
 def session38_named_table(results: Path) -> list[str]:
     """DTU, lego and fern in session 38 beside the defaults they compare with, median [min, max] over the seeds each
     row names."""
@@ -299,15 +333,15 @@ def session38_named_table(results: Path) -> list[str]:
     runs = sm.read([results / "s36" / "c.txt", results / "s36" / "e.txt", results / "s36" / "f.txt",
                     results / "s37" / "t.txt", results / "s38" / "d.txt", results / "s38" / "l.txt",
                     results / "s38" / "v.txt"])
-    fern_rs = {**runs.get("t_r_fern_full", {}), **runs.get("l_fern_full_rs05", {})}
-    rows = [("fern 3 views, 3000 it", "baseline (default)", runs.get("c_fern_db")),
+    fern_rs = named_default(results, "fern", "full")
+    rows = [("fern 3 views, 3000 it", "baseline (default)", named_default(results, "fern", "baseline")),
             ("fern 3 views, 3000 it", "full (session 37 default, pseudo weight 1)", runs.get("c_fern_full_db")),
             ("fern 3 views, 3000 it", "full, full.refine_stop_fraction=0.5", fern_rs),
-            ("lego 8 views, 10,000 it", "baseline (default)", runs.get("e_lego_baseline_db")),
+            ("lego 8 views, 10,000 it", "baseline (default)", named_default(results, "lego", "baseline")),
             ("lego 8 views, 10,000 it", "full (session 37 default, pseudo weight 1)", runs.get("f_lego_full")),
-            ("lego 8 views, 10,000 it", "full, full.pseudo_weight=0.2", runs.get("l_lego_full_pw02")),
-            ("DTU scan65 3 views, 3000 it", "baseline (default)", runs.get("c_dtu_db")),
-            ("DTU scan65 3 views, 3000 it", "full (default, pseudo weight 0.2)", runs.get("t_p_dtu_full")),
+            ("lego 8 views, 10,000 it", "full, full.pseudo_weight=0.2", named_default(results, "lego", "full")),
+            ("DTU scan65 3 views, 3000 it", "baseline (default)", named_default(results, "dtu", "baseline")),
+            ("DTU scan65 3 views, 3000 it", "full (default, pseudo weight 0.2)", named_default(results, "dtu", "full")),
             ("DTU scan65 3 views, 3000 it", "full, full.cycles=3", runs.get("v_c3_dtu_full")),
             ("DTU scan65 3 views, 3000 it", "full, full.baseline_fraction=0.6", runs.get("v_bf6_dtu_full")),
             ("DTU scan65 3 views, 10,000 it", "baseline (default)", runs.get("d_dtu10k_baseline")),
@@ -353,10 +387,8 @@ def session40_tables(results: Path) -> list[list[str]]:
             default, variant = session37_default(results), load(path, prefix)
             out.append([f"{label}, 384x256, 3000 it, seeds 0-2, against session 37's default:", ""]
                        + table([("session 37 default", default), (label, variant)]) + change_lines(default, variant, label))
-            runs = sm.read([results / "s36" / "c.txt", results / "s37" / "t.txt", results / "s38" / "l.txt", path])
-            keep = ("c_dtu_db", "t_p_dtu_full", "c_fern_db", "t_r_fern_full", "l_fern_full_rs05",
-                    f"{prefix}_dtu_baseline", f"{prefix}_dtu_full", f"{prefix}_fern_baseline", f"{prefix}_fern_full")
-            out.append(sm.table({k: v for k, v in runs.items() if k in keep}))
+            out.append(named_beside_defaults(results, path, [f"{prefix}_{scene}_{m}" for scene in ("dtu", "fern")
+                                                             for m in ("baseline", "full")]))
     if (d40 / "i.txt").is_file():
         default, variant = session38_images4(results), load(d40 / "i.txt", "i")
         out.append(["path partner at images_4 (768x512, 10,000 it), seeds 0-2, against session 38's default:", ""]
@@ -377,10 +409,8 @@ def session41_tables(results: Path) -> list[list[str]]:
         variants = {names.get(k, k): v for k, v in load_variants(d41 / "c.txt", "c").items()}
         out.append(["the full method with full.path_consistency, 384x256, 3000 it, seeds 0-2, against session 37's "
                     "default:", ""] + variant_table(session37_default(results), variants, "default (session 37)"))
-        runs = sm.read([results / "s36" / "c.txt", results / "s37" / "t.txt", results / "s38" / "l.txt", d41 / "c.txt"])
-        keep = ("c_dtu_db", "t_p_dtu_full", "c_fern_db", "t_r_fern_full", "l_fern_full_rs05",
-                *(f"c_{k}_{scene}_full" for k in names for scene in ("dtu", "fern")))
-        out.append(sm.table({k: v for k, v in runs.items() if k in keep}))
+        out.append(named_beside_defaults(results, d41 / "c.txt",
+                                         [f"c_{k}_{scene}_full" for k in names for scene in ("dtu", "fern")]))
     if (d41 / "i.txt").is_file():
         out.append(["the full method with full.path_consistency=1.0 at images_4 (768x512, 10,000 it), seeds 0-2, against "
                     "session 38's default:", ""]

@@ -67,19 +67,16 @@ def rows(results: Path) -> list[str]:
     out.append(_row("synthetic room, 3 views", "no arguments: 128x96, 1000 it", doc["machine"],
                     {int(s): v["baseline"]["psnr"] for s, v in noarg.items()},
                     {int(s): v["full"]["psnr"] for s, v in noarg.items()}, f"`{NOARG}`"))
-    c = _psnrs(results / "s36" / "c.txt")
-    t = _psnrs(results / "s37" / "t.txt")
-    ell = _psnrs(results / "s38" / "l.txt")
-    out.append(_row("LLFF fern, 3 views", "504x378, 3000 it", "H200", c.get("c_fern_db", {}),
-                    {**t.get("t_r_fern_full", {}), **ell.get("l_fern_full_rs05", {})},
-                    "`s36/c.txt`, `s37/t.txt`, `s38/l.txt`"))
-    out.append(_row("DTU scan65, 3 views (masked)", "400x300, 3000 it", "H200", c.get("c_dtu_db", {}),
-                    t.get("t_p_dtu_full", {}), "`s36/c.txt`, `s37/t.txt`"))
-    out.append(_row("Blender lego, 8 views", "400x400, 10,000 it", "H200",
-                    _psnrs(results / "s36" / "e.txt").get("e_lego_baseline_db", {}),
-                    ell.get("l_lego_full_pw02", {}), "`s36/e.txt`, `s38/l.txt`"))
+    for scene, label, setting in (("fern", "LLFF fern, 3 views", "504x378, 3000 it"),
+                                  ("dtu", "DTU scan65, 3 views (masked)", "400x300, 3000 it"),
+                                  ("lego", "Blender lego, 8 views", "400x400, 10,000 it")):
+        base, full = (ct.named_default(results, scene, m) for m in ("baseline", "full"))
+        files = dict.fromkeys(f for m in ("baseline", "full") for f, _ in ct.NAMED_DEFAULTS[(scene, m)])
+        out.append(_row(label, setting, "H200", {k: p for k, (p, _) in base.items()},
+                        {k: p for k, (p, _) in full.items()}, ", ".join(f"`{f}`" for f in files)))
     out.append(_row("Blender lego, 8 views", "best setting: + opacity noise 0.8, SH degree 1, "
-                    "`optim.means_lr_final=3.2e-5`, 10,000 it", "H200", c.get("c_lego_db", {}), {}, "`s36/c.txt`"))
+                    "`optim.means_lr_final=3.2e-5`, 10,000 it", "H200",
+                    _psnrs(results / "s36" / "c.txt").get("c_lego_db", {}), {}, "`s36/c.txt`"))
     for runs, setting, source in (
             (ct.session37_default(results), "384x256, 3000 it", "`s36/b_all.txt`, `s37/t.txt`"),
             (ct.session38_images4(results), "768x512 (images_4), 10,000 it", "`s36/g.txt`, `s38/i.txt`")):

@@ -213,9 +213,11 @@ def test_session40_tables_put_each_partner_run_beside_the_default_it_changes(tmp
     assert row == ("| castle_p30 | 6 | 20.10 [20.00, 20.20] | 20.70 [20.70, 20.70] | 20.50 [20.50, 20.50] | "
                    "21.50 [21.50, 21.50] | +1.00 |")
     named = "\n".join(tables[1])
-    for name in ("c_dtu_db", "t_p_dtu_full", "p_dtu_baseline", "p_dtu_full", "c_fern_db", "t_r_fern_full",
-                 "l_fern_full_rs05", "p_fern_full"):
+    for name in ("dtu baseline (default)", "dtu full (default)", "p_dtu_baseline", "p_dtu_full",
+                 "fern baseline (default)", "fern full (default)", "p_fern_full"):
         assert f"| {name} |" in named
+    # fern's default full method: seed 0 of s37/t.txt and seeds 1-2 of s38/l.txt (NAMED_DEFAULTS)
+    assert "| fern full (default) | 22.95 [22.90, 23.00] | 0, 1 |" in named
     assert "c_dtu_full_dec" not in named and "castle" not in named
     row = next(r for r in tables[2] if r.startswith("| castle_p30 | 9 |"))
     assert row.endswith("| 24.00 [24.00, 24.00] | 25.00 [25.00, 25.00] | +1.00 |")
@@ -249,5 +251,5 @@ def test_session41_tables_put_each_weight_beside_the_default_baseline(tmp_path):
     # the baseline's median 20.10: 1.0 gives 21.20 (+1.10), 0.3 gives 20.50 (+0.40); the default's full 20.70 (+0.60)
     assert "| default (session 37) | 20.70 (+0.60) |" in text
     assert "| path_consistency=1.0 | 21.20 (+1.10) |" in text and "| path_consistency=0.3 | 20.50 (+0.40) |" in text
-    assert "| c_pc10_dtu_full |" in "\n".join(tables[1]) and "| t_p_dtu_full |" in "\n".join(tables[1])
+    assert "| c_pc10_dtu_full |" in "\n".join(tables[1]) and "| dtu full (default) |" in "\n".join(tables[1])
     assert "| path_consistency=1.0 | 25.30 (+1.00) |" in "\n".join(tables[2])
