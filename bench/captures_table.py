@@ -70,7 +70,8 @@ median).
   38's (``s40/i.txt``, ``i_...``). The tables of the files present are printed.
 - session 41 (``bench/gpu_session41.sh``, prepared in session 40): the full method with ``full.path_consistency`` 1.0
   and 0.3 against session 37's default at 384x256, seeds 0-2 (``s41/c.txt``, ``c_pc10_...``, ``c_pc03_...``; DTU and
-  fern beside their defaults), and 1.0 at images_4 against session 38's (``s41/i.txt``, ``i_...``).
+  fern beside their defaults), the baseline with ``train.path_consistency`` at the same weights (``s41/b.txt``,
+  ``b_pc10_...``: the term in both methods), and 1.0 at images_4 against session 38's (``s41/i.txt``, ``i_...``).
 - session 39 (the last 290 s of two H200s): the full method at pseudo weight 0.1 against session 37's default (0.2)
   at 384x256, seeds 0-2 (``s39/x.txt``, ``x_...``; DTU's ``x_dtu_full_sK`` beside ``s37/t.txt``'s).
 """
@@ -411,6 +412,15 @@ def session41_tables(results: Path) -> list[list[str]]:
                     "default:", ""] + variant_table(session37_default(results), variants, "default (session 37)"))
         out.append(named_beside_defaults(results, d41 / "c.txt",
                                          [f"c_{k}_{scene}_full" for k in names for scene in ("dtu", "fern")]))
+    if (d41 / "b.txt").is_file() and (d41 / "c.txt").is_file():  # the term in both methods
+        default, full = session37_default(results), load_variants(d41 / "c.txt", "c")
+        for k, base in sorted(load_variants(d41 / "b.txt", "b").items()):
+            both = merged(base, full.get(k, {}))
+            label = f"{names.get(k, k)} in both methods"
+            out.append([f"{label} (train.path_consistency in the baseline), 384x256, 3000 it, seeds 0-2:", ""]
+                       + table([("session 37 default", default), (label, both)]) + change_lines(default, both, label))
+        out.append(named_beside_defaults(results, d41 / "b.txt",
+                                         [f"b_{k}_{scene}_baseline" for k in names for scene in ("dtu", "fern")]))
     if (d41 / "i.txt").is_file():
         out.append(["the full method with full.path_consistency=1.0 at images_4 (768x512, 10,000 it), seeds 0-2, against "
                     "session 38's default:", ""]

@@ -253,3 +253,14 @@ def test_session41_tables_put_each_weight_beside_the_default_baseline(tmp_path):
     assert "| path_consistency=1.0 | 21.20 (+1.10) |" in text and "| path_consistency=0.3 | 20.50 (+0.40) |" in text
     assert "| c_pc10_dtu_full |" in "\n".join(tables[1]) and "| dtu full (default) |" in "\n".join(tables[1])
     assert "| path_consistency=1.0 | 25.30 (+1.00) |" in "\n".join(tables[2])
+    # the baseline with the term too: the pair's gain over its own baseline, and the changes against the default
+    (tmp_path / "s41" / "b.txt").write_text("b_pc10_castle_p30_6v_baseline_s0 20.6 1\nb_pc10_castle_p30_6v_baseline_s1 20.8 1\n"
+                                            "b_pc10_dtu_baseline_s0 26.9 5\n")
+    tables = ct.session41_tables(tmp_path)
+    assert len(tables) == 5
+    both = "\n".join(tables[2])
+    assert both.startswith("path_consistency=1.0 in both methods (train.path_consistency in the baseline)")
+    assert "| castle_p30 | 6 | 20.10 [20.00, 20.20] | 20.70 [20.70, 20.70] | 20.70 [20.60, 20.80] | " \
+           "21.20 [21.00, 21.40] | +0.50 |" in both
+    assert "baseline +0.60 dB (worst +0.60), full +0.50 dB (worst +0.50)" in both
+    assert "| b_pc10_dtu_baseline |" in "\n".join(tables[3])

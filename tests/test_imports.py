@@ -14,7 +14,7 @@ LAYERS = [
     ["model", "data"],
     ["strategy"],
     ["pseudo", "densify"],
-    ["points", "clearance"],
+    ["points", "clearance", "pathconsistency"],
     ["config"],
     ["optim"],
     ["graphstep"],

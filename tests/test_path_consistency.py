@@ -7,7 +7,8 @@ import pytest
 import torch
 
 from devices import DEVICES  # tests/devices.py: WARPGS_TEST_DEVICES restricts them
-from warpgs.pipelines.full import pseudo_pair, two_view_consistency
+from warpgs.pathconsistency import two_view_consistency
+from warpgs.pipelines.full import pseudo_pair
 
 
 def textured_plane(device="cpu"):
@@ -106,3 +107,48 @@ def test_inputs_of_different_intrinsics_are_refused_by_name(tmp_path):
     scene.train[1].K = scene.train[1].K * np.array([[1.1, 1, 1], [1, 1.1, 1], [1, 1, 1]], np.float32)
     with pytest.raises(ValueError, match="full.path_consistency needs input views of one size and one camera matrix"):
         make_trainer(cfg, scene, tmp_path / "b")
+
+
+def test_any_method_has_it_at_drawn_path_poses_and_resumes_bit_for_bit(tmp_path):
+    """``train.path_consistency``: the poses are the trajectories' interior ones between neighbouring inputs; from
+    its start on every step adds the term (one more render), a run differs from one without it, and a run stopped
+    half-way resumes to the same parameters (the draws come from the checkpointed generator)."""
+    from tiny_scene import make_scene, param_copy, same_params, tiny_config
+    from warpgs.train import Trainer
+
+    def cfg_of(weight):
+        cfg = tiny_config(30)
+        cfg.train.path_consistency = weight
+        cfg.train.path_consistency_start = 0.3
+        cfg.train.checkpoint_every = 15
+        cfg.pseudo.trajectory.n_frames = 5
+        return cfg
+
+    scene = make_scene()
+    whole = Trainer(cfg_of(1.0), scene, tmp_path / "whole", log=lambda m: None)
+    pc = whole.path_consistency
+    n = len(scene.train)
+    assert len(pc.pairs) == 3 * (n - 1) and all(abs(a - b) == 1 for a, b in pc.pairs)  # 3 poses between each pair of neighbours
+    assert whole.path_consistency_active(9) and not whole.path_consistency_active(8)
+    parts = []
+    original = whole.compute_loss
+
+    def spy(out, cam):
+        loss, p = original(out, cam)
+        parts.append(p)
+        return loss, p
+
+    whole.compute_loss = spy
+    whole.train()
+    assert ["path_consistency" in p for p in parts] == [k >= 9 for k in range(30)]
+    off = Trainer(cfg_of(0.0), make_scene(), None, log=lambda m: None)
+    assert off.path_consistency is None
+    off.train()
+    assert not same_params(param_copy(whole), param_copy(off))
+    half = Trainer(cfg_of(1.0), make_scene(), tmp_path / "half", log=lambda m: None)
+    half.train(15)
+    half.save_checkpoint()
+    resumed = Trainer(cfg_of(1.0), make_scene(), tmp_path / "half", log=lambda m: None)
+    resumed.load_checkpoint()
+    resumed.train()
+    assert same_params(param_copy(resumed), param_copy(whole))

@@ -71,8 +71,8 @@ class StepGraph:
             return False  # a torch whose graphs cannot hold draws from the trainer's own generator
         if lc.depth_weight > 0 and lc.depth_prior == "scene" and cam.depth is not None:
             return False
-        if tr.binocular_active(step):
-            return False  # a second render a step, of a pose drawn on the device: not held
+        if tr.binocular_active(step) or tr.path_consistency_active(step):
+            return False  # a second render a step, of a pose drawn anew: not held
         if not tr.densify_only_updates_state(step) or not getattr(tr.method, "graph_safe", lambda: False)():
             return False
         # every parameter has its Adam state (the first step makes it, outside any graph)

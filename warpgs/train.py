@@ -533,6 +533,15 @@ class Trainer:
                                      cfg.pseudo.trajectory.order, tc.binocular_reach)
             self.binocular = Binocular(tc.binocular, tc.binocular_shift, int(tc.binocular_start * tc.iterations),
                                        tc.binocular_smooth, self.device, seed, path=path)
+        # the two inputs' agreement at a pose of the path (train.path_consistency; warpgs/pathconsistency.py)
+        self.path_consistency = None
+        if cfg.train.path_consistency > 0 and len(scene.train) >= 2:
+            from warpgs.pathconsistency import PathConsistency
+
+            tc = cfg.train
+            self.path_consistency = PathConsistency(tc.path_consistency, int(tc.path_consistency_start * tc.iterations),
+                                                    scene.train, cfg.pseudo.trajectory.n_frames,
+                                                    cfg.pseudo.trajectory.order, seed, self.device)
         # CoR-GS (train.co_reg): the second model of the co-regularised pair, its optimiser and strategy
         self.pair = None
         if cfg.train.co_reg:
@@ -729,6 +738,9 @@ class Trainer:
         loss, parts = self.compute_loss(out, cam)
         if self.binocular_active(step):
             loss = loss + self.binocular.loss(self.model, out, cam, bg, parts)
+        if self.path_consistency_active(step):
+            loss = loss + self.path_consistency.loss(self.model, self.train_cams, self.background,
+                                                     self.opacity_scale(step), parts)
         if self.pair is not None:  # its partner on the same view, and the two co-regularised (one backward for both)
             loss = loss + self.pair.loss(step, cam, bg, parts)
         loss.backward()
@@ -930,6 +942,10 @@ class Trainer:
         self.decay_opacities(self.step if step is None else step)
         return record, apply
 
+    def path_consistency_active(self, step: int) -> bool:
+        """Whether ``train.path_consistency`` adds its term to the loss of ``step``."""
+        return self.path_consistency is not None and self.path_consistency.active(step)
+
     def binocular_active(self, step: int) -> bool:
         """Whether ``train.binocular`` adds its term to the loss of ``step`` (from ``train.binocular_start`` on)."""
         return self.binocular is not None and self.binocular.active(step)
@@ -1086,6 +1102,8 @@ class Trainer:
         if "progress" in parts:
             if self.binocular is not None:
                 st["binocular_gen"] = self.binocular.gen.get_state()
+            if self.path_consistency is not None:
+                st["path_consistency_rng"] = copy.deepcopy(self.path_consistency.rng.bit_generator.state)
             st.update(step=self.step, split_gen=self.split_gen.get_state(), drop_gen=self.drop_gen.get_state(),
                       view_rng=copy.deepcopy(self.view_rng.bit_generator.state), order=list(self.order),
                       torch_rng=torch.get_rng_state(), stat_start=self.guard.stat_start, in_phase=self.in_phase)
@@ -1125,6 +1143,8 @@ class Trainer:
                 self.drop_gen.set_state(st["drop_gen"])
             if self.binocular is not None and "binocular_gen" in st:
                 self.binocular.gen.set_state(st["binocular_gen"])
+            if self.path_consistency is not None and "path_consistency_rng" in st:
+                self.path_consistency.rng.bit_generator.state = copy.deepcopy(st["path_consistency_rng"])
             self.view_rng.bit_generator.state = copy.deepcopy(st["view_rng"])
             self.order = list(st["order"])
             torch.set_rng_state(st["torch_rng"])

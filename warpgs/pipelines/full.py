@@ -34,6 +34,7 @@ from warpgs import losses
 from warpgs.config import FullConfig, check_limits
 from warpgs.console import warn_once
 from warpgs.model import rgb_to_sh
+from warpgs.pathconsistency import check_one_camera, two_view_consistency
 from warpgs.train import STATE_PARTS, Method, Trainer
 
 ABLATIONS = {
@@ -96,10 +97,7 @@ class FullMethod(Method):
         if self.settings.far_field is not None:
             trainer.far_field = trainer.fit_far_field(self.settings.far_field, getattr(trainer.scene, "geometry", None))
         if self.settings.path_consistency > 0:  # the pseudo views carry their start input's intrinsics and size
-            Ks = torch.stack([torch.as_tensor(c.K, dtype=torch.float32).cpu() for c in trainer.train_cams])
-            if len({(c.width, c.height) for c in trainer.train_cams}) > 1 or not torch.allclose(Ks, Ks[:1].expand_as(Ks)):
-                raise ValueError("full.path_consistency needs input views of one size and one camera matrix (K); "
-                                 "these differ: set full.path_consistency=0")
+            check_one_camera(trainer.train_cams, "full.path_consistency")
         self.pseudo_cams: list = []
         self.pseudo_order: list[int] = []
         self.pseudo_rng = np.random.default_rng(cfg.train.seed + 3)
@@ -432,20 +430,6 @@ def pseudo_pair(name: str, n_inputs: int) -> tuple[int, int] | None:
         return None
     a, b = int(parts[1]), int(parts[2])
     return (a, b) if a != b and max(a, b) < n_inputs else None
-
-
-def two_view_consistency(depth: torch.Tensor, view, a, b) -> torch.Tensor:
-    """``full.path_consistency``'s term for one pseudo view ``view`` (its rendered ``depth`` [H, W]): the photos of
-    inputs ``a`` and ``b`` warped into it with that depth (``pose_warp``), mean absolute difference over the pixels
-    both land in. Zero at the true depth of a surface both inputs see alike; its gradient reaches ``depth`` only.
-    The inputs must share the view's intrinsics and size (the pseudo views' are their start input's)."""
-    from warpgs.binocular import pose_warp, rigid_inverse
-
-    inv = rigid_inverse(view.viewmat.float())
-    wa, ma = pose_warp(a.image, depth, a.viewmat.float() @ inv, view.K)
-    wb, mb = pose_warp(b.image, depth, b.viewmat.float() @ inv, view.K)
-    both = ma * mb
-    return ((wa - wb).abs().mean(-1) * both).sum() / (both.sum() + 1e-6)
 
 
 def inputs_plane_sweep(cams, bounds, stereo_cfg):

@@ -1,0 +1,72 @@
+"""Two-view consistency at poses of the capture path (``full.path_consistency``, ``train.path_consistency``).
+
+At a pose between two neighbouring inputs, the photos of both, warped into it with the depth the model renders there
+(``warpgs.binocular.pose_warp``), should agree wherever both see the same surface. The term is their mean absolute
+difference over the pixels both land in; its gradient reaches that depth only (the photos are fixed). The full method
+evaluates it at the pseudo view it trains on anyway (its render is there; ``full.path_consistency``). Any method can
+have it at a pose of the pseudo views' trajectories drawn each step, at the cost of one more render
+(``train.path_consistency``, this module's ``PathConsistency``): the measure of whether a gain is the pseudo views'.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+
+
+def two_view_consistency(depth: torch.Tensor, view, a, b) -> torch.Tensor:
+    """The term for one pose ``view`` (viewmat, K) and its rendered ``depth`` [H, W]: the photos of inputs ``a`` and
+    ``b`` warped into it with that depth, mean absolute difference over the pixels both land in (0 where none do).
+    The inputs must share the view's intrinsics and size."""
+    from warpgs.binocular import pose_warp, rigid_inverse
+
+    inv = rigid_inverse(view.viewmat.float())
+    wa, ma = pose_warp(a.image, depth, a.viewmat.float() @ inv, view.K)
+    wb, mb = pose_warp(b.image, depth, b.viewmat.float() @ inv, view.K)
+    both = ma * mb
+    return ((wa - wb).abs().mean(-1) * both).sum() / (both.sum() + 1e-6)
+
+
+def check_one_camera(cams, option: str) -> None:
+    """A clear error unless every view of ``cams`` has one size and one camera matrix (the warp's assumption)."""
+    Ks = torch.stack([torch.as_tensor(c.K, dtype=torch.float32).cpu() for c in cams])
+    if len({(c.width, c.height) for c in cams}) > 1 or not torch.allclose(Ks, Ks[:1].expand_as(Ks)):
+        raise ValueError(f"{option} needs input views of one size and one camera matrix (K); these differ: "
+                         f"set {option}=0")
+
+
+class PathConsistency:
+    """``train.path_consistency`` for one trainer: the interior poses of the pseudo views' trajectories between each
+    pair of neighbouring inputs; from step ``start`` on, each step one of them (drawn with a generator the checkpoint
+    keeps) is rendered and the term computed there."""
+
+    def __init__(self, weight: float, start: int, cams, n_frames: int, order, seed: int, device):
+        from warpgs.pseudo.trajectory import path_trajectories
+
+        check_one_camera(cams, "train.path_consistency")
+        self.weight, self.start = weight, start
+        V = np.stack([np.asarray(torch.as_tensor(c.viewmat).cpu(), np.float64) for c in cams])
+        poses, self.pairs = [], []
+        for traj in path_trajectories(V, max(n_frames, 3), order=order):
+            for vm in traj.viewmats[1:-1]:
+                poses.append(vm)
+                self.pairs.append((traj.start, traj.end))
+        self.poses = torch.as_tensor(np.stack(poses), dtype=torch.float32, device=device)
+        self.rng = np.random.default_rng(int(seed) + 29)
+
+    def active(self, step: int) -> bool:
+        return self.weight > 0 and step >= self.start
+
+    def loss(self, model, cams, background, opacity_scale, parts: dict) -> torch.Tensor:
+        """weight x the term at one drawn pose (rendered over ``background`` with ``opacity_scale``), recorded in
+        ``parts`` as ``path_consistency``."""
+        from types import SimpleNamespace
+
+        k = int(self.rng.integers(len(self.pairs)))
+        a, b = (cams[i] for i in self.pairs[k])
+        view = SimpleNamespace(viewmat=self.poses[k], K=a.K)
+        out = model.render(view.viewmat, a.K, a.width, a.height, background=background, opacity_scale=opacity_scale,
+                           check_finite=False)
+        term = two_view_consistency(out.depth, view, a, b)
+        parts["path_consistency"] = term.detach()
+        return self.weight * term
