@@ -377,8 +377,6 @@ def session40_tables(results: Path) -> list[list[str]]:
     """Session 40's tables (module docstring), for the summaries present: each variant of the binocular partner
     beside the default it changes, both methods (their full - baseline in the last column), then DTU's and fern's
     runs beside their defaults."""
-    import seed_medians as sm
-
     d40 = results / "s40"
     out = []
     for prefix, label in (("p", "path partner"), ("h", "path partner, reach 0.25"),
@@ -401,8 +399,6 @@ def session40_tables(results: Path) -> list[list[str]]:
 def session41_tables(results: Path) -> list[list[str]]:
     """Session 41's tables (module docstring), for the summaries present: each weight of ``full.path_consistency``
     as a variant of the full method against the default's baseline, then DTU's and fern's runs beside their defaults."""
-    import seed_medians as sm
-
     d41 = results / "s41"
     names = {"pc10": "path_consistency=1.0", "pc03": "path_consistency=0.3"}
     out = []

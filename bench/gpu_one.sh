@@ -31,6 +31,16 @@ export -f one
 one4() { DS=4 IT=10000 one "$@"; }
 export -f one4
 
+# cuda_tests FILE ...: the tests of FILE that run on CUDA (-k cuda: the machine's packed Warp has no CPU compiler, and
+# the files' other tests run on the CPU; session 40's first call failed on them), once per machine: a passed run
+# leaves $R/t_ok; the last lines in $OUT/t.log (bench/gpu_session40.sh on).
+cuda_tests() {
+  [ -f "$R/t_ok" ] && return 0
+  timeout 200 python3 -m pytest -q -p no:cacheprovider "$@" -k cuda 2>&1 | tail -3 | tee "$OUT/t.log"
+  grep -q " passed" "$OUT/t.log" && ! grep -q "failed\|error" "$OUT/t.log" && python3 -c "import torch; assert torch.cuda.is_available()" \
+    && touch "$R/t_ok"
+}
+
 # named NAME METHOD DATASET SCENE VIEWS SEED [--set k=v ...]: sparse_run on a named dataset (dtu, llff, ...) for
 # 3000 iterations, 10 evaluations.
 named() {

@@ -44,22 +44,15 @@ lines_i() {
     echo "one4 i_${c}_${v}v_${m}_s$s $m $c $v $s --set train.binocular_partner=path"
   done; done; done; done
 }
-cuda_tests() {  # once per machine: a passed run leaves $R/t_ok. Only the tests on CUDA (-k cuda): the machine's packed
-  # Warp has no CPU compiler, and the file's other tests run on the CPU (session 40's first call failed on them)
-  [ -f "$R/t_ok" ] && return 0
-  timeout 200 python3 -m pytest -q -p no:cacheprovider tests/test_binocular.py -k cuda 2>&1 | tail -3 | tee "$OUT/t.log"
-  grep -q " passed" "$OUT/t.log" && ! grep -q "failed\|error" "$OUT/t.log" && python3 -c "import torch; assert torch.cuda.is_available()" \
-    && touch "$R/t_ok"
-}
 case $P in
-t) cuda_tests ;;
+t) cuda_tests tests/test_binocular.py ;;
 p) lines_small p --set train.binocular_partner=path | run_lines 48; summary p_ p.txt ;;
 b) lines_small b --set train.binocular_start=0.25 | grep -v _fern_ | run_lines 48; summary b_ b.txt ;;
 h) lines_small h --set train.binocular_partner=path --set train.binocular_reach=0.25 | run_lines 48; summary h_ h.txt ;;
 i) lines_i | run_lines 24; summary i_ i.txt ;;
-q) cuda_tests || { echo "the CUDA tests failed: no runs"; exit 1; }
+q) cuda_tests tests/test_binocular.py || { echo "the CUDA tests failed: no runs"; exit 1; }
    { lines_small p --set train.binocular_partner=path; lines_i; } | run_lines 48; summary p_ p.txt; summary i_ i.txt ;;
-z) cuda_tests || { echo "the CUDA tests failed: no runs"; exit 1; }
+z) cuda_tests tests/test_binocular.py || { echo "the CUDA tests failed: no runs"; exit 1; }
    { lines_small p --set train.binocular_partner=path; lines_small b --set train.binocular_start=0.25 | grep -v _fern_
      lines_i; } | run_lines 48; summary p_ p.txt; summary b_ b.txt; summary i_ i.txt ;;
 *) echo "unknown phase $P"; exit 2 ;;

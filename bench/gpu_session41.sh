@@ -38,19 +38,12 @@ lines_i() {
     echo "one4 i_${c}_${v}v_full_s$s full $c $v $s --set full.path_consistency=1.0"
   done; done; done
 }
-cuda_tests() {  # once per machine: a passed run leaves $R/t_ok (the tests on CUDA only: the packed Warp has no CPU
-  [ -f "$R/t_ok" ] && return 0  # compiler)
-  timeout 200 python3 -m pytest -q -p no:cacheprovider tests/test_binocular.py tests/test_path_consistency.py -k cuda 2>&1 \
-    | tail -3 | tee "$OUT/t.log"
-  grep -q " passed" "$OUT/t.log" && ! grep -q "failed\|error" "$OUT/t.log" && python3 -c "import torch; assert torch.cuda.is_available()" \
-    && touch "$R/t_ok"
-}
 case $P in
-t) cuda_tests ;;
+t) cuda_tests tests/test_binocular.py tests/test_path_consistency.py ;;
 c) lines_c | run_lines 48; summary c_ c.txt ;;
 b) lines_b | run_lines 48; summary b_ b.txt ;;
 i) lines_i | run_lines 18; summary i_ i.txt ;;
-q) cuda_tests || { echo "the CUDA tests failed: no runs"; exit 1; }
+q) cuda_tests tests/test_binocular.py tests/test_path_consistency.py || { echo "the CUDA tests failed: no runs"; exit 1; }
    { lines_c; lines_b; lines_i; } | run_lines 48; summary c_ c.txt; summary b_ b.txt; summary i_ i.txt ;;
 *) echo "unknown phase $P"; exit 2 ;;
 esac

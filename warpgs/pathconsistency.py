@@ -45,7 +45,7 @@ class PathConsistency:
 
         check_one_camera(cams, "train.path_consistency")
         self.weight, self.start = weight, start
-        V = np.stack([np.asarray(torch.as_tensor(c.viewmat).cpu(), np.float64) for c in cams])
+        V = np.stack([np.asarray(c.viewmat, np.float64) for c in cams])  # (the scene's views: numpy)
         poses, self.pairs = [], []
         for traj in path_trajectories(V, max(n_frames, 3), order=order):
             for vm in traj.viewmats[1:-1]:
