@@ -71,7 +71,10 @@ median).
 - session 41 (``bench/gpu_session41.sh``, prepared in session 40): the full method with ``full.path_consistency`` 1.0
   and 0.3 against session 37's default at 384x256, seeds 0-2 (``s41/c.txt``, ``c_pc10_...``, ``c_pc03_...``; DTU and
   fern beside their defaults), the baseline with ``train.path_consistency`` at the same weights (``s41/b.txt``,
-  ``b_pc10_...``: the term in both methods), and 1.0 at images_4 against session 38's (``s41/i.txt``, ``i_...``).
+  ``b_pc10_...``: the term in both methods), and 1.0 at images_4 against session 38's (``s41/i.txt``, ``i_...``);
+  a seed-0 screen of the full method's parts (``s41/s.txt``, ``s_densify_...``, ``s_depth_weight_...``,
+  ``s_guidance_...``: no densification, no depth term on the pseudo views, renders for guidance) against session
+  37's default at seed 0, DTU beside its defaults.
 - session 39 (the last 290 s of two H200s): the full method at pseudo weight 0.1 against session 37's default (0.2)
   at 384x256, seeds 0-2 (``s39/x.txt``, ``x_...``; DTU's ``x_dtu_full_sK`` beside ``s37/t.txt``'s).
 """
@@ -417,6 +420,17 @@ def session41_tables(results: Path) -> list[list[str]]:
                        + table([("session 37 default", default), (label, both)]) + change_lines(default, both, label))
         out.append(named_beside_defaults(results, d41 / "b.txt",
                                          [f"b_{k}_{scene}_baseline" for k in names for scene in ("dtu", "fern")]))
+    if (d41 / "s.txt").is_file():  # the seed-0 screen of the full method's parts
+        screen = {"densify": "densify=false", "depth_weight": "depth_weight=0", "guidance": "guidance=render"}
+        variants: dict = {}
+        for (name, views, method), seeds in load(d41 / "s.txt", "s").items():
+            key = next(k for k in screen if name.startswith(k + "_"))
+            variants.setdefault(screen[key], {})[(name[len(key) + 1:], views, method)] = seeds
+        out.append(["the full method's parts, seed 0 (full.densify=false, full.depth_weight=0, full.guidance=render), "
+                    "384x256, 3000 it, against session 37's default at seed 0:", ""]
+                   + variant_table(seed0(session37_default(results)), variants, "default (session 37), seed 0"))
+        out.append(named_beside_defaults(results, d41 / "s.txt",
+                                         [f"s_{k}_dtu_full" for k in screen]))
     if (d41 / "i.txt").is_file():
         out.append(["the full method with full.path_consistency=1.0 at images_4 (768x512, 10,000 it), seeds 0-2, against "
                     "session 38's default:", ""]

@@ -15,6 +15,10 @@
 # i: the full method with full.path_consistency=1.0 at images_4 (768x512, 10,000 it), the six cases, seeds 0-2 (18 runs;
 #    about two calls). Against s38/i.txt. i.txt.
 # q: t, then c, b and i in one queue (about three calls on two H200s).
+# s (added in session 41, after c: one H200 only): a seed-0 screen of the full method's parts on the six captures and DTU
+#    (21 runs, one call): full.densify=false (no points from the pseudo views), full.depth_weight=0 (no Pearson depth
+#    term on the pseudo views), full.guidance=render (the pseudo views are the model's own renders: no warped inputs).
+#    Against s37/t.txt's seed 0. s.txt.
 # Copy the summaries to bench/results/s41/; python bench/captures_table.py --session 41 prints the tables.
 set -u
 source "$(dirname "${BASH_SOURCE[0]}")/gpu_one.sh"
@@ -38,6 +42,14 @@ lines_i() {
     echo "one4 i_${c}_${v}v_full_s$s full $c $v $s --set full.path_consistency=1.0"
   done; done; done
 }
+lines_s() {
+  for v in densify=false depth_weight=0 guidance=render; do local p="s_${v%%=*}"
+    echo "named ${p}_dtu_full_s0 full dtu scan65 3 0 --set full.$v"
+    for c in castle_p30 herz_jesus_p25; do for n in 3 6 9; do
+      echo "one ${p}_${c}_${n}v_full_s0 full $c $n 0 --set full.$v"
+    done; done
+  done
+}
 case $P in
 t) cuda_tests tests/test_binocular.py tests/test_path_consistency.py ;;
 c) lines_c | run_lines 48; summary c_ c.txt ;;
@@ -45,5 +57,6 @@ b) lines_b | run_lines 48; summary b_ b.txt ;;
 i) lines_i | run_lines 18; summary i_ i.txt ;;
 q) cuda_tests tests/test_binocular.py tests/test_path_consistency.py || { echo "the CUDA tests failed: no runs"; exit 1; }
    { lines_c; lines_b; lines_i; } | run_lines 48; summary c_ c.txt; summary b_ b.txt; summary i_ i.txt ;;
+s) lines_s | run_lines 21; summary s_ s.txt ;;
 *) echo "unknown phase $P"; exit 2 ;;
 esac
