@@ -75,6 +75,9 @@ median).
   a seed-0 screen of the full method's parts (``s41/s.txt``, ``s_densify_...``, ``s_depth_weight_...``,
   ``s_guidance_...``: no densification, no depth term on the pseudo views, renders for guidance) against session
   37's default at seed 0, DTU beside its defaults.
+- session 42 (``bench/gpu_session42.sh``, prepared in session 41): the full method with ``full.reliable_weight=5``
+  (``s42/w.txt``, ``w_...``, seeds 0-2) and ``full.depth_weight=0`` (``s42/d.txt``, ``d_...``, seeds 1-2; seed 0 from
+  session 41's screen) against session 37's default at 384x256; DTU beside its defaults.
 - session 39 (the last 290 s of two H200s): the full method at pseudo weight 0.1 against session 37's default (0.2)
   at 384x256, seeds 0-2 (``s39/x.txt``, ``x_...``; DTU's ``x_dtu_full_sK`` beside ``s37/t.txt``'s).
 """
@@ -399,6 +402,42 @@ def session40_tables(results: Path) -> list[list[str]]:
     return out
 
 
+SCREEN41 = {"densify": "densify=false", "depth_weight": "depth_weight=0", "guidance": "guidance=render"}
+
+
+def screen41(results: Path) -> dict:
+    """{screen key: {(scene, views, method): {seed: psnr}}} of session 41's seed-0 screen (``s41/s.txt``, runs named
+    ``s_KEY_scene_Nv_full_s0``; a key may hold an underscore)."""
+    out: dict = {}
+    for (name, views, method), seeds in load(results / "s41" / "s.txt", "s").items():
+        key = next(k for k in SCREEN41 if name.startswith(k + "_"))
+        out.setdefault(key, {})[(name[len(key) + 1:], views, method)] = seeds
+    return out
+
+
+def session42_tables(results: Path) -> list[list[str]]:
+    """Session 42's tables (module docstring), for the summaries present: ``full.reliable_weight=5`` and
+    ``full.depth_weight=0`` (seed 0 from session 41's screen) against session 37's default, DTU beside its defaults."""
+    d42 = results / "s42"
+    variants, names = {}, []
+    if (d42 / "w.txt").is_file():
+        variants["reliable_weight=5"] = load(d42 / "w.txt", "w")
+        names.append((d42 / "w.txt", "w_dtu_full"))
+    if (d42 / "d.txt").is_file():
+        depth0 = {k: dict(v) for k, v in screen41(results).get("depth_weight", {}).items()}
+        for key, seeds in load(d42 / "d.txt", "d").items():
+            depth0.setdefault(key, {}).update(seeds)
+        variants["depth_weight=0"] = depth0
+        names.append((d42 / "d.txt", "d_dtu_full"))
+    if not variants:
+        return []
+    out = [["the full method with full.reliable_weight=5 and full.depth_weight=0, 384x256, 3000 it, seeds 0-2, against "
+            "session 37's default:", ""] + variant_table(session37_default(results), variants, "default (session 37)")]
+    for path, name in names:
+        out.append(named_beside_defaults(results, path, [name]))
+    return out
+
+
 def session41_tables(results: Path) -> list[list[str]]:
     """Session 41's tables (module docstring), for the summaries present: each weight of ``full.path_consistency``
     as a variant of the full method against the default's baseline, then DTU's and fern's runs beside their defaults."""
@@ -421,16 +460,11 @@ def session41_tables(results: Path) -> list[list[str]]:
         out.append(named_beside_defaults(results, d41 / "b.txt",
                                          [f"b_{k}_{scene}_baseline" for k in names for scene in ("dtu", "fern")]))
     if (d41 / "s.txt").is_file():  # the seed-0 screen of the full method's parts
-        screen = {"densify": "densify=false", "depth_weight": "depth_weight=0", "guidance": "guidance=render"}
-        variants: dict = {}
-        for (name, views, method), seeds in load(d41 / "s.txt", "s").items():
-            key = next(k for k in screen if name.startswith(k + "_"))
-            variants.setdefault(screen[key], {})[(name[len(key) + 1:], views, method)] = seeds
+        variants = {SCREEN41[k]: v for k, v in screen41(results).items()}
         out.append(["the full method's parts, seed 0 (full.densify=false, full.depth_weight=0, full.guidance=render), "
                     "384x256, 3000 it, against session 37's default at seed 0:", ""]
                    + variant_table(seed0(session37_default(results)), variants, "default (session 37), seed 0"))
-        out.append(named_beside_defaults(results, d41 / "s.txt",
-                                         [f"s_{k}_dtu_full" for k in screen]))
+        out.append(named_beside_defaults(results, d41 / "s.txt", [f"s_{k}_dtu_full" for k in SCREEN41]))
     if (d41 / "i.txt").is_file():
         out.append(["the full method with full.path_consistency=1.0 at images_4 (768x512, 10,000 it), seeds 0-2, against "
                     "session 38's default:", ""]
@@ -450,9 +484,12 @@ def with_baselines(default: dict, baselines: dict) -> dict:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--results", default=str(Path(__file__).resolve().parent / "results"))
-    ap.add_argument("--session", type=int, choices=(20, 21, 22, 26, 27, 28, 29, 30, 31, 33, 34, 35, 36, 37, 38, 39, 40, 41),
+    ap.add_argument("--session", type=int, choices=(20, 21, 22, 26, 27, 28, 29, 30, 31, 33, 34, 35, 36, 37, 38, 39, 40, 41, 42),
                     default=21)
     args = ap.parse_args(argv)
+    if args.session == 42:
+        print("\n\n".join("\n".join(t) for t in session42_tables(Path(args.results))) or "no s42 summaries yet")
+        return 0
     if args.session == 41:
         print("\n\n".join("\n".join(t) for t in session41_tables(Path(args.results))) or "no s41 summaries yet")
         return 0

@@ -232,13 +232,19 @@ def test_session40_tables_put_each_partner_run_beside_the_default_it_changes(tmp
            "over 1 cases" in tables[2]
 
 
+def write_session37_default(results, *more_dirs):
+    """Fake summaries of session 37's default (castle_p30 6 views: baseline 20.0 / 20.2, full 20.7; DTU's and fern's
+    named defaults) under ``results``, and the empty folders ``more_dirs``."""
+    for d in ("s36", "s37", "s38", *more_dirs):
+        (results / d).mkdir()
+    (results / "s36" / "b_all.txt").write_text("b_castle_p30_6v_baseline_db_s0 20.0 1\nb_castle_p30_6v_baseline_db_s1 20.2 1\n")
+    (results / "s36" / "c.txt").write_text("c_dtu_db_s0 26.4 5\nc_fern_db_s0 22.8 9\n")
+    (results / "s37" / "t.txt").write_text("t_p_castle_p30_6v_full_s0 20.7 1\nt_p_dtu_full_s0 26.6 5\n")
+    (results / "s38" / "l.txt").write_text("")
+
+
 def test_session41_tables_put_each_weight_beside_the_default_baseline(tmp_path):
-    for d in ("s36", "s37", "s38", "s41"):
-        (tmp_path / d).mkdir()
-    (tmp_path / "s36" / "b_all.txt").write_text("b_castle_p30_6v_baseline_db_s0 20.0 1\nb_castle_p30_6v_baseline_db_s1 20.2 1\n")
-    (tmp_path / "s36" / "c.txt").write_text("c_dtu_db_s0 26.4 5\nc_fern_db_s0 22.8 9\n")
-    (tmp_path / "s37" / "t.txt").write_text("t_p_castle_p30_6v_full_s0 20.7 1\nt_p_dtu_full_s0 26.6 5\n")
-    (tmp_path / "s38" / "l.txt").write_text("")
+    write_session37_default(tmp_path, "s41")
     (tmp_path / "s36" / "g.txt").write_text("g_castle_p30_9v_baseline_s0 24.3 1\n")
     (tmp_path / "s38" / "i.txt").write_text("i_castle_p30_9v_full_s0 24.6 1\n")
     assert ct.session41_tables(tmp_path) == []
@@ -264,3 +270,20 @@ def test_session41_tables_put_each_weight_beside_the_default_baseline(tmp_path):
            "21.20 [21.00, 21.40] | +0.50 |" in both
     assert "baseline +0.60 dB (worst +0.60), full +0.50 dB (worst +0.50)" in both
     assert "| b_pc10_dtu_baseline |" in "\n".join(tables[3])
+
+
+def test_session42_tables_merge_the_screens_seed_0_into_the_depth_variant(tmp_path):
+    write_session37_default(tmp_path, "s41", "s42")
+    summaries = {  # castle_p30 6 views; the screen's seed 0 of the depth variant, seeds 1-2 from session 42
+        "s41/s.txt": ["s_depth_weight_castle_p30_6v_full_s0 20.9 1", "s_densify_castle_p30_6v_full_s0 20.1 1"],
+        "s42/d.txt": ["d_castle_p30_6v_full_s1 21.3 1", "d_castle_p30_6v_full_s2 21.1 1", "d_dtu_full_s1 26.8 5"],
+        "s42/w.txt": ["w_castle_p30_6v_full_s0 20.2 1", "w_dtu_full_s0 27.0 5"],
+    }
+    (tmp_path / "s41/s.txt").write_text("\n".join(summaries["s41/s.txt"]))
+    assert ct.session42_tables(tmp_path) == []  # the screen alone is session 41's
+    for name in ("s42/d.txt", "s42/w.txt"):
+        (tmp_path / name).write_text("\n".join(summaries[name]))
+    variants, dtu_w, dtu_d = ("\n".join(t) for t in ct.session42_tables(tmp_path))
+    # the baseline's median 20.10; depth_weight=0 has seeds 0 (the screen's 20.9), 1 and 2: median 21.10 (+1.00)
+    assert "| depth_weight=0 | 21.10 (+1.00) |" in variants and "| reliable_weight=5 | 20.20 (+0.10) |" in variants
+    assert "| w_dtu_full |" in dtu_w and "| d_dtu_full |" in dtu_d

@@ -274,6 +274,10 @@ class FullConfig:
     path_consistency: float = 0.0  # weight of the two inputs' agreement at each pseudo view trained on: the photos of
     #   the inputs it lies between, warped into it with its rendered depth (warpgs.binocular.pose_warp), compared
     #   (L1 where both land); its gradient reaches the depth each step, unlike the pseudo view's fixed image. 0: off
+    reliable_weight: float = 1.0  # weight of a pseudo view's reliable pixels (U < pseudo.sampler.delta: where the
+    #   warped inputs were kept) in its L1 and D-SSIM, the other pixels' being 1 (the render they were filled from,
+    #   made at the cycle's start). With pseudo_weight 0.2 and 5 the warped inputs weigh 1, the paper's weight, and
+    #   the render 0.2. An LPIPS term, when its weights are there, stays unweighted. 1: every pixel alike
     flythrough_frames: int = 24  # frames per trajectory in flythrough.gif
 
     LIMITS = {"cycles": ">= 0", "baseline_fraction": "[0, 1)", "pseudo_weight": ">= 0", "lpips_weight": ">= 0",
@@ -281,7 +285,7 @@ class FullConfig:
               "pseudo_loss": "{lpips, l1}", "guidance": "{warped, render}", "stereo_sources": "{inputs, all}",
               "init_opacity": "(0, 1)", "max_new": ">= 0", "pseudo_mask": "{seen, reliable, all}", "growth_budget": ">= 0",
               "drop_rate": "[0, 1)", "pseudo_depth_smooth": ">= 0", "far_field": FAR_FIELD_RULE, "refine_stop_fraction": "[0, 1]",
-              "path_consistency": ">= 0", "flythrough_frames": ">= 0"}
+              "path_consistency": ">= 0", "reliable_weight": "> 0", "flythrough_frames": ">= 0"}
 
 
 IMPORTANCE_VIEWS = ("train", "virtual", "pseudo")

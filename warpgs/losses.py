@@ -92,6 +92,30 @@ def dssim(pred: torch.Tensor, target: torch.Tensor, window_size: int = 11) -> to
     return 1.0 - ssim(pred, target, window_size)
 
 
+def weighted_l1(pred: torch.Tensor, target: torch.Tensor, weight: torch.Tensor, mask: torch.Tensor | None = None
+                ) -> torch.Tensor:
+    """``weight`` [H, W] x |pred - target| ([H, W, C]), averaged over the pixels and channels (those of ``mask``
+    [H, W] where given): with weight 1, ``l1``."""
+    d = weight[..., None] * (pred - target).abs()
+    if mask is None:
+        return d.mean()
+    m = mask.to(d.dtype)[..., None]
+    n = m.sum() * d.shape[-1]
+    return (d * m).sum() / n if n > 0 else d.sum() * 0
+
+
+def weighted_dssim(pred: torch.Tensor, target: torch.Tensor, weight: torch.Tensor, window_size: int = 11
+                   ) -> torch.Tensor:
+    """The mean over pixels and channels of ``weight`` [H, W] x (1 - SSIM map) of [H, W, C] images (kornia's map,
+    Gaussian window, 'same' padding): with weight 1 the D-SSIM."""
+    from kornia.metrics import ssim as kssim
+
+    a, b = _bchw(pred), _bchw(target)
+    smap = _ssim_map(a, b, window_size) if a.device.type != "cpu" and a.dtype == torch.float32 \
+        else kssim(a, b, window_size, max_val=1.0)
+    return (weight.to(smap.dtype)[None, None] * (1.0 - smap)).mean()
+
+
 def pearson_depth_loss(depth: torch.Tensor, prior: torch.Tensor, mask: torch.Tensor | None = None,
                        eps: float = 1e-8) -> torch.Tensor:
     """1 - Pearson correlation of ``depth`` and ``prior`` over ``mask`` (default: where prior > 0)."""

@@ -99,6 +99,7 @@ class FullMethod(Method):
         if self.settings.path_consistency > 0:  # the pseudo views carry their start input's intrinsics and size
             check_one_camera(trainer.train_cams, "full.path_consistency")
         self.pseudo_cams: list = []
+        self.pseudo_reliable: dict[str, torch.Tensor] = {}  # full.reliable_weight: each pseudo view's U < delta
         self.pseudo_order: list[int] = []
         self.pseudo_rng = np.random.default_rng(cfg.train.seed + 3)
         self.cycles_done = 0
@@ -132,12 +133,18 @@ class FullMethod(Method):
         m = cam.mask.to(out.image.dtype)[..., None] if cam.mask is not None else None
         pred = out.image * m if m is not None else out.image
         target = cam.image * m if m is not None else cam.image
+        reliable = self.pseudo_reliable.get(cam.name) if s.reliable_weight != 1.0 else None
+        # reliable pixels x reliable_weight, the rest x 1; a mask keeps the unweighted terms' normalisation
+        weight = None if reliable is None else torch.where(reliable, s.reliable_weight, 1.0).to(out.image.dtype)
         if self._lpips is not None:
             loss = s.lpips_weight * self._lpips(pred, target)
+        elif weight is not None:
+            loss = s.lpips_weight * losses.weighted_l1(out.image, cam.image, weight, cam.mask)
         else:
             loss = s.lpips_weight * losses.l1(out.image, cam.image, cam.mask)
         if s.ssim_weight > 0:
-            loss = loss + s.ssim_weight * losses.dssim(pred, target)
+            loss = loss + s.ssim_weight * (losses.dssim(pred, target) if weight is None
+                                           else losses.weighted_dssim(pred, target, weight))
         if s.depth_weight > 0 and cam.depth is not None:  # set only with enough confident pixels (depth_prior)
             loss = loss + s.depth_weight * losses.pearson_depth_loss(out.depth, cam.depth, cam.depth > 0)
         return loss
@@ -201,10 +208,14 @@ class FullMethod(Method):
         pcfg = self.pseudo_config()
         seqs = generate_pseudo_views(model_renderer(tr.model, tr.background_for), tr.train_cams, pcfg, device=tr.device)
         times["pseudo_views_s"] = time.perf_counter() - t0
-        cams = []
+        cams, reliable = [], {}
         limit = {"reliable": pcfg.sampler.delta, "all": math.inf}.get(self.settings.pseudo_mask, 1.0)
         for seq in seqs:
-            cams += seq.pseudo_cameras(prefix=f"c{cycle}_{seq.start}_{seq.end}", max_uncertainty=limit)
+            seq_cams = seq.pseudo_cameras(prefix=f"c{cycle}_{seq.start}_{seq.end}", max_uncertainty=limit)
+            if self.settings.reliable_weight != 1.0:  # the interior frames, in pseudo_cameras' order
+                reliable.update({c.name: (seq.uncertainty[i + 1] < pcfg.sampler.delta).to(tr.device)
+                                 for i, c in enumerate(seq_cams)})
+            cams += seq_cams
         cycle_dir = tr.out / f"cycle_{cycle}" if tr.out is not None else None
         if cycle_dir is not None:
             for seq in seqs:
@@ -215,6 +226,7 @@ class FullMethod(Method):
             added = self.densify(cams, cycle_dir)
         times["densify_s"] = time.perf_counter() - t0
         self.pseudo_cams = cams
+        self.pseudo_reliable = reliable
         self.pseudo_order = []
         tr.log(f"warpgs: cycle {cycle}: {len(cams)} pseudo views ({times['pseudo_views_s']:.1f} s), "
                f"{added} Gaussians added by densification ({times['densify_s']:.1f} s), {len(tr.model)} in all")
@@ -332,6 +344,7 @@ class FullMethod(Method):
                                  "height": c.height, "image": c.image.cpu(),
                                  "mask": None if c.mask is None else c.mask.cpu(),
                                  "depth": None if c.depth is None else c.depth.cpu()} for c in self.pseudo_cams],
+                "pseudo_reliable": {k: v.cpu() for k, v in self.pseudo_reliable.items()},
             }
         return st
 
@@ -356,6 +369,7 @@ class FullMethod(Method):
                                           mask=None if c["mask"] is None else c["mask"].to(dev),
                                           depth=None if c["depth"] is None else c["depth"].to(dev))
                             for c in ck["pseudo_cams"]]
+        self.pseudo_reliable = {k: v.to(dev) for k, v in ck.get("pseudo_reliable", {}).items()}
 
     # ------------------------------------------------------------------------------------------
     # the phases, and what the method adds after training
