@@ -75,8 +75,8 @@ median).
   a seed-0 screen of the full method's parts (``s41/s.txt``, ``s_densify_...``, ``s_depth_weight_...``,
   ``s_guidance_...``: no densification, no depth term on the pseudo views, renders for guidance) against session
   37's default at seed 0, DTU beside its defaults.
-- session 42 (``bench/gpu_session42.sh``, prepared in session 41): the full method with ``full.reliable_weight=5``
-  (``s42/w.txt``, ``w_...``, seeds 0-2) and ``full.depth_weight=0`` (``s42/d.txt``, ``d_...``, seeds 1-2; seed 0 from
+- session 42 (``bench/gpu_session42.sh``, prepared in session 41): the full method with ``full.reliable_weight`` 5 and
+  2.5 (``s42/w.txt``, ``w_rw50_...``, ``w_rw25_...``) and ``full.depth_weight=0`` (``s42/d.txt``, ``d_...``, seeds 1-2; seed 0 from
   session 41's screen) against session 37's default at 384x256; DTU beside its defaults.
 - session 39 (the last 290 s of two H200s): the full method at pseudo weight 0.1 against session 37's default (0.2)
   at 384x256, seeds 0-2 (``s39/x.txt``, ``x_...``; DTU's ``x_dtu_full_sK`` beside ``s37/t.txt``'s).
@@ -416,13 +416,14 @@ def screen41(results: Path) -> dict:
 
 
 def session42_tables(results: Path) -> list[list[str]]:
-    """Session 42's tables (module docstring), for the summaries present: ``full.reliable_weight=5`` and
+    """Session 42's tables (module docstring), for the summaries present: ``full.reliable_weight`` 5 and 2.5 and
     ``full.depth_weight=0`` (seed 0 from session 41's screen) against session 37's default, DTU beside its defaults."""
     d42 = results / "s42"
     variants, names = {}, []
     if (d42 / "w.txt").is_file():
-        variants["reliable_weight=5"] = load(d42 / "w.txt", "w")
-        names.append((d42 / "w.txt", "w_dtu_full"))
+        weights = {"rw50": "reliable_weight=5", "rw25": "reliable_weight=2.5"}
+        variants.update({weights.get(k, k): v for k, v in load_variants(d42 / "w.txt", "w").items()})
+        names += [(d42 / "w.txt", f"w_{k}_dtu_full") for k in weights]
     if (d42 / "d.txt").is_file():
         depth0 = {k: dict(v) for k, v in screen41(results).get("depth_weight", {}).items()}
         for key, seeds in load(d42 / "d.txt", "d").items():
@@ -431,8 +432,8 @@ def session42_tables(results: Path) -> list[list[str]]:
         names.append((d42 / "d.txt", "d_dtu_full"))
     if not variants:
         return []
-    out = [["the full method with full.reliable_weight=5 and full.depth_weight=0, 384x256, 3000 it, seeds 0-2, against "
-            "session 37's default:", ""] + variant_table(session37_default(results), variants, "default (session 37)")]
+    out = [["the full method with full.reliable_weight (5, 2.5) and full.depth_weight=0, 384x256, 3000 it, the seeds "
+            "each has, against session 37's default:", ""] + variant_table(session37_default(results), variants, "default (session 37)")]
     for path, name in names:
         out.append(named_beside_defaults(results, path, [name]))
     return out

@@ -7,11 +7,15 @@
 # and the Pearson depth term on the pseudo views -0.07 (without it +0.07). In session 38 the pseudo views beat the
 # render at held-out frames by 0.9 dB on herz_jesus_p25 6 views, yet the full method gains 0.14 there: the
 # captures weigh every pseudo pixel x 0.2, the warped inputs' as well as the render's they were filled from.
-# t: the CUDA tests of the weighted losses (tests/test_reliable_weight.py -k cuda); about 20 s.
-# w: full.reliable_weight=5 (the warped inputs' pixels x 1, the paper's weight; the render's x 0.2), the six captures
-#    at 384x256 and DTU, seeds 0-2 (21 runs, one call of one H200). Against s37/t.txt. w.txt.
-# d: full.depth_weight=0, seeds 1 and 2 of the same (14 runs; seed 0 is s41/s.txt). d.txt.
-# q: t, then w and d in one queue (35 runs, about two calls of one H200).
+# On herz_jesus_p25 6 views 36-92% of a pseudo view's pixels are reliable (U < 0.5; the CPU run of session 41), on
+# castle_p30 5-7% (session 38): at 5 herz's pseudo views weigh nearly what they did at pseudo weight 1, which lost
+# 0.1-0.2 dB there in session 37. So a seed-0 screen of 5 and 2.5 first.
+# t: the CUDA tests of the weighted losses (tests/test_reliable_weight.py -k cuda); about 20 s (passed in session 41).
+# s: full.reliable_weight 5 and 2.5 (the warped inputs' pixels x 1 / x 0.5, the render's x 0.2), the six captures at
+#    384x256 and DTU, seed 0 (14 runs), and full.depth_weight=0 at seeds 1 and 2 (14 runs; its seed 0 is s41/s.txt):
+#    28 runs, about one call of one H200. w.txt, d.txt.
+# w: seeds 1 and 2 of full.reliable_weight=$W (default 5.0; the better of s's two), 14 runs. w.txt.
+# q: t, then s.
 # Copy the summaries to bench/results/s42/; python bench/captures_table.py --session 42 prints the tables.
 set -u
 source "$(dirname "${BASH_SOURCE[0]}")/gpu_one.sh"
@@ -26,13 +30,18 @@ lines_v() {  # lines_v PREFIX "SEEDS" SETTING: the full method with SETTING, the
     done; done
   done
 }
-lines_w() { lines_v w "0 1 2" full.reliable_weight=5.0; }
+rw_name() { local w=${1/./}; echo "rw${w:0:2}"; }  # 5.0 -> rw50, 2.5 -> rw25
+lines_w() {  # lines_w "SEEDS" WEIGHT ...
+  local seeds=$1; shift
+  for w in "$@"; do lines_v "w_$(rw_name "$w")" "$seeds" full.reliable_weight=$w; done
+}
 lines_d() { lines_v d "1 2" full.depth_weight=0; }
+screen() { { lines_w 0 5.0 2.5; lines_d; } | run_lines 28; summary w_ w.txt; summary d_ d.txt; }
 case $P in
 t) cuda_tests tests/test_reliable_weight.py ;;
-w) lines_w | run_lines 21; summary w_ w.txt ;;
-d) lines_d | run_lines 14; summary d_ d.txt ;;
+s) screen ;;
+w) lines_w "1 2" "${W:-5.0}" | run_lines 14; summary w_ w.txt ;;
 q) cuda_tests tests/test_reliable_weight.py || { echo "the CUDA tests failed: no runs"; exit 1; }
-   { lines_w; lines_d; } | run_lines 35; summary w_ w.txt; summary d_ d.txt ;;
+   screen ;;
 *) echo "unknown phase $P"; exit 2 ;;
 esac

@@ -277,13 +277,15 @@ def test_session42_tables_merge_the_screens_seed_0_into_the_depth_variant(tmp_pa
     summaries = {  # castle_p30 6 views; the screen's seed 0 of the depth variant, seeds 1-2 from session 42
         "s41/s.txt": ["s_depth_weight_castle_p30_6v_full_s0 20.9 1", "s_densify_castle_p30_6v_full_s0 20.1 1"],
         "s42/d.txt": ["d_castle_p30_6v_full_s1 21.3 1", "d_castle_p30_6v_full_s2 21.1 1", "d_dtu_full_s1 26.8 5"],
-        "s42/w.txt": ["w_castle_p30_6v_full_s0 20.2 1", "w_dtu_full_s0 27.0 5"],
+        "s42/w.txt": ["w_rw50_castle_p30_6v_full_s0 20.2 1", "w_rw50_dtu_full_s0 27.0 5",
+                      "w_rw25_castle_p30_6v_full_s0 20.4 1"],
     }
     (tmp_path / "s41/s.txt").write_text("\n".join(summaries["s41/s.txt"]))
     assert ct.session42_tables(tmp_path) == []  # the screen alone is session 41's
     for name in ("s42/d.txt", "s42/w.txt"):
         (tmp_path / name).write_text("\n".join(summaries[name]))
-    variants, dtu_w, dtu_d = ("\n".join(t) for t in ct.session42_tables(tmp_path))
+    variants, dtu_w50, dtu_w25, dtu_d = ("\n".join(t) for t in ct.session42_tables(tmp_path))
     # the baseline's median 20.10; depth_weight=0 has seeds 0 (the screen's 20.9), 1 and 2: median 21.10 (+1.00)
     assert "| depth_weight=0 | 21.10 (+1.00) |" in variants and "| reliable_weight=5 | 20.20 (+0.10) |" in variants
-    assert "| w_dtu_full |" in dtu_w and "| d_dtu_full |" in dtu_d
+    assert "| reliable_weight=2.5 | 20.40 (+0.30) |" in variants
+    assert "| w_rw50_dtu_full |" in dtu_w50 and "| w_rw25_dtu_full |" not in dtu_w25 and "| d_dtu_full |" in dtu_d
