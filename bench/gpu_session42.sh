@@ -13,7 +13,7 @@
 # t: the CUDA tests of the weighted losses (tests/test_reliable_weight.py -k cuda); about 20 s (passed in session 41).
 # s: full.reliable_weight 5 and 2.5 (the warped inputs' pixels x 1 / x 0.5, the render's x 0.2), the six captures at
 #    384x256 and DTU, seed 0 (14 runs), and full.depth_weight=0 at seeds 1 and 2 (14 runs; its seed 0 is s41/s.txt):
-#    28 runs, about one call of one H200. w.txt, d.txt.
+#    28 runs, one call of one H200 or a little more (session 41: about 42 runs in 890 s). w.txt, d.txt.
 # w: seeds 1 and 2 of full.reliable_weight=$W (default 5.0; the better of s's two), 14 runs. w.txt.
 # q: t, then s.
 # Copy the summaries to bench/results/s42/; python bench/captures_table.py --session 42 prints the tables.
