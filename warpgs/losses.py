@@ -48,15 +48,20 @@ def l1(pred: torch.Tensor, target: torch.Tensor, mask: torch.Tensor | None = Non
 
 
 def ssim(pred: torch.Tensor, target: torch.Tensor, window_size: int = 11, padding: str = "same") -> torch.Tensor:
-    """Mean SSIM (Gaussian window, sigma 1.5) through kornia. On a GPU, with float32 images and ``'same'``
-    padding, ``_ssim_map`` computes kornia's map with its window made once per device (kornia makes it on every
+    """Mean SSIM (Gaussian window, sigma 1.5) through kornia (``ssim_map``)."""
+    return ssim_map(pred, target, window_size, padding).mean()
+
+
+def ssim_map(pred: torch.Tensor, target: torch.Tensor, window_size: int = 11, padding: str = "same") -> torch.Tensor:
+    """kornia's SSIM map [B, C, H, W] of two images ([H, W, C] or [B, C, H, W]). On a GPU, with float32 images and
+    ``'same'`` padding, ``_ssim_map`` computes it with its window made once per device (kornia makes it on every
     call, from a copy from the host that a CUDA graph cannot hold)."""
     a, b = _bchw(pred), _bchw(target)
     if padding == "same" and a.device.type != "cpu" and a.dtype == b.dtype == torch.float32 and a.shape == b.shape:
-        return _ssim_map(a, b, window_size).mean()
+        return _ssim_map(a, b, window_size)
     from kornia.metrics import ssim as kssim
 
-    return kssim(a, b, window_size, max_val=1.0, padding=padding).mean()
+    return kssim(a, b, window_size, max_val=1.0, padding=padding)
 
 
 @functools.cache  # never evicted: a CUDA graph of a training step reads it where it is
@@ -107,12 +112,8 @@ def weighted_l1(pred: torch.Tensor, target: torch.Tensor, weight: torch.Tensor, 
 def weighted_dssim(pred: torch.Tensor, target: torch.Tensor, weight: torch.Tensor, window_size: int = 11
                    ) -> torch.Tensor:
     """The mean over pixels and channels of ``weight`` [H, W] x (1 - SSIM map) of [H, W, C] images (kornia's map,
-    Gaussian window, 'same' padding): with weight 1 the D-SSIM."""
-    from kornia.metrics import ssim as kssim
-
-    a, b = _bchw(pred), _bchw(target)
-    smap = _ssim_map(a, b, window_size) if a.device.type != "cpu" and a.dtype == torch.float32 \
-        else kssim(a, b, window_size, max_val=1.0)
+    Gaussian window, 'same' padding; ``ssim_map``): with weight 1 the D-SSIM."""
+    smap = ssim_map(pred, target, window_size)
     return (weight.to(smap.dtype)[None, None] * (1.0 - smap)).mean()
 
 

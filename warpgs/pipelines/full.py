@@ -212,9 +212,9 @@ class FullMethod(Method):
         limit = {"reliable": pcfg.sampler.delta, "all": math.inf}.get(self.settings.pseudo_mask, 1.0)
         for seq in seqs:
             seq_cams = seq.pseudo_cameras(prefix=f"c{cycle}_{seq.start}_{seq.end}", max_uncertainty=limit)
-            if self.settings.reliable_weight != 1.0:  # the interior frames, in pseudo_cameras' order
-                reliable.update({c.name: (seq.uncertainty[i + 1] < pcfg.sampler.delta).to(tr.device)
-                                 for i, c in enumerate(seq_cams)})
+            if self.settings.reliable_weight != 1.0:
+                reliable.update({c.name: r.to(tr.device)
+                                 for c, r in zip(seq_cams, seq.interior_below(pcfg.sampler.delta), strict=True)})
             cams += seq_cams
         cycle_dir = tr.out / f"cycle_{cycle}" if tr.out is not None else None
         if cycle_dir is not None:

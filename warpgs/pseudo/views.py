@@ -111,12 +111,16 @@ class PseudoSequence:
         from warpgs.data.scene import CameraTensors
 
         prefix = prefix or f"pseudo_{self.start}_{self.end}"
+        masks = self.interior_below(max_uncertainty) if max_uncertainty != float("inf") else [None] * (len(self) - 2)
         return [
             CameraTensors(name=f"{prefix}_{i:03d}", viewmat=self.viewmats[i], K=self.K, width=self.width,
-                          height=self.height, image=self.frames[i],
-                          mask=None if max_uncertainty == float("inf") else self.uncertainty[i] < max_uncertainty)
+                          height=self.height, image=self.frames[i], mask=masks[i - 1])
             for i in range(1, len(self) - 1)
         ]
+
+    def interior_below(self, limit: float) -> list:
+        """[H, W] bool per interior frame, in ``pseudo_cameras``' order: U < ``limit``."""
+        return [self.uncertainty[i] < limit for i in range(1, len(self) - 1)]
 
 
 def model_renderer(model, background=None) -> RenderFn:
