@@ -16,6 +16,12 @@
 #    28 runs, one call of one H200 or a little more (session 41: about 42 runs in 890 s). w.txt, d.txt.
 # w: seeds 1 and 2 of full.reliable_weight=$W (default 5.0; the better of s's two), 14 runs. w.txt.
 # q: t, then s.
+# x (written after s: reliable_weight lost, +0.28 / +0.30 against +0.38; depth_weight=0 over seeds 0-2 +0.38, the
+#    same): the paper's schedule, full.cycle_iterations=1000: the baseline phase is the whole 3000-step baseline run and
+#    the two cycles train 1000 steps more each, from the baseline's final model (with the default split the pseudo
+#    views are made at step 1200, before the binocular term starts at 1500). Seeds 0-2 of the six captures and DTU
+#    (x_*, 21 runs), and seed 0 of its control xc_*: the same 2000 extra steps without pseudo views, densification or
+#    the inputs' depth prior (the baseline trained longer as it was). 28 runs of 5000 steps: two calls. x.txt.
 # Copy the summaries to bench/results/s42/; python bench/captures_table.py --session 42 prints the tables.
 set -u
 source "$(dirname "${BASH_SOURCE[0]}")/gpu_one.sh"
@@ -37,10 +43,16 @@ lines_w() {  # lines_w "SEEDS" WEIGHT ...
 }
 lines_d() { lines_v d "1 2" full.depth_weight=0; }
 screen() { { lines_w 0 5.0 2.5; lines_d; } | run_lines 28; summary w_ w.txt; summary d_ d.txt; }
+lines_x() {
+  lines_v x 0 full.cycle_iterations=1000
+  lines_v xc 0 "full.cycle_iterations=1000 --set full.pseudo_weight=0 --set full.densify=false --set full.input_depth_weight=0"
+  lines_v x "1 2" full.cycle_iterations=1000
+}
 case $P in
 t) cuda_tests tests/test_reliable_weight.py ;;
 s) screen ;;
 w) lines_w "1 2" "${W:-5.0}" | run_lines 14; summary w_ w.txt ;;
+x) lines_x | run_lines 28; summary x x.txt ;;
 q) cuda_tests tests/test_reliable_weight.py || { echo "the CUDA tests failed: no runs"; exit 1; }
    screen ;;
 *) echo "unknown phase $P"; exit 2 ;;

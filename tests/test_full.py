@@ -195,3 +195,34 @@ def test_early_input_depth_is_the_scene_depth_where_confident_and_trains_from_st
     mask[1, 0] = True
     p = depth_prior(mask, torch.full((4, 5), 2.0), "cpu", min_pixels=4)
     assert torch.equal(p > 0, mask) and float(p.max()) == 2.0
+
+
+def test_cycle_iterations_follow_the_baseline_run(tmp_path):
+    """``full.cycle_iterations`` (the paper's schedule): the baseline phase is the baseline's own run, step for step
+    (the same model when the first pseudo views are made), and each cycle adds that many steps."""
+    from tiny_scene import small_full_trainer
+
+    assert phase_boundaries(1000, FullConfig(cycles=2, cycle_iterations=300)) == [1000, 1300, 1600]
+    assert phase_boundaries(1000, FullConfig(cycles=0, cycle_iterations=300)) == [1000]
+    _, base = small_full_trainer(tmp_path / "b", "--method", "baseline", "--iterations", "20")
+    base.run()
+    _, tr = small_full_trainer(tmp_path / "f", "--iterations", "20", "--set", "full.cycle_iterations=6")
+    at_first_cycle = []
+    update = tr.method.update_pseudo_views
+
+    def snapshot(cycle):
+        if cycle == 1:
+            at_first_cycle.append((tr.step, {k: v.detach().clone() for k, v in tr.model.params.items()}))
+        return update(cycle)
+
+    tr.method.update_pseudo_views = snapshot
+    tr.run()
+    step, params = at_first_cycle[0]
+    assert step == 20 and tr.step == 32
+    assert params.keys() == base.model.params.keys()
+    for k, v in params.items():
+        assert torch.equal(v, base.model.params[k].detach()), k
+    assert [h["step"] for h in tr.method.history] == [20, 26, 32]
+    with pytest.raises(ValueError, match="cycle_iterations"):
+        from warpgs.pipelines.full import check_settings
+        check_settings(FullConfig(cycle_iterations=-1))

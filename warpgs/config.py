@@ -244,6 +244,10 @@ class FullConfig:
 
     cycles: int = 2  # pseudo-view updates (the paper: refinement cycles of 10K iterations)
     baseline_fraction: float = 0.4  # share of train.iterations before the first pseudo-view update
+    cycle_iterations: int = 0  # 0: the cycles share train.iterations with the baseline phase (baseline_fraction), so the
+    #   two methods train equally long | > 0: the paper's schedule: the baseline phase is the whole baseline run (every
+    #   schedule as the baseline's; baseline_fraction unused), then each cycle trains this many more steps, so a run
+    #   takes train.iterations + cycles x cycle_iterations steps in all
     pseudo_weight: float = 1.0  # scale of the pseudo-view loss: 1 = the paper's weights (SYN3R code: 0.05 LLFF/DTU, 0.2 DL3DV)
     lpips_weight: float = 1.0  # w4
     ssim_weight: float = 0.2  # w5
@@ -280,7 +284,7 @@ class FullConfig:
     #   the render 0.2. An LPIPS term, when its weights are there, stays unweighted. 1: every pixel alike
     flythrough_frames: int = 24  # frames per trajectory in flythrough.gif
 
-    LIMITS = {"cycles": ">= 0", "baseline_fraction": "[0, 1)", "pseudo_weight": ">= 0", "lpips_weight": ">= 0",
+    LIMITS = {"cycles": ">= 0", "baseline_fraction": "[0, 1)", "cycle_iterations": ">= 0", "pseudo_weight": ">= 0", "lpips_weight": ">= 0",
               "ssim_weight": ">= 0", "depth_weight": ">= 0", "input_depth_weight": ">= 0",
               "pseudo_loss": "{lpips, l1}", "guidance": "{warped, render}", "stereo_sources": "{inputs, all}",
               "init_opacity": "(0, 1)", "max_new": ">= 0", "pseudo_mask": "{seen, reliable, all}", "growth_budget": ">= 0",

@@ -16,7 +16,9 @@ Without LPIPS weights the pseudo views use L1 instead (the paper's own ablation)
 and recorded in metrics.json.
 
 Training iterations are counted as in the baseline (``train.iterations`` in total, the baseline phase
-included), so the two are compared at equal iterations.
+included), so the two are compared at equal iterations. With ``full.cycle_iterations`` > 0 the run follows the
+paper's schedule instead: the baseline phase is the whole baseline run, and each cycle trains that many steps more
+(``train.iterations + cycles x cycle_iterations`` in all), from the baseline's final model.
 """
 
 from __future__ import annotations
@@ -375,7 +377,7 @@ class FullMethod(Method):
     # the phases, and what the method adds after training
 
     def run(self) -> None:
-        """Runs (or resumes) the whole loop up to ``train.iterations`` steps."""
+        """Runs (or resumes) the whole loop: ``train.iterations`` steps, plus ``cycles x cycle_iterations``."""
         tr, s = self.trainer, self.settings
         bounds = phase_boundaries(tr.total_steps, s)
         if tr.phase_len is None:
@@ -402,8 +404,8 @@ class FullMethod(Method):
             self.history.append(self.record(c + 1, times))
             self.cycles_done = c + 1
             tr.save_checkpoint()
-        if tr.step < tr.total_steps:  # a resumed run given more iterations: continue the last phase
-            tr.train(tr.total_steps)
+        if tr.step < bounds[-1]:  # a resumed run given more iterations: continue the last phase
+            tr.train(bounds[-1])
 
     def record(self, cycle: int, times: dict) -> dict:
         """One row of the per-cycle history: test PSNR/SSIM now, Gaussians, stage times."""
@@ -467,9 +469,13 @@ def depth_prior(mask: torch.Tensor, depth: torch.Tensor, device, min_pixels: int
 
 
 def phase_boundaries(total: int, settings: FullConfig) -> list[int]:
-    """Step at which each phase ends: [baseline, cycle 1, ..., cycle C] (the last is ``total``)."""
+    """Step at which each phase ends: [baseline, cycle 1, ..., cycle C]. The last is ``total``, or with
+    ``cycle_iterations`` > 0 (the paper's schedule) the baseline phase is all of ``total`` and each cycle adds that
+    many steps."""
     if settings.cycles == 0:
         return [total]
+    if settings.cycle_iterations > 0:
+        return [total] + [total + settings.cycle_iterations * (c + 1) for c in range(settings.cycles)]
     first = int(round(total * settings.baseline_fraction))
     per = (total - first) / settings.cycles
     return [first] + [int(round(first + per * (c + 1))) for c in range(settings.cycles)]
