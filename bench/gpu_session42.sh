@@ -48,11 +48,25 @@ lines_x() {
   lines_v xc 0 "full.cycle_iterations=1000 --set full.pseudo_weight=0 --set full.densify=false --set full.input_depth_weight=0"
   lines_v x "1 2" full.cycle_iterations=1000
 }
+# g (written after x: its control, the baseline phase and 2000 more steps without pseudo views, gave castle_p30 9 views
+#    24.04 against the baseline's 22.70, seed 0, with 56,563 Gaussians against 15,716: the full method grows to
+#    strategy.refine_stop_iter (full.refine_stop_fraction: 0, configs/full.yaml) where the baseline stops at half the
+#    run, so its baseline phase is not the baseline): the baseline with the full method's growth schedule
+#    (strategy.refine_stop_fraction=0), the six captures and DTU, seeds 0-2 (21 runs, 3000 steps). g.txt.
+lines_g() {
+  for s in 0 1 2; do
+    echo "named g_dtu_baseline_s$s baseline dtu scan65 3 $s --set strategy.refine_stop_fraction=0"
+    for c in castle_p30 herz_jesus_p25; do for v in 3 6 9; do
+      echo "one g_${c}_${v}v_baseline_s$s baseline $c $v $s --set strategy.refine_stop_fraction=0"
+    done; done
+  done
+}
 case $P in
 t) cuda_tests tests/test_reliable_weight.py ;;
 s) screen ;;
 w) lines_w "1 2" "${W:-5.0}" | run_lines 14; summary w_ w.txt ;;
 x) lines_x | run_lines 28; summary x x.txt ;;
+g) lines_g | run_lines 21; summary g_ g.txt ;;
 q) cuda_tests tests/test_reliable_weight.py || { echo "the CUDA tests failed: no runs"; exit 1; }
    screen ;;
 *) echo "unknown phase $P"; exit 2 ;;
