@@ -77,7 +77,10 @@ median).
   37's default at seed 0, DTU beside its defaults.
 - session 42 (``bench/gpu_session42.sh``, prepared in session 41): the full method with ``full.reliable_weight`` 5 and
   2.5 (``s42/w.txt``, ``w_rw50_...``, ``w_rw25_...``) and ``full.depth_weight=0`` (``s42/d.txt``, ``d_...``, seeds 1-2; seed 0 from
-  session 41's screen) against session 37's default at 384x256; DTU beside its defaults.
+  session 41's screen) against session 37's default at 384x256; DTU beside its defaults. Then (written during the
+  session) ``full.cycle_iterations=1000`` over seeds 0-2 and its control at seed 0 (``s42/x.txt``, ``x_...``,
+  ``xc_...``), the baseline with the full method's growth schedule (``s42/g.txt``, ``g_...``) and the full method
+  with the baseline's (``s42/h.txt``, ``h_...``), seeds 0-2.
 - session 39 (the last 290 s of two H200s): the full method at pseudo weight 0.1 against session 37's default (0.2)
   at 384x256, seeds 0-2 (``s39/x.txt``, ``x_...``; DTU's ``x_dtu_full_sK`` beside ``s37/t.txt``'s).
 """
@@ -320,14 +323,15 @@ def named_default(results: Path, scene: str, method: str) -> dict[int, tuple[flo
     return out
 
 
-def named_beside_defaults(results: Path, path: Path, names: list[str]) -> list[str]:
-    """``seed_medians.table`` of fern's and DTU's defaults (both methods), then the runs ``names`` of summary ``path``."""
+def named_beside_defaults(results: Path, path: Path | list[Path], names: list[str]) -> list[str]:
+    """``seed_medians.table`` of fern's and DTU's defaults (both methods), then the runs ``names`` of summary ``path``
+    (or of the summaries listed)."""
     import seed_medians as sm
 
     rows = {f"{scene} {method} (default)": named_default(results, scene, method)
             for scene in ("dtu", "fern") for method in ("baseline", "full")}
     rows = {k: v for k, v in rows.items() if v}
-    runs = sm.read([path])
+    runs = sm.read(path if isinstance(path, list) else [path])
     rows.update({n: runs[n] for n in names if n in runs})
     return sm.table(rows)
 
@@ -430,12 +434,35 @@ def session42_tables(results: Path) -> list[list[str]]:
             depth0.setdefault(key, {}).update(seeds)
         variants["depth_weight=0"] = depth0
         names.append((d42 / "d.txt", "d_dtu_full"))
-    if not variants:
-        return []
-    out = [["the full method with full.reliable_weight (5, 2.5) and full.depth_weight=0, 384x256, 3000 it, the seeds "
-            "each has, against session 37's default:", ""] + variant_table(session37_default(results), variants, "default (session 37)")]
-    for path, name in names:
-        out.append(named_beside_defaults(results, path, [name]))
+    out = []
+    default = session37_default(results)
+    if variants:
+        out.append(["the full method with full.reliable_weight (5, 2.5) and full.depth_weight=0, 384x256, 3000 it, the "
+                    "seeds each has, against session 37's default:", ""] + variant_table(default, variants, "default (session 37)"))
+    if (d42 / "x.txt").is_file():  # the paper's schedule, and its control without pseudo views
+        out.append(["the full method with full.cycle_iterations=1000 (3000 baseline steps, then two cycles of 1000: 5000 "
+                    "steps), seeds 0-2, and its control (the same 5000 steps without pseudo views, densification or the "
+                    "inputs' depth prior), seed 0, against session 37's default (3000 steps):", ""]
+                   + variant_table(default, {"cycle_iterations=1000": load(d42 / "x.txt", "x"),
+                                             "its control, seed 0": load(d42 / "x.txt", "xc")}, "default (session 37)"))
+        names.append((d42 / "x.txt", "x_dtu_full"))
+        names.append((d42 / "x.txt", "xc_dtu_full"))
+    if (d42 / "g.txt").is_file():  # the baseline with the full method's growth schedule
+        both = with_baselines(default, load(d42 / "g.txt", "g"))
+        label = "growth to strategy.refine_stop_iter in both"
+        out.append(["both methods growing as the full method does (the baseline with strategy.refine_stop_fraction=0), "
+                    "384x256, 3000 it, seeds 0-2:", ""] + table([("session 37 default", default), (label, both)])
+                   + change_lines(default, both, label))
+        names.append((d42 / "g.txt", "g_dtu_baseline"))
+    if (d42 / "h.txt").is_file():  # the full method with the baseline's growth schedule
+        half = merged({k: v for k, v in default.items() if k[2] == "baseline"}, load(d42 / "h.txt", "h"))
+        label = "growth stops at half the run in both"
+        out.append(["both methods growing as the baseline does (the full method with full.refine_stop_fraction=0.5), "
+                    "384x256, 3000 it, seeds 0-2:", ""] + table([("session 37 default", default), (label, half)])
+                   + change_lines(default, half, label))
+        names.append((d42 / "h.txt", "h_dtu_full"))
+    if names:  # DTU's runs in one table
+        out.append(named_beside_defaults(results, sorted({p for p, _ in names}), [n for _, n in names]))
     return out
 
 

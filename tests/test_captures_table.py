@@ -284,8 +284,29 @@ def test_session42_tables_merge_the_screens_seed_0_into_the_depth_variant(tmp_pa
     assert ct.session42_tables(tmp_path) == []  # the screen alone is session 41's
     for name in ("s42/d.txt", "s42/w.txt"):
         (tmp_path / name).write_text("\n".join(summaries[name]))
-    variants, dtu_w50, dtu_w25, dtu_d = ("\n".join(t) for t in ct.session42_tables(tmp_path))
+    variants, dtu = ("\n".join(t) for t in ct.session42_tables(tmp_path))
     # the baseline's median 20.10; depth_weight=0 has seeds 0 (the screen's 20.9), 1 and 2: median 21.10 (+1.00)
     assert "| depth_weight=0 | 21.10 (+1.00) |" in variants and "| reliable_weight=5 | 20.20 (+0.10) |" in variants
     assert "| reliable_weight=2.5 | 20.40 (+0.30) |" in variants
-    assert "| w_rw50_dtu_full |" in dtu_w50 and "| w_rw25_dtu_full |" not in dtu_w25 and "| d_dtu_full |" in dtu_d
+    # DTU's runs in one table; w_rw25 has no DTU run here
+    assert "| w_rw50_dtu_full |" in dtu and "| w_rw25_dtu_full |" not in dtu and "| d_dtu_full |" in dtu
+
+
+def test_session42_tables_put_the_growth_schedules_side_by_side(tmp_path):
+    """x: cycle_iterations and its control against the default's baseline; g: the default full method against a
+    baseline that grows as it does; h: the default baseline against a full method that grows as the baseline does."""
+    write_session37_default(tmp_path, "s41", "s42")
+    (tmp_path / "s42/x.txt").write_text("x_castle_p30_6v_full_s0 20.5 1\nx_castle_p30_6v_full_s1 20.9 1\n"
+                                        "xc_castle_p30_6v_full_s0 20.3 1\nx_dtu_full_s0 27.1 5\n")
+    (tmp_path / "s42/g.txt").write_text("g_castle_p30_6v_baseline_s0 20.4 1\ng_castle_p30_6v_baseline_s1 20.6 1\n"
+                                        "g_dtu_baseline_s0 26.2 5\n")
+    (tmp_path / "s42/h.txt").write_text("h_castle_p30_6v_full_s0 20.3 1\nh_dtu_full_s0 26.7 5\n")
+    x, g, h, dtu = ("\n".join(t) for t in ct.session42_tables(tmp_path))
+    # against the baseline's median 20.10: cycle_iterations 20.70 (+0.60), its control 20.30 (+0.20)
+    assert "| cycle_iterations=1000 | 20.70 (+0.60) |" in x and "| its control, seed 0 | 20.30 (+0.20) |" in x
+    # the default full 20.70 against the growing baseline's 20.50: +0.20; its baseline moved +0.40, the full method not
+    assert g.splitlines()[4].endswith("| +0.20 |") and "baseline +0.40 dB" in g and "full +0.00 dB" in g
+    # the full method growing as the baseline: 20.30 against the default baseline's 20.10
+    assert h.splitlines()[4].endswith("| +0.20 |") and "full -0.40 dB" in h
+    for name in ("x_dtu_full", "xc_dtu_full", "g_dtu_baseline", "h_dtu_full"):
+        assert (f"| {name} |" in dtu) == (name != "xc_dtu_full"), name
