@@ -226,3 +226,37 @@ def test_cycle_iterations_follow_the_baseline_run(tmp_path):
     with pytest.raises(ValueError, match="cycle_iterations"):
         from warpgs.pipelines.full import check_settings
         check_settings(FullConfig(cycle_iterations=-1))
+
+
+def test_cycle_iterations_resume_past_train_iterations(tmp_path, monkeypatch):
+    """Ctrl-C in the second cycle (step 28, past train.iterations = 20): the checkpoint holds that step, and the resumed
+    run ends at 20 + 2 x 6 with the cycles' records and the model of the uninterrupted run."""
+    import signal
+
+    from tiny_scene import small_full_trainer
+    from warpgs.train import TrainingInterrupted
+
+    opts = ("--iterations", "20", "--set", "full.cycle_iterations=6")
+    _, straight = small_full_trainer(tmp_path / "a", *opts)
+    straight.run()
+    _, tr = small_full_trainer(tmp_path / "b", *opts)
+    real_step = tr.train_step
+
+    def step_with_ctrl_c():
+        if tr.step == 28:
+            signal.raise_signal(signal.SIGINT)
+        return real_step()
+
+    monkeypatch.setattr(tr, "train_step", step_with_ctrl_c)
+    with pytest.raises(TrainingInterrupted) as e:
+        tr.run()
+    assert e.value.step == 29
+    _, again = small_full_trainer(tmp_path / "b", *opts)
+    again.load_checkpoint()
+    assert again.step == 29 and again.method.cycles_done == 1
+    again.run()
+    assert again.step == straight.step == 32
+    assert [h["step"] for h in again.method.history] == [h["step"] for h in straight.method.history] == [20, 26, 32]
+    assert [c.name for c in again.method.pseudo_cams] == [c.name for c in straight.method.pseudo_cams]
+    for k, v in straight.model.params.items():
+        assert torch.allclose(again.model.params[k].detach(), v.detach(), atol=1e-6), k
