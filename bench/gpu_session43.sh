@@ -12,7 +12,9 @@
 #    one call on two H200s, two on one). Against the defaults (s36/b_all.txt, s36/c.txt, s37/t.txt, s38/l.txt). m.txt.
 # b: the full method's growth in its cycles, full.growth_budget 0 (no cap) and 2.0 (the default 1.0 keeps the count of
 #    the first growth period), the captures at 384x256 and DTU, seed 0 (14 runs). Against s37/t.txt's seed 0. b.txt.
-# q: m, then b.
+# p: the full method growing more where it grows (strategy.grow_grad2d=0.0003 in the full runs only; the captures'
+#    config has 0.0005, session 6), the captures at 384x256 and DTU, seed 0 (7 runs). b.txt (b_gg3_...).
+# q: m, then b and p.
 # Copy the summaries to bench/results/s43/.
 set -u
 source "$(dirname "${BASH_SOURCE[0]}")/gpu_one.sh"
@@ -36,9 +38,11 @@ lines_b() {
   FERN=0 cases b_gb0 full 0 full.growth_budget=0
   FERN=0 cases b_gb20 full 0 full.growth_budget=2.0
 }
+lines_p() { FERN=0 cases b_gg3 full 0 strategy.grow_grad2d=0.0003; }
 case $P in
 m) lines_m | run_lines 48; summary m_ m.txt ;;
 b) lines_b | run_lines 14; summary b_ b.txt ;;
-q) { lines_m; lines_b; } | run_lines 62; summary m_ m.txt; summary b_ b.txt ;;
+p) lines_p | run_lines 7; summary b_ b.txt ;;
+q) { lines_m; lines_b; lines_p; } | run_lines 69; summary m_ m.txt; summary b_ b.txt ;;
 *) echo "unknown phase $P"; exit 2 ;;
 esac
