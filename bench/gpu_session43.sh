@@ -13,7 +13,8 @@
 # b: the full method's growth in its cycles, full.growth_budget 0 (no cap) and 2.0 (the default 1.0 keeps the count of
 #    the first growth period), the captures at 384x256 and DTU, seed 0 (14 runs). Against s37/t.txt's seed 0. b.txt.
 # p: the full method growing more where it grows (strategy.grow_grad2d=0.0003 in the full runs only; the captures'
-#    config has 0.0005, session 6), the captures at 384x256 and DTU, seed 0 (7 runs). b.txt (b_gg3_...).
+#    config has 0.0005, session 6; DTU keeps 3D-GS's 0.0002, so there it grows less), the captures at 384x256 and DTU,
+#    seed 0 (7 runs). b.txt (b_gg3_...).
 # q: m, then b and p.
 # Copy the summaries to bench/results/s43/.
 set -u
