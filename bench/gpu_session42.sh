@@ -53,6 +53,8 @@ lines_x() {
 #    strategy.refine_stop_iter (full.refine_stop_fraction: 0, configs/full.yaml) where the baseline stops at half the
 #    run, so its baseline phase is not the baseline): the baseline with the full method's growth schedule
 #    (strategy.refine_stop_fraction=0), the six captures and DTU, seeds 0-2 (21 runs, 3000 steps). g.txt.
+# h (run from the command line on two H200s after g, the same lines): the full method with the baseline's growth
+#    schedule (full.refine_stop_fraction=0.5), the six captures and DTU, seeds 0-2 (21 runs). h.txt.
 lines_g() {
   for s in 0 1 2; do
     echo "named g_dtu_baseline_s$s baseline dtu scan65 3 $s --set strategy.refine_stop_fraction=0"
@@ -67,6 +69,7 @@ s) screen ;;
 w) lines_w "1 2" "${W:-5.0}" | run_lines 14; summary w_ w.txt ;;
 x) lines_x | run_lines 28; summary x x.txt ;;
 g) lines_g | run_lines 21; summary g_ g.txt ;;
+h) lines_v h "0 1 2" full.refine_stop_fraction=0.5 | run_lines 21; summary h_ h.txt ;;
 q) cuda_tests tests/test_reliable_weight.py || { echo "the CUDA tests failed: no runs"; exit 1; }
    screen ;;
 *) echo "unknown phase $P"; exit 2 ;;
