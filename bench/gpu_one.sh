@@ -26,6 +26,17 @@ one() {
 }
 export -f one
 
+# cases PREFIX METHOD SEED SETTING: the run lines of METHOD with --set SETTING on DTU, fern (not with FERN=0) and the six
+# captures at 384x256, named PREFIX_SCENE[_Nv]_METHOD_sSEED (bench/gpu_session42.sh on).
+cases() {
+  local pre=$1 m=$2 s=$3 set=$4
+  echo "named ${pre}_dtu_${m}_s$s $m dtu scan65 3 $s --set $set"
+  [ "${FERN:-1}" = 1 ] && echo "named ${pre}_fern_${m}_s$s $m llff fern 3 $s --set $set"
+  for c in castle_p30 herz_jesus_p25; do for v in 3 6 9; do
+    echo "one ${pre}_${c}_${v}v_${m}_s$s $m $c $v $s --set $set"
+  done; done
+}
+
 # one4 NAME METHOD SCENE VIEWS SEED [--set k=v ...]: one at images_4 (768x512) for 10,000 iterations (the setting of
 # --data dl3dv; bench/gpu_session38.sh on).
 one4() { DS=4 IT=10000 one "$@"; }

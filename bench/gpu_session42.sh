@@ -27,14 +27,8 @@ set -u
 source "$(dirname "${BASH_SOURCE[0]}")/gpu_one.sh"
 session_env "$@"; P=$1; D=$2; R=$3; shift 3
 export R D T END=$(( $(date +%s) + ${T:-540} ))  # every run of the call stops by then
-lines_v() {  # lines_v PREFIX "SEEDS" SETTING: the full method with SETTING, the six captures at 384x256 and DTU
-  local pre=$1 seeds=$2 set=$3
-  for s in $seeds; do
-    echo "named ${pre}_dtu_full_s$s full dtu scan65 3 $s --set $set"
-    for c in castle_p30 herz_jesus_p25; do for v in 3 6 9; do
-      echo "one ${pre}_${c}_${v}v_full_s$s full $c $v $s --set $set"
-    done; done
-  done
+lines_v() {  # lines_v PREFIX "SEEDS" SETTING [METHOD]: METHOD (default full) with SETTING, the six captures at 384x256 and DTU
+  local s; for s in $2; do FERN=0 cases "$1" "${4:-full}" "$s" "$3"; done
 }
 rw_name() { local w=${1/./}; echo "rw${w:0:2}"; }  # 5.0 -> rw50, 2.5 -> rw25
 lines_w() {  # lines_w "SEEDS" WEIGHT ...
@@ -55,14 +49,7 @@ lines_x() {
 #    (strategy.refine_stop_fraction=0), the six captures and DTU, seeds 0-2 (21 runs, 3000 steps). g.txt.
 # h (run from the command line on two H200s after g, the same lines): the full method with the baseline's growth
 #    schedule (full.refine_stop_fraction=0.5), the six captures and DTU, seeds 0-2 (21 runs). h.txt.
-lines_g() {
-  for s in 0 1 2; do
-    echo "named g_dtu_baseline_s$s baseline dtu scan65 3 $s --set strategy.refine_stop_fraction=0"
-    for c in castle_p30 herz_jesus_p25; do for v in 3 6 9; do
-      echo "one g_${c}_${v}v_baseline_s$s baseline $c $v $s --set strategy.refine_stop_fraction=0"
-    done; done
-  done
-}
+lines_g() { lines_v g "0 1 2" strategy.refine_stop_fraction=0 baseline; }
 case $P in
 t) cuda_tests tests/test_reliable_weight.py ;;
 s) screen ;;

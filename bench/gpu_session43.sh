@@ -21,14 +21,6 @@ set -u
 source "$(dirname "${BASH_SOURCE[0]}")/gpu_one.sh"
 session_env "$@"; P=$1; D=$2; R=$3; shift 3
 export R D T END=$(( $(date +%s) + ${T:-540} ))  # every run of the call stops by then
-cases() {  # cases PREFIX METHOD SEED SETTING: METHOD with SETTING on DTU, fern (FERN=0: not) and the six captures
-  local pre=$1 m=$2 s=$3 set=$4
-  echo "named ${pre}_dtu_${m}_s$s $m dtu scan65 3 $s --set $set"
-  [ "${FERN:-1}" = 1 ] && echo "named ${pre}_fern_${m}_s$s $m llff fern 3 $s --set $set"
-  for c in castle_p30 herz_jesus_p25; do for v in 3 6 9; do
-    echo "one ${pre}_${c}_${v}v_${m}_s$s $m $c $v $s --set $set"
-  done; done
-}
 lines_m() {
   for s in 0 1 2; do
     cases m baseline "$s" strategy.refine_stop_fraction=0.75

@@ -8,7 +8,7 @@ import pytest
 import torch
 
 from warpgs.config import FullConfig
-from warpgs.pipelines.full import ABLATIONS, append_gaussians, phase_boundaries
+from warpgs.pipelines.full import ABLATIONS, append_gaussians, check_settings, phase_boundaries
 
 
 def test_phase_boundaries_split_the_iterations():
@@ -133,8 +133,6 @@ def test_pseudo_view_masks_follow_the_uncertainty():
 
 
 def test_growth_budget_caps_the_cycles_and_bad_settings_are_named(tmp_path):
-    from warpgs.pipelines.full import check_settings
-
     from tiny_scene import small_full_trainer
 
     _, tr = small_full_trainer(tmp_path, "--set", "full.growth_budget=1.5")
@@ -224,7 +222,6 @@ def test_cycle_iterations_follow_the_baseline_run(tmp_path):
         assert torch.equal(v, base.model.params[k].detach()), k
     assert [h["step"] for h in tr.method.history] == [20, 26, 32]
     with pytest.raises(ValueError, match="cycle_iterations"):
-        from warpgs.pipelines.full import check_settings
         check_settings(FullConfig(cycle_iterations=-1))
 
 
