@@ -419,6 +419,33 @@ def screen41(results: Path) -> dict:
     return out
 
 
+def session43_tables(results: Path) -> list[list[str]]:
+    """Session 43's tables (module docstring), for the summaries present: both methods stopping growth at 0.75 of the
+    run (``m``) beside session 37's default; the full method's ``growth_budget`` 0 and 2.0 and
+    ``strategy.grow_grad2d=0.0003`` (``b``, seed 0) as variants against it; DTU's and fern's runs beside their defaults."""
+    d43 = results / "s43"
+    out, names = [], []
+    default = session37_default(results)
+    if (d43 / "m.txt").is_file():
+        late = load(d43 / "m.txt", "m")
+        label = "growth stops at 0.75 of the run in both"
+        out.append(["both methods stopping growth at 0.75 of the run (strategy.refine_stop_fraction=0.75 in the baseline, "
+                    "full.refine_stop_fraction=0.75 in the full method), 384x256, 3000 it, seeds 0-2:", ""]
+                   + table([("session 37 default", default), (label, late)]) + change_lines(default, late, label))
+        names += [(d43 / "m.txt", f"m_{scene}_{m}") for scene in ("dtu", "fern") for m in ("baseline", "full")]
+    if (d43 / "b.txt").is_file():
+        labels = {"gb0": "growth_budget=0", "gb20": "growth_budget=2.0", "gg3": "grow_grad2d=0.0003"}
+        variants = {labels.get(k, k): v for k, v in load_variants(d43 / "b.txt", "b").items()}
+        out.append(["the full method with full.growth_budget 0 (no cap) and 2.0, and strategy.grow_grad2d=0.0003, "
+                    "384x256, 3000 it, seed 0, against session 37's default (seed 0 and seeds 0-2):", ""]
+                   + variant_table(seed0(default), variants, "default (session 37), seed 0")
+                   + [""] + variant_table(default, variants, "default (session 37), seeds 0-2"))
+        names += [(d43 / "b.txt", f"b_{k}_dtu_full") for k in labels]
+    if names:
+        out.append(named_beside_defaults(results, sorted({p for p, _ in names}), [n for _, n in names]))
+    return out
+
+
 def session42_tables(results: Path) -> list[list[str]]:
     """Session 42's tables (module docstring), for the summaries present: ``full.reliable_weight`` 5 and 2.5 and
     ``full.depth_weight=0`` (seed 0 from session 41's screen) against session 37's default, DTU beside its defaults."""
@@ -512,9 +539,12 @@ def with_baselines(default: dict, baselines: dict) -> dict:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--results", default=str(Path(__file__).resolve().parent / "results"))
-    ap.add_argument("--session", type=int, choices=(20, 21, 22, 26, 27, 28, 29, 30, 31, 33, 34, 35, 36, 37, 38, 39, 40, 41, 42),
+    ap.add_argument("--session", type=int, choices=(20, 21, 22, 26, 27, 28, 29, 30, 31, 33, 34, 35, 36, 37, 38, 39, 40, 41, 42, 43),
                     default=21)
     args = ap.parse_args(argv)
+    if args.session == 43:
+        print("\n\n".join("\n".join(t) for t in session43_tables(Path(args.results))) or "no s43 summaries yet")
+        return 0
     if args.session == 42:
         print("\n\n".join("\n".join(t) for t in session42_tables(Path(args.results))) or "no s42 summaries yet")
         return 0

@@ -16,6 +16,9 @@
 #    config has 0.0005, session 6; DTU keeps 3D-GS's 0.0002, so there it grows less), the captures at 384x256 and DTU,
 #    seed 0 (7 runs). b.txt (b_gg3_...).
 # q: m, then b and p.
+# c (written after q's results): CoR-GS's pair (train.co_reg=true, its defaults) on DTU in both methods, seeds 0-2, then in
+#    the full method on the six captures at 384x256, seed 0 (12 runs, each two to four times a run's cost; 8 at a time).
+#    c.txt.
 # Copy the summaries to bench/results/s43/.
 set -u
 source "$(dirname "${BASH_SOURCE[0]}")/gpu_one.sh"
@@ -31,11 +34,18 @@ lines_b() {
   FERN=0 cases b_gb0 full 0 full.growth_budget=0
   FERN=0 cases b_gb20 full 0 full.growth_budget=2.0
 }
+lines_c() {
+  for s in 0 1 2; do for m in baseline full; do
+    echo "named c_cr_dtu_${m}_s$s $m dtu scan65 3 $s --set train.co_reg=true"
+  done; done
+  FERN=0 cases c_cr full 0 train.co_reg=true | grep -v _dtu_
+}
 lines_p() { FERN=0 cases b_gg3 full 0 strategy.grow_grad2d=0.0003; }
 case $P in
 m) lines_m | run_lines 48; summary m_ m.txt ;;
 b) lines_b | run_lines 14; summary b_ b.txt ;;
 p) lines_p | run_lines 7; summary b_ b.txt ;;
+c) lines_c | JOBS=${JOBS:-8} run_lines 12; summary c_ c.txt ;;
 q) { lines_m; lines_b; lines_p; } | run_lines 69; summary m_ m.txt; summary b_ b.txt ;;
 *) echo "unknown phase $P"; exit 2 ;;
 esac
