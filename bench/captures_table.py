@@ -422,7 +422,7 @@ def screen41(results: Path) -> dict:
 def session43_tables(results: Path) -> list[list[str]]:
     """Session 43's tables (module docstring), for the summaries present: both methods stopping growth at 0.75 of the
     run (``m``) beside session 37's default; the full method's ``growth_budget`` 0 and 2.0 and
-    ``strategy.grow_grad2d=0.0003`` (``b``, seed 0) as variants against it; DTU's and fern's runs beside their defaults."""
+    ``strategy.grow_grad2d=0.0003`` (``b``, seed 0) and CoR-GS's pair (``c``, seed 0) as variants against it; DTU's and fern's runs beside their defaults."""
     d43 = results / "s43"
     out, names = [], []
     default = session37_default(results)
@@ -441,6 +441,11 @@ def session43_tables(results: Path) -> list[list[str]]:
                    + variant_table(seed0(default), variants, "default (session 37), seed 0")
                    + [""] + variant_table(default, variants, "default (session 37), seeds 0-2"))
         names += [(d43 / "b.txt", f"b_{k}_dtu_full") for k in labels]
+    if (d43 / "c.txt").is_file():  # CoR-GS's pair
+        variants = {"co_reg=true": load_variants(d43 / "c.txt", "c").get("cr", {})}
+        out.append(["the full method with CoR-GS's pair (train.co_reg=true), 384x256, 3000 it, seed 0, against session 37's "
+                    "default (seed 0):", ""] + variant_table(seed0(default), variants, "default (session 37), seed 0"))
+        names += [(d43 / "c.txt", f"c_cr_dtu_{m}") for m in ("baseline", "full")]
     if names:
         out.append(named_beside_defaults(results, sorted({p for p, _ in names}), [n for _, n in names]))
     return out

@@ -310,3 +310,23 @@ def test_session42_tables_put_the_growth_schedules_side_by_side(tmp_path):
     assert h.splitlines()[4].endswith("| +0.20 |") and "full -0.40 dB" in h
     for name in ("x_dtu_full", "xc_dtu_full", "g_dtu_baseline", "h_dtu_full"):
         assert (f"| {name} |" in dtu) == (name != "xc_dtu_full"), name
+
+
+def test_session43_tables_compare_growth_and_the_pair_with_the_default(tmp_path):
+    """m: both methods stopping growth at 0.75, beside the default; b and c: seed-0 variants of the full method against
+    the default's seed 0 (and, for b, its seeds 0-2); DTU's runs in one table."""
+    write_session37_default(tmp_path, "s43")
+    assert ct.session43_tables(tmp_path) == []
+    (tmp_path / "s43/m.txt").write_text("m_castle_p30_6v_baseline_s0 20.5 1\nm_castle_p30_6v_baseline_s1 20.3 1\n"
+                                        "m_castle_p30_6v_full_s0 20.9 1\nm_dtu_full_s0 26.5 5\n")
+    (tmp_path / "s43/b.txt").write_text("b_gb20_castle_p30_6v_full_s0 20.6 1\nb_gb20_dtu_full_s0 26.6 5\n")
+    (tmp_path / "s43/c.txt").write_text("c_cr_castle_p30_6v_full_s0 19.9 1\nc_cr_dtu_baseline_s0 26.4 5\n")
+    m, b, c, dtu = ("\n".join(t) for t in ct.session43_tables(tmp_path))
+    # the late-stopping pair: baseline median 20.40, full 20.90: +0.50; both moved against the default (20.10 / 20.70)
+    assert m.splitlines()[4].endswith("| +0.50 |") and "baseline +0.30 dB" in m and "full +0.20 dB" in m
+    # growth_budget=2.0 at seed 0 against the default's seed-0 baseline 20.0 (+0.60), then its median 20.10 (+0.50)
+    assert "| growth_budget=2.0 | 20.60 (+0.60) |" in b and "| growth_budget=2.0 | 20.60 (+0.50) |" in b
+    assert "| co_reg=true | 19.90 (-0.10) |" in c
+    for name in ("m_dtu_full", "b_gb20_dtu_full", "c_cr_dtu_baseline"):
+        assert f"| {name} |" in dtu, name
+    assert "| c_cr_dtu_full |" not in dtu and "| m_dtu_baseline |" not in dtu
