@@ -81,6 +81,11 @@ median).
   session) ``full.cycle_iterations=1000`` over seeds 0-2 and its control at seed 0 (``s42/x.txt``, ``x_...``,
   ``xc_...``), the baseline with the full method's growth schedule (``s42/g.txt``, ``g_...``) and the full method
   with the baseline's (``s42/h.txt``, ``h_...``), seeds 0-2.
+- session 43 (``bench/gpu_session43.sh``, prepared in session 42): both methods stopping growth at 0.75 of the run
+  (``s43/m.txt``, ``m_...``, seeds 0-2, fern and DTU too) beside session 37's default; the full method's
+  ``full.growth_budget`` 0 and 2.0 and ``strategy.grow_grad2d=0.0003`` (``s43/b.txt``, ``b_gb0_...``, ``b_gb20_...``,
+  ``b_gg3_...``, seed 0); then (written during the session) CoR-GS's pair, ``train.co_reg=true`` (``s43/c.txt``,
+  ``c_cr_...``: DTU in both methods, seeds 0-2; the captures' full method, seed 0).
 - session 39 (the last 290 s of two H200s): the full method at pseudo weight 0.1 against session 37's default (0.2)
   at 384x256, seeds 0-2 (``s39/x.txt``, ``x_...``; DTU's ``x_dtu_full_sK`` beside ``s37/t.txt``'s).
 """
@@ -422,7 +427,8 @@ def screen41(results: Path) -> dict:
 def session43_tables(results: Path) -> list[list[str]]:
     """Session 43's tables (module docstring), for the summaries present: both methods stopping growth at 0.75 of the
     run (``m``) beside session 37's default; the full method's ``growth_budget`` 0 and 2.0 and
-    ``strategy.grow_grad2d=0.0003`` (``b``, seed 0) and CoR-GS's pair (``c``, seed 0) as variants against it; DTU's and fern's runs beside their defaults."""
+    ``strategy.grow_grad2d=0.0003`` (``b``, seed 0) and CoR-GS's pair (``c``, seed 0) as variants against it; DTU's
+    and fern's runs beside their defaults."""
     d43 = results / "s43"
     out, names = [], []
     default = session37_default(results)

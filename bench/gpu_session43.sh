@@ -17,8 +17,8 @@
 #    seed 0 (7 runs). b.txt (b_gg3_...).
 # q: m, then b and p.
 # c (written after q's results): CoR-GS's pair (train.co_reg=true, its defaults) on DTU in both methods, seeds 0-2, then in
-#    the full method on the six captures at 384x256, seed 0 (12 runs, each two to four times a run's cost; 8 at a time).
-#    c.txt.
+#    the full method on the six captures at 384x256, seed 0 (12 runs, each two to four times a run's cost; JOBS at a time,
+#    default 8; session 43 ran it with JOBS=12 in 334 s). c.txt.
 # Copy the summaries to bench/results/s43/.
 set -u
 source "$(dirname "${BASH_SOURCE[0]}")/gpu_one.sh"
@@ -35,9 +35,7 @@ lines_b() {
   FERN=0 cases b_gb20 full 0 full.growth_budget=2.0
 }
 lines_c() {
-  for s in 0 1 2; do for m in baseline full; do
-    echo "named c_cr_dtu_${m}_s$s $m dtu scan65 3 $s --set train.co_reg=true"
-  done; done
+  for s in 0 1 2; do for m in baseline full; do FERN=0 cases c_cr $m $s train.co_reg=true | grep _dtu_; done; done
   FERN=0 cases c_cr full 0 train.co_reg=true | grep -v _dtu_
 }
 lines_p() { FERN=0 cases b_gg3 full 0 strategy.grow_grad2d=0.0003; }
