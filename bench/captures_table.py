@@ -553,17 +553,10 @@ def main(argv=None) -> int:
     ap.add_argument("--session", type=int, choices=(20, 21, 22, 26, 27, 28, 29, 30, 31, 33, 34, 35, 36, 37, 38, 39, 40, 41, 42, 43),
                     default=21)
     args = ap.parse_args(argv)
-    if args.session == 43:
-        print("\n\n".join("\n".join(t) for t in session43_tables(Path(args.results))) or "no s43 summaries yet")
-        return 0
-    if args.session == 42:
-        print("\n\n".join("\n".join(t) for t in session42_tables(Path(args.results))) or "no s42 summaries yet")
-        return 0
-    if args.session == 41:
-        print("\n\n".join("\n".join(t) for t in session41_tables(Path(args.results))) or "no s41 summaries yet")
-        return 0
-    if args.session == 40:
-        print("\n\n".join("\n".join(t) for t in session40_tables(Path(args.results))) or "no s40 summaries yet")
+    tables = {40: session40_tables, 41: session41_tables, 42: session42_tables, 43: session43_tables}
+    if args.session in tables:
+        got = tables[args.session](Path(args.results))
+        print("\n\n".join("\n".join(t) for t in got) or f"no s{args.session} summaries yet")
         return 0
     if args.session == 39:
         import seed_medians as sm

@@ -43,12 +43,7 @@ lines_i() {
   done; done; done
 }
 lines_s() {
-  for v in densify=false depth_weight=0 guidance=render; do local p="s_${v%%=*}"
-    echo "named ${p}_dtu_full_s0 full dtu scan65 3 0 --set full.$v"
-    for c in castle_p30 herz_jesus_p25; do for n in 3 6 9; do
-      echo "one ${p}_${c}_${n}v_full_s0 full $c $n 0 --set full.$v"
-    done; done
-  done
+  for v in densify=false depth_weight=0 guidance=render; do FERN=0 cases "s_${v%%=*}" full 0 "full.$v"; done
 }
 case $P in
 t) cuda_tests tests/test_binocular.py tests/test_path_consistency.py ;;

@@ -284,8 +284,8 @@ class FullConfig:
     #   the render 0.2. An LPIPS term, when its weights are there, stays unweighted. 1: every pixel alike
     flythrough_frames: int = 24  # frames per trajectory in flythrough.gif
 
-    LIMITS = {"cycles": ">= 0", "baseline_fraction": "[0, 1)", "cycle_iterations": ">= 0", "pseudo_weight": ">= 0", "lpips_weight": ">= 0",
-              "ssim_weight": ">= 0", "depth_weight": ">= 0", "input_depth_weight": ">= 0",
+    LIMITS = {"cycles": ">= 0", "baseline_fraction": "[0, 1)", "cycle_iterations": ">= 0", "pseudo_weight": ">= 0",
+              "lpips_weight": ">= 0", "ssim_weight": ">= 0", "depth_weight": ">= 0", "input_depth_weight": ">= 0",
               "pseudo_loss": "{lpips, l1}", "guidance": "{warped, render}", "stereo_sources": "{inputs, all}",
               "init_opacity": "(0, 1)", "max_new": ">= 0", "pseudo_mask": "{seen, reliable, all}", "growth_budget": ">= 0",
               "drop_rate": "[0, 1)", "pseudo_depth_smooth": ">= 0", "far_field": FAR_FIELD_RULE, "refine_stop_fraction": "[0, 1]",
