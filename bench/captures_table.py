@@ -86,6 +86,11 @@ median).
   ``full.growth_budget`` 0 and 2.0 and ``strategy.grow_grad2d=0.0003`` (``s43/b.txt``, ``b_gb0_...``, ``b_gb20_...``,
   ``b_gg3_...``, seed 0); then (written during the session) CoR-GS's pair, ``train.co_reg=true`` (``s43/c.txt``,
   ``c_cr_...``: DTU in both methods, seeds 0-2; the captures' full method, seed 0).
+- session 44 (``bench/gpu_session44.sh``): DTU only, seeds 0-2, beside DTU's and fern's defaults: the full method's
+  pseudo views also on copies of the path moved up and down (``pseudo.trajectory.offsets``: ``s44/a.txt``,
+  ``a_off5_...``, ``a_off10_...``), the binocular term's partner moved in any direction of the image plane
+  (``train.binocular_axes=xy``, both methods: ``a_bxy_...``), both (``a_both_...``), and the moved copies weighing
+  more (``s44/c.txt``, ``c_off5rw5_...``, ``c_off5pw5_...``).
 - session 39 (the last 290 s of two H200s): the full method at pseudo weight 0.1 against session 37's default (0.2)
   at 384x256, seeds 0-2 (``s39/x.txt``, ``x_...``; DTU's ``x_dtu_full_sK`` beside ``s37/t.txt``'s).
 """
@@ -457,6 +462,20 @@ def session43_tables(results: Path) -> list[list[str]]:
     return out
 
 
+S44_NAMES = [("a.txt", "a_off5_dtu_full"), ("a.txt", "a_off10_dtu_full"), ("a.txt", "a_bxy_dtu_baseline"),
+             ("a.txt", "a_bxy_dtu_full"), ("a.txt", "a_both_dtu_full"), ("c.txt", "c_off5rw5_dtu_full"),
+             ("c.txt", "c_off5pw5_dtu_full")]
+
+
+def session44_tables(results: Path) -> list[list[str]]:
+    """Session 44's DTU runs (module docstring) beside DTU's and fern's defaults, for the summaries present."""
+    d44 = results / "s44"
+    files = sorted({d44 / f for f, _ in S44_NAMES if (d44 / f).is_file()})
+    if not files:
+        return []
+    return [named_beside_defaults(results, files, [n for _, n in S44_NAMES])]
+
+
 def session42_tables(results: Path) -> list[list[str]]:
     """Session 42's tables (module docstring), for the summaries present: ``full.reliable_weight`` 5 and 2.5 and
     ``full.depth_weight=0`` (seed 0 from session 41's screen) against session 37's default, DTU beside its defaults."""
@@ -550,10 +569,10 @@ def with_baselines(default: dict, baselines: dict) -> dict:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--results", default=str(Path(__file__).resolve().parent / "results"))
-    ap.add_argument("--session", type=int, choices=(20, 21, 22, 26, 27, 28, 29, 30, 31, 33, 34, 35, 36, 37, 38, 39, 40, 41, 42, 43),
+    ap.add_argument("--session", type=int, choices=(20, 21, 22, 26, 27, 28, 29, 30, 31, 33, 34, 35, 36, 37, 38, 39, 40, 41, 42, 43, 44),
                     default=21)
     args = ap.parse_args(argv)
-    tables = {40: session40_tables, 41: session41_tables, 42: session42_tables, 43: session43_tables}
+    tables = {40: session40_tables, 41: session41_tables, 42: session42_tables, 43: session43_tables, 44: session44_tables}
     if args.session in tables:
         got = tables[args.session](Path(args.results))
         print("\n\n".join("\n".join(t) for t in got) or f"no s{args.session} summaries yet")

@@ -180,19 +180,15 @@ def test_binocular_term_trains_and_checkpoints_its_draws(tmp_path):
     assert same_params(param_copy(resumed), param_copy(whole))
 
 
-def test_binocular_loss_is_lower_with_the_true_depth():
-    """On the textured plane, the term computed with the input's rendered depth is below the term with that
-    depth 30% too far or too near (the warp then misaligns the moved render)."""
+def _plane_view(gx, gy, colours):
+    """A plane of Gaussians at z = 4 (centres ``gx``, ``gy``, RGB ``colours`` [n, 3]) rendered by a 48x32 camera at
+    the origin looking along +z -> (model, the render, the camera with that render as its photo, background)."""
     from types import SimpleNamespace
 
-    from warpgs.binocular import Binocular
     from warpgs.model import GaussianModel
 
-    g = np.random.default_rng(0)
-    n = 60 * 40
-    gx, gy = np.meshgrid(np.linspace(-2.4, 2.4, 60), np.linspace(-1.6, 1.6, 40))
-    means = torch.tensor(np.stack([gx.ravel(), gy.ravel(), np.full(n, 4.0)], 1), dtype=torch.float32)
-    model = GaussianModel.from_points(means, torch.tensor(g.random((n, 3)), dtype=torch.float32), sh_degree=0,
+    means = torch.tensor(np.stack([gx.ravel(), gy.ravel(), np.full(gx.size, 4.0)], 1), dtype=torch.float32)
+    model = GaussianModel.from_points(means, torch.as_tensor(colours, dtype=torch.float32), sh_degree=0,
                                       init_opacity=0.99, init_scale=1.0)
     W, H = 48, 32
     K = torch.tensor([[40.0, 0, W / 2], [0, 40.0, H / 2], [0, 0, 1]])
@@ -200,7 +196,16 @@ def test_binocular_loss_is_lower_with_the_true_depth():
     bg = torch.zeros(3)
     with torch.no_grad():
         inp = model.render(vm, K, W, H, background=bg)
-    cam = SimpleNamespace(viewmat=vm, K=K, width=W, height=H, image=inp.image)
+    return model, inp, SimpleNamespace(viewmat=vm, K=K, width=W, height=H, image=inp.image), bg
+
+
+def test_binocular_loss_is_lower_with_the_true_depth():
+    """On the textured plane, the term computed with the input's rendered depth is below the term with that
+    depth 30% too far or too near (the warp then misaligns the moved render)."""
+    from warpgs.binocular import Binocular
+
+    gx, gy = np.meshgrid(np.linspace(-2.4, 2.4, 60), np.linspace(-1.6, 1.6, 40))
+    model, inp, cam, bg = _plane_view(gx, gy, np.random.default_rng(0).random((gx.size, 3)))
 
     def term(scale):
         b = Binocular(1.0, 1.0, 0, 0.0, "cpu", 0)  # the same draw of t each time (same seed): 6 px at 4 m
@@ -373,3 +378,28 @@ def test_path_partner_trains_from_the_config_and_resumes_bit_for_bit(tmp_path):
     resumed.load_checkpoint()
     resumed.train()
     assert same_params(param_copy(resumed), param_copy(path))
+
+
+def test_binocular_xy_sees_depth_errors_a_sideways_move_cannot():
+    """Horizontal stripes (colour varies with the row only): a sideways partner warps along the rows and sees no
+    error in the depth, whatever it is; ``train.binocular_axes: xy`` moves the camera up and down too, so the term
+    with the depth 30% off is well above the term with the true depth. With the true depth both are small."""
+    from warpgs.binocular import Binocular
+
+    n_x, n_y = 150, 40  # wider than the view and its moves: no edge of the plane in sight along the rows
+    gx, gy = np.meshgrid(np.linspace(-6.0, 6.0, n_x), np.linspace(-1.6, 1.6, n_y))
+    rows = np.repeat(np.arange(n_y) % 2, n_x).astype(np.float32)  # stripes one grid row high
+    model, inp, cam, bg = _plane_view(gx, gy, np.stack([rows, 1 - rows, np.full_like(rows, 0.5)], 1))
+
+    def term(axes, scale, draws=8):
+        b = Binocular(1.0, 1.0, 0, 0.0, "cpu", 0, axes=axes)
+        with torch.no_grad():  # the mean over a few draws of the move (one generator: different draws)
+            return np.mean([float(b.loss(model, inp._replace(depth=inp.depth * scale), cam, bg, {}))
+                            for _ in range(draws)])
+
+    x_right, x_wrong = term("x", 1.0), term("x", 1.3)
+    xy_right, xy_wrong = term("xy", 1.0), term("xy", 1.3)
+    assert abs(x_wrong - x_right) < 0.2 * x_wrong + 1e-3  # blind to the depth
+    assert xy_wrong > 2 * xy_right and xy_wrong > 2 * x_wrong
+    with pytest.raises(ValueError, match="x or xy"):
+        Binocular(1.0, 1.0, 0, 0.0, "cpu", 0, axes="z")

@@ -330,3 +330,19 @@ def test_session43_tables_compare_growth_and_the_pair_with_the_default(tmp_path)
     for name in ("m_dtu_full", "b_gb20_dtu_full", "c_cr_dtu_baseline"):
         assert f"| {name} |" in dtu, name
     assert "| c_cr_dtu_full |" not in dtu and "| m_dtu_baseline |" not in dtu
+
+
+def test_session44_tables_put_dtu_variants_beside_its_defaults(tmp_path):
+    """Session 44's DTU runs, median [min, max] over their seeds, in one table under DTU's defaults; runs of other
+    names in the summaries are not listed."""
+    write_session37_default(tmp_path, "s44")
+    assert ct.session44_tables(tmp_path) == []
+    (tmp_path / "s44/a.txt").write_text("a_off5_dtu_full_s0 26.4 5\na_off5_dtu_full_s1 26.6 5\na_off5_dtu_full_s2 26.5 5\n"
+                                        "a_bxy_dtu_baseline_s0 26.1 5\na_zzz_dtu_full_s0 30.0 5\n")
+    (tmp_path / "s44/c.txt").write_text("c_off5pw5_dtu_full_s0 25.8 5\n")
+    (dtu,) = ct.session44_tables(tmp_path)
+    text = "\n".join(dtu)
+    assert "| dtu full (default) | 26.60 [26.60, 26.60] |" in text
+    assert "| a_off5_dtu_full | 26.50 [26.40, 26.60] | 0, 1, 2 |" in text
+    assert "| a_bxy_dtu_baseline | 26.10 [26.10, 26.10] | 0 |" in text and "| c_off5pw5_dtu_full | 25.80" in text
+    assert "a_zzz" not in text and "a_off10" not in text

@@ -298,15 +298,13 @@ def _visible(cap, depth, V_dst, src_ids, tol=0.02):
     return vis
 
 
-def test_default_backend_pseudo_views_on_the_synthetic_scene(tmp_path):
-    """Inputs: frames 4, 7, 10 of the ray-traced walk. The "3D-GS" is a stand-in: one small Gaussian per
-    input pixel at its true depth, rasterized (colour I_gs); depth everywhere is the ray-traced truth.
-    Pseudo views at the interpolated poses are compared with ray-traced ground truth on pixels that an
-    input of the trajectory sees."""
+def _stand_in_model():
+    """Frames 4, 7, 10 of the ray-traced walk as inputs, and a stand-in "3D-GS": one small Gaussian per input pixel
+    at its true depth, rasterized (colour I_gs); depth everywhere is the ray-traced truth -> (cap, ids, inputs,
+    render_fn, input depths)."""
     from warpgs.data import SyntheticConfig, generate_capture
     from warpgs.data.scene import Camera
     from warpgs.data.synthetic import render_views
-    from warpgs.pseudo.views import PseudoConfig, generate_pseudo_views
     from warpgs.render import rasterize
 
     cap = generate_capture(SyntheticConfig(seed=0, width=80, height=60, frames=24, samples_per_side=2), device="cpu")
@@ -333,23 +331,40 @@ def test_default_backend_pseudo_views_on_the_synthetic_scene(tmp_path):
         _, depth = render_views(cap.world, viewmat.double().numpy()[None], K.double().numpy(), width, height, 1, "cpu")
         return image, torch.from_numpy(depth[0])
 
-    depths_in = [torch.from_numpy(c.depth) for c in inputs]
+    return cap, ids, inputs, render_fn, [torch.from_numpy(c.depth) for c in inputs]
+
+
+def _visible_psnr(cap, ids, seqs, w, h):
+    """PSNR of the pseudo views' interior frames and of the renders there against ray-traced ground truth, on the
+    pixels one of the trajectory's two inputs sees."""
+    from warpgs.data.synthetic import render_views
+
+    se = se_render = count = 0.0
+    for s in seqs:
+        V = s.viewmats.double().numpy()
+        gt, gt_depth = render_views(cap.world, V, cap.K, w, h, 2, "cpu")
+        for i in range(1, len(s) - 1):
+            vis = _visible(cap, gt_depth[i], V[i], [ids[s.start], ids[s.end]])
+            se += float((((s.frames[i].numpy() - gt[i]) ** 2).mean(-1))[vis].sum())
+            se_render += float((((s.renders[i].numpy() - gt[i]) ** 2).mean(-1))[vis].sum())
+            count += vis.sum()
+    return 10 * np.log10(count / se), 10 * np.log10(count / se_render)
+
+
+def test_default_backend_pseudo_views_on_the_synthetic_scene(tmp_path):
+    """Pseudo views at the interpolated poses between the stand-in's inputs (``_stand_in_model``) are compared
+    with ray-traced ground truth on pixels that an input of the trajectory sees."""
+    from warpgs.pseudo.views import PseudoConfig, generate_pseudo_views
+
+    cap, ids, inputs, render_fn, depths_in = _stand_in_model()
+    h, w = cap.depths.shape[1:]
     results = {}
     for guided in (True, False):
         cfg = PseudoConfig.load(overrides=["trajectory.n_frames=9", "sampler.steps=20",
                                            f"sampler.guided={str(guided).lower()}"])
         seqs = generate_pseudo_views(render_fn, inputs, cfg, input_depths=depths_in,
                                      out_dir=tmp_path / "pseudo" if guided else None)
-        se = se_render = count = 0.0
-        for s in seqs:
-            V = s.viewmats.double().numpy()
-            gt, gt_depth = render_views(cap.world, V, cap.K, w, h, 2, "cpu")
-            for i in range(1, len(s) - 1):
-                vis = _visible(cap, gt_depth[i], V[i], [ids[s.start], ids[s.end]])
-                se += float((((s.frames[i].numpy() - gt[i]) ** 2).mean(-1))[vis].sum())
-                se_render += float((((s.renders[i].numpy() - gt[i]) ** 2).mean(-1))[vis].sum())
-                count += vis.sum()
-        results[guided] = (10 * np.log10(count / se), 10 * np.log10(count / se_render))
+        results[guided] = _visible_psnr(cap, ids, seqs, w, h)
     (psnr_guided, psnr_render), (psnr_unguided, _) = results[True], results[False]
     print(f"\ndefault backend, visible pixels: guided {psnr_guided:.2f} dB, unguided {psnr_unguided:.2f} dB, "
           f"3D-GS stand-in render {psnr_render:.2f} dB")
@@ -363,6 +378,36 @@ def test_default_backend_pseudo_views_on_the_synthetic_scene(tmp_path):
         im = np.asarray(Image.open(d / f"{kind}_004.png"))
         assert im.shape[:2] == (h, w)
     assert (d / "poses.npz").is_file()
+
+
+def test_offset_paths_give_pseudo_views_off_the_path_that_match_the_truth(tmp_path):
+    """``trajectory.offsets``: copies of the path moved up and down. Their pseudo views, at poses no input or path
+    frame has, are compared with ray-traced ground truth as above: guided they are good and better than unguided
+    sampling; each copy lies at its offset from the path; names and saved folders of the copies are their own."""
+    from warpgs.pseudo.views import PseudoConfig, generate_pseudo_views
+
+    cap, ids, inputs, render_fn, depths_in = _stand_in_model()
+    h, w = cap.depths.shape[1:]
+    results, seqs = {}, None
+    for guided in (True, False):
+        cfg = PseudoConfig.load(overrides=["trajectory.n_frames=7", "sampler.steps=20", "trajectory.offsets=[-0.3, 0.3]",
+                                           f"sampler.guided={str(guided).lower()}"])
+        seqs = generate_pseudo_views(render_fn, inputs, cfg, input_depths=depths_in,
+                                     out_dir=tmp_path / "pseudo" if guided else None)
+        assert [s.offset for s in seqs] == [0.0] * 2 + [-0.3] * 2 + [0.3] * 2
+        results[guided] = _visible_psnr(cap, ids, [s for s in seqs if s.offset != 0], w, h)
+    (psnr_guided, _), (psnr_unguided, _) = results[True], results[False]
+    print(f"\noff the path, visible pixels: guided {psnr_guided:.2f} dB, unguided {psnr_unguided:.2f} dB")
+    assert psnr_guided >= 24.0, results
+    assert psnr_guided > psnr_unguided + 1.0, results
+    on, up = seqs[0], seqs[4]
+    chord = float((on.viewmats[-1, :3, :3].T @ on.viewmats[-1, :3, 3] - on.viewmats[0, :3, :3].T @ on.viewmats[0, :3, 3]).norm())
+    centres = lambda v: -(v[:, :3, :3].transpose(1, 2) @ v[:, :3, 3:])[..., 0]  # noqa: E731
+    assert torch.allclose((centres(up.viewmats) - centres(on.viewmats)).norm(dim=1), torch.tensor(0.3 * chord), rtol=1e-3)
+    names = [c.name for s in seqs for c in s.pseudo_cameras()]
+    assert len(names) == len(set(names)) == 6 * 5
+    assert {p.name for p in (tmp_path / "pseudo").iterdir()} == {
+        "seq_000_001", "seq_001_002", "seq_o-0.3_000_001", "seq_o-0.3_001_002", "seq_o+0.3_000_001", "seq_o+0.3_001_002"}
 
 
 def test_pseudo_config_file_and_overrides(tmp_path):

@@ -13,7 +13,9 @@ from warpgs.pseudo.trajectory import (
     chord_knots,
     guidance_sources,
     natural_cubic_spline,
+    focus_point,
     nearest_neighbour_path,
+    offset_trajectories,
     path_trajectories,
     perturb_pose,
     perturb_trajectory,
@@ -191,3 +193,69 @@ def test_guidance_sources():
     assert guidance_sources(traj8, centers, "halves").tolist() == [0, 0, 0, 0, 1, 1, 1, 1]
     with pytest.raises(ValueError):
         guidance_sources(traj, centers, "bogus")
+
+
+def _ring_looking_at(target, n=4, radius=3.0, height=0.0, spread_deg=60.0):
+    """n cameras on an arc of a horizontal circle (world z up) around ``target``, each looking at it, OpenCV axes
+    (camera y points down the world's z)."""
+    out = []
+    for a in np.radians(np.linspace(-spread_deg / 2, spread_deg / 2, n)):
+        c = target + np.array([radius * np.cos(a), radius * np.sin(a), height])
+        z = (target - c) / np.linalg.norm(target - c)
+        x = np.cross(z, [0.0, 0.0, 1.0])
+        x /= np.linalg.norm(x)
+        y = np.cross(z, x)  # points down (-z of the world) for a level camera
+        out.append(pose(np.stack([x, y, z], 1), c))
+    return np.stack(out)
+
+
+def test_focus_point_is_where_the_axes_meet_and_none_for_parallel_axes():
+    target = np.array([0.5, -1.0, 2.0])
+    assert np.allclose(focus_point(_ring_looking_at(target, n=5)), target, atol=1e-9)
+    forward = np.stack([pose(np.eye(3), [x, 0.0, 0.0]) for x in (0.0, 1.0, 2.0)])  # all looking along +z
+    assert focus_point(forward) is None
+    behind = _ring_looking_at(target, n=3)
+    behind[:, :3, :] *= -1  # every camera turned round (rows of x, y, z negated: still a rotation? det -1 -> fix y)
+    behind[:, 1, :] *= -1
+    assert focus_point(behind) is None  # the point the axes meet lies behind the cameras
+
+
+def test_offset_trajectories_move_up_by_the_share_of_the_pair_and_keep_the_look_at_point():
+    """Cameras on a level arc looking at a point: the copy at offset e moves every frame by e x the pair's
+    distance straight up (the world's z, perpendicular to the level chord), and each moved frame's optical axis
+    still passes through the point its unmoved frame's axis looked at (the target's projection on that axis: the
+    target itself at the inputs); offset 0 gives the path back; frames stay rotations."""
+    target = np.array([0.0, 0.0, 0.0])
+    V = _ring_looking_at(target, n=3, radius=4.0)
+    trajs = path_trajectories(V, 7, "capture")
+    for e in (0.5, -0.25):
+        moved = offset_trajectories(trajs, V, [e])
+        assert len(moved) == len(trajs)
+        for t, m in zip(trajs, moved):
+            assert (m.start, m.end, m.offset) == (t.start, t.end, e)
+            chord = np.linalg.norm(t.centers[-1] - t.centers[0])
+            assert np.allclose(m.centers - t.centers, [0.0, 0.0, e * chord], atol=1e-9)
+            R = m.viewmats[:, :3, :3]
+            assert np.allclose(R @ R.transpose(0, 2, 1), np.eye(3), atol=1e-9) and np.allclose(np.linalg.det(R), 1)
+            for M0, M, c0, c in zip(t.viewmats, m.viewmats, t.centers, m.centers):
+                f0 = M0[2, :3]
+                look = c0 + np.dot(target - c0, f0) * f0
+                v, f = look - c, M[2, :3]
+                assert np.linalg.norm(v - np.dot(v, f) * f) < 1e-9 and np.dot(v, f) > 0
+            for k in (0, -1):  # at the inputs' ends that point is the target
+                f = m.viewmats[k, 2, :3]
+                v = target - m.centers[k]
+                assert np.linalg.norm(v - np.dot(v, f) * f) < 1e-9
+    same = offset_trajectories(trajs, V, [0.0])
+    for t, m in zip(trajs, same):
+        assert np.allclose(m.viewmats, t.viewmats, atol=1e-12)
+
+
+def test_offset_trajectories_of_forward_facing_inputs_only_move():
+    """Parallel axes (no focus point): the moved frames keep their rotations; 'up' is -y of the cameras."""
+    V = np.stack([pose(np.eye(3), [x, 0.0, 0.0]) for x in (0.0, 1.0, 3.0)])
+    trajs = path_trajectories(V, 5, "capture")
+    for t, m in zip(trajs, offset_trajectories(trajs, V, [1.0])):
+        chord = np.linalg.norm(t.centers[-1] - t.centers[0])
+        assert np.allclose(m.centers - t.centers, [0.0, -chord, 0.0], atol=1e-9)
+        assert np.allclose(m.viewmats[:, :3, :3], t.viewmats[:, :3, :3])

@@ -16,6 +16,10 @@ about 0.14 of the width). The draw happens on the device (no host read). The ter
 ``train.binocular_start`` x the run's steps (theirs: 20,000 of 30,000 on LLFF and DTU, 4000 of 7000 on
 Blender).
 
+``train.binocular_axes: xy`` (ours) moves the camera in a direction of its image plane drawn each step
+(uniform angle; the same distance as above), up and down as well as sideways, and warps back with the general
+reprojection (``pose_warp``).
+
 ``train.binocular_partner: path`` (ours) replaces the sideways partner by a pose of the capture path: the
 poses the pseudo views' trajectories pass through (splined centres, slerped rotations), from the input up to
 ``train.binocular_reach`` x the way to each neighbouring input, one drawn per step. The moved render is warped
@@ -145,8 +149,10 @@ class Binocular:
     """The term of one trainer (module docstring); ``loss`` adds it for an input render."""
 
     def __init__(self, weight: float, shift: float, start: int, smooth: float, device, seed: int,
-                 path: dict[str, torch.Tensor] | None = None):
-        self.weight, self.shift, self.start, self.smooth = weight, shift, start, smooth
+                 path: dict[str, torch.Tensor] | None = None, axes: str = "x"):
+        if axes not in ("x", "xy"):
+            raise ValueError(f"binocular axes must be x or xy, got {axes!r}")
+        self.weight, self.shift, self.start, self.smooth, self.axes = weight, shift, start, smooth, axes
         self.gen = torch.Generator(device=device)
         self.gen.manual_seed(int(seed) + 17)
         self.device = device
@@ -175,10 +181,19 @@ class Binocular:
             zmed = torch.where(seen, depth.detach(), torch.nan).nanmedian().nan_to_num(1.0)
             u = torch.rand(1, device=self.device, generator=self.gen)
             t = (2 * u - 1) * self.shift * cam.width * zmed / fx
-            moved = model.render(moved_viewmat(cam.viewmat, t), cam.K, cam.width, cam.height, background=bg,
-                                 check_finite=False)
-            ft = (fx * t).reshape(1)
-            warped, weight = shift_warp(moved.image, depth, ft)
+            if self.axes == "xy":  # a direction of the image plane (drawn on the device)
+                a = 2 * torch.pi * torch.rand(1, device=self.device, generator=self.gen)
+                vm = cam.viewmat.float().clone()
+                vm[:2, 3] = vm[:2, 3] - t * torch.cat([torch.cos(a), torch.sin(a)])
+                rel = vm @ rigid_inverse(cam.viewmat.float())
+                moved = model.render(vm, cam.K, cam.width, cam.height, background=bg, check_finite=False)
+                warped, weight = pose_warp(moved.image, depth, rel, cam.K)
+                ft = (fx * t.abs()).reshape(1)
+            else:
+                moved = model.render(moved_viewmat(cam.viewmat, t), cam.K, cam.width, cam.height, background=bg,
+                                     check_finite=False)
+                ft = (fx * t).reshape(1)
+                warped, weight = shift_warp(moved.image, depth, ft)
         diff = (warped - cam.image).abs() * weight[..., None]
         term = diff.sum() / (3 * weight.sum() + 1e-6)
         if self.smooth > 0:

@@ -128,6 +128,8 @@ class TrainConfig:
     binocular_partner: str = "shift"  # shift: their partner, the camera moved along its x axis | path: a pose of the
     #   capture path next to the input (the pseudo views' trajectories), up to binocular_reach of the way to a neighbour
     binocular_reach: float = 0.5  # path partner: the farthest, as a share of the way to the neighbouring input
+    binocular_axes: str = "x"  # shift partner: x: along the camera's x axis (theirs) | xy: in a direction of the image
+    #   plane drawn each step (up and down too: DTU's test cameras sit in the rows above and below its inputs')
     path_consistency: float = 0.0  # weight of the two inputs' agreement at a pose of the pseudo views' trajectories
     #   drawn each step (warpgs/pathconsistency.py; one more render a step): their photos warped into it with its
     #   rendered depth, L1 where both land. The full method's own is full.path_consistency, at its pseudo views; 0: off
@@ -219,7 +221,7 @@ class TrainConfig:
               "eval_every": ">= 0", "background": "[0, 1]", "drop_rate": "[0, 1)", "opacity_noise": "[0, 1]",
               "scale_reg": ">= 0", "scale_reg_ratio": ">= 1", "max_nan_steps": ">= 1", "opacity_decay": "[0, 1)",
               "binocular": ">= 0", "binocular_shift": "(0, 1]", "binocular_start": "[0, 1]", "binocular_smooth": ">= 0",
-              "binocular_partner": "{shift, path}", "binocular_reach": "(0, 1]",
+              "binocular_partner": "{shift, path}", "binocular_reach": "(0, 1]", "binocular_axes": "{x, xy}",
               "path_consistency": ">= 0", "path_consistency_start": "[0, 1]",
               "explode_factor": ">= 0", "explode_window": ">= 1", "explode_patience": ">= 1", "snapshot_every": ">= 0",
               "max_recoveries": ">= 0", "recovery_lr_factor": "(0, 1]", "cpu_threads": ">= 0", "sync_every": ">= 1",

@@ -532,7 +532,7 @@ class Trainer:
                 path = path_partners(np.stack([c.viewmat for c in scene.train]), [c.name for c in scene.train],
                                      cfg.pseudo.trajectory.order, tc.binocular_reach)
             self.binocular = Binocular(tc.binocular, tc.binocular_shift, int(tc.binocular_start * tc.iterations),
-                                       tc.binocular_smooth, self.device, seed, path=path)
+                                       tc.binocular_smooth, self.device, seed, path=path, axes=tc.binocular_axes)
         # the two inputs' agreement at a pose of the path (train.path_consistency; warpgs/pathconsistency.py)
         self.path_consistency = None
         if cfg.train.path_consistency > 0 and len(scene.train) >= 2:

@@ -213,7 +213,7 @@ class FullMethod(Method):
         cams, reliable = [], {}
         limit = {"reliable": pcfg.sampler.delta, "all": math.inf}.get(self.settings.pseudo_mask, 1.0)
         for seq in seqs:
-            seq_cams = seq.pseudo_cameras(prefix=f"c{cycle}_{seq.start}_{seq.end}", max_uncertainty=limit)
+            seq_cams = seq.pseudo_cameras(prefix=f"c{cycle}_{seq.tag}", max_uncertainty=limit)
             if self.settings.reliable_weight != 1.0:
                 reliable.update({c.name: r.to(tr.device)
                                  for c, r in zip(seq_cams, seq.interior_below(pcfg.sampler.delta), strict=True)})

@@ -3,18 +3,25 @@
     order = nearest_neighbour_path(centers)                     # inputs ordered as a path
     trajs = path_trajectories(viewmats, n_frames=25)           # one Trajectory per pair of neighbours
     traj = perturb_trajectory(traj, score, rng, n_candidates=5)  # optional: keep the most uncertain pose
+    trajs += offset_trajectories(trajs, viewmats, [-0.5, 0.5])  # optional: copies of the path above and below
 
 Along the path, rotations are interpolated by slerp between neighbours and camera centres by a natural
 cubic spline through all centres (chord-length knots), as in the released SYN3R code. A trajectory has
 ``n_frames`` poses and includes both ends: frame 0 is the start input's pose and frame N-1 the end
 input's, so the video model is conditioned on real images at both ends.
 
+``trajectory.offsets`` (ours) adds copies of every trajectory moved off the path: each frame's centre by
+``offset`` x the distance between the pair's inputs along the inputs' mean "up" direction (made perpendicular
+to the pair's chord), turned to keep looking at the point its axis looked at (the projection on that axis of
+the point nearest to all the inputs' optical axes). An object-centric capture (DTU's camera rows) is tested from
+above and below the row its inputs lie on, where the path never goes.
+
 Poses are world-to-camera 4x4 matrices in OpenCV axes (``warpgs/__init__.py``); quaternions (w, x, y, z).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from types import SimpleNamespace
 from typing import Callable
 
@@ -40,8 +47,11 @@ class TrajectoryConfig:
     # capture: the inputs in the order given (a walk-through's frames sorted by name: the capture path, as the
     # paper does for DL3DV); nearest: a nearest-neighbour path through the camera centres (any capture)
     order: str = "nearest"
+    # copies of the path moved off it, each frame by offset x the pair's distance along the inputs' mean up direction
+    # (perpendicular to the pair), turned to keep its look-at point (offset_trajectories); [] = the path only
+    offsets: list = field(default_factory=list)
 
-    LIMITS = {"n_frames": ">= 2", "perturb_candidates": ">= 0", "perturb_translation": ">= 0",
+    LIMITS = {"offsets": "[-2, 2]", "n_frames": ">= 2", "perturb_candidates": ">= 0", "perturb_translation": ">= 0",
               "perturb_rotation_deg": ">= 0", "guidance_source": "{nearest, halves, best}", "order": "{capture, nearest}",
               "guidance_colour": "{raw, affine}"}
 
@@ -53,6 +63,7 @@ class Trajectory:
     start: int
     end: int
     viewmats: np.ndarray  # (N, 4, 4) float64, world -> camera
+    offset: float = 0.0  # off the path (offset_trajectories): frames 0 and N-1 are not the inputs' poses then
 
     def __len__(self) -> int:
         return len(self.viewmats)
@@ -170,6 +181,82 @@ def path_trajectories(viewmats: np.ndarray, n_frames: int, order: list[int] | st
 
 
 # ----------------------------------------------------------------------------------------------
+# off the path
+
+
+def focus_point(viewmats: np.ndarray, max_condition: float = 1e6) -> np.ndarray | None:
+    """The point nearest (least squares) to every camera's optical axis, or None where the axes are too close
+    to parallel to fix one (condition number above ``max_condition``: a forward-facing capture) or it lies
+    behind a camera."""
+    V = np.asarray(viewmats, np.float64).reshape(-1, 4, 4)
+    if len(V) < 2:
+        return None
+    C = camera_centres(V)
+    F = V[:, 2, :3]  # optical axes in the world (rows of world -> camera: the camera's z axis)
+    A = np.zeros((3, 3))
+    b = np.zeros(3)
+    for c, f in zip(C, F):
+        P = np.eye(3) - np.outer(f, f)
+        A += P
+        b += P @ c
+    if np.linalg.cond(A) > max_condition:
+        return None
+    p = np.linalg.solve(A, b)
+    if np.any(np.einsum("ij,ij->i", p[None] - C, F) <= 0):
+        return None
+    return p
+
+
+def _turn(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """The smallest rotation taking unit vector ``a`` to unit vector ``b`` (Rodrigues)."""
+    v = np.cross(a, b)
+    s, c = np.linalg.norm(v), float(np.dot(a, b))
+    if s < 1e-12:
+        return np.eye(3)  # (never called with opposite vectors: both axes look at the same point)
+    return axis_angle_to_rotmat(v / s * np.arctan2(s, c))
+
+
+def offset_trajectories(trajs: list[Trajectory], viewmats: np.ndarray, offsets) -> list[Trajectory]:
+    """For each offset (a share of each pair's distance; signed: + is up) a copy of every trajectory moved off
+    the path (module doc). "Up" is the inputs' mean up direction (-y of the OpenCV camera) made perpendicular
+    to the pair's chord (the chord's cross product with the mean optical axis where they are parallel).
+    Each moved frame turns by the smallest rotation that keeps the point it looked at (the projection of
+    ``focus_point`` on its axis) on its optical axis; without a focus point (forward-facing inputs) the
+    frames only move."""
+    V = np.asarray(viewmats, np.float64).reshape(-1, 4, 4)
+    up = -V[:, 1, :3].mean(axis=0)
+    forward = V[:, 2, :3].mean(axis=0)
+    focus = focus_point(V)
+    out = []
+    for e in offsets:
+        for t in trajs:
+            c = t.centers
+            chord = c[-1] - c[0]
+            length = float(np.linalg.norm(chord))
+            if length <= 0:
+                continue
+            a = chord / length
+            u = up - np.dot(up, a) * a
+            if np.linalg.norm(u) < 1e-6 * max(np.linalg.norm(up), 1e-12):
+                u = np.cross(a, forward)
+            u = u / np.linalg.norm(u)
+            move = float(e) * length * u
+            mats = []
+            for M, ci in zip(t.viewmats, c):
+                R_c2w = M[:3, :3].T
+                f = R_c2w[:, 2]
+                turn = np.eye(3)
+                if focus is not None:
+                    d = float(np.dot(focus - ci, f))
+                    if d > 0:
+                        g = ci + d * f - (ci + move)
+                        turn = _turn(f, g / np.linalg.norm(g))
+                mats.append(pose(turn @ R_c2w, ci + move))
+            out.append(Trajectory(t.start, t.end, np.stack(mats), offset=float(e)))
+    return out
+
+
+# ----------------------------------------------------------------------------------------------
 # perturbation
 
 
@@ -205,7 +292,7 @@ def perturb_trajectory(
         cands = [perturb_pose(traj.viewmats[f], rng, sigma_t, rotation_deg) for _ in range(n_candidates)]
         scores = [float(score(f, m)) for m in cands]
         mats[f] = cands[int(np.argmax(scores))]
-    return Trajectory(traj.start, traj.end, mats)
+    return Trajectory(traj.start, traj.end, mats, traj.offset)
 
 
 def guidance_sources(traj: Trajectory, input_centers: np.ndarray, mode: str = "nearest") -> np.ndarray:

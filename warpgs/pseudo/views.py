@@ -40,6 +40,7 @@ from .trajectory import (
     TrajectoryConfig,
     camera_centres,
     guidance_sources,
+    offset_trajectories,
     path_trajectories,
     perturb_trajectory,
 )
@@ -101,6 +102,13 @@ class PseudoSequence:
     depths: torch.Tensor  # [N, H, W] D_gs
     sources: torch.Tensor  # [N, H, W] input index each pixel's guidance was warped from
     tau: torch.Tensor  # [N] guidance stop time per frame
+    offset: float = 0.0  # off the path (trajectory.offsets): frames 0 and N-1 are moved off the inputs too
+
+    @property
+    def tag(self) -> str:
+        """``<start>_<end>`` on the path; ``<start>_<end>`` after ``o<offset>`` off it (names of files and views)."""
+        pair = f"{self.start}_{self.end}"
+        return pair if self.offset == 0 else f"o{self.offset:+g}_{pair}"
 
     def __len__(self) -> int:
         return int(self.frames.shape[0])
@@ -110,7 +118,7 @@ class PseudoSequence:
         1: every pixel an input sees; infinite: no mask, every pixel) for training."""
         from warpgs.data.scene import CameraTensors
 
-        prefix = prefix or f"pseudo_{self.start}_{self.end}"
+        prefix = prefix or f"pseudo_{self.tag}"
         masks = self.interior_below(max_uncertainty) if max_uncertainty != float("inf") else [None] * (len(self) - 2)
         return [
             CameraTensors(name=f"{prefix}_{i:03d}", viewmat=self.viewmats[i], K=self.K, width=self.width,
@@ -197,6 +205,8 @@ def generate_pseudo_views(
 
     if trajectories is None:
         trajectories = path_trajectories(src_V.double().cpu().numpy(), tc.n_frames, tc.order)
+        if tc.offsets:
+            trajectories = trajectories + offset_trajectories(trajectories, src_V.double().cpu().numpy(), tc.offsets)
     if tc.guidance_source not in ("nearest", "halves", "best"):
         raise ValueError(f"trajectory.guidance_source must be nearest, halves or best, got {tc.guidance_source!r}")
     if tc.guidance_colour not in ("raw", "affine"):
@@ -244,10 +254,12 @@ def generate_pseudo_views(
         if tc.guidance_colour == "affine":
             warped = match_colour(warped, renders, reliable, sources)
         guidance = torch.where(reliable[..., None], warped, renders)
-        res = sample_video(backend, src_images[traj.start], src_images[traj.end], guidance=guidance,
+        # the video is conditioned on its end frames: the inputs on the path, the guidance there off it
+        first, last = (src_images[traj.start], src_images[traj.end]) if traj.offset == 0 else (guidance[0], guidance[-1])
+        res = sample_video(backend, first, last, guidance=guidance,
                            uncertainty=r.uncertainty, prior=renders, cfg=cfg.sampler, generator=generator)
         seq = PseudoSequence(traj.start, traj.end, V, K, W, H, res.frames.to(dev), guidance, r.guidance,
-                             r.uncertainty, renders, depths, sources, res.tau)
+                             r.uncertainty, renders, depths, sources, res.tau, traj.offset)
         if out_dir is not None:
             save_sequence(seq, out_dir)
         out.append(seq)
@@ -261,7 +273,8 @@ def generate_pseudo_views(
 def save_sequence(seq: PseudoSequence, out_dir: str | Path) -> Path:
     """``<out_dir>/seq_<start>_<end>/{pseudo,guidance,warped,uncertainty,render}_NNN.png`` plus poses.npz.
     Uncertainty is grey (white = 1, unreliable)."""
-    d = Path(out_dir) / f"seq_{seq.start:03d}_{seq.end:03d}"
+    d = Path(out_dir) / (f"seq_{seq.start:03d}_{seq.end:03d}" if seq.offset == 0 else
+                         f"seq_o{seq.offset:+g}_{seq.start:03d}_{seq.end:03d}")
     for i in range(len(seq)):
         save_image(d / f"pseudo_{i:03d}.png", seq.frames[i])
         save_image(d / f"guidance_{i:03d}.png", seq.guidance[i])
