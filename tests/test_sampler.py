@@ -383,14 +383,15 @@ def test_default_backend_pseudo_views_on_the_synthetic_scene(tmp_path):
 def test_offset_paths_give_pseudo_views_off_the_path_that_match_the_truth(tmp_path):
     """``trajectory.offsets``: copies of the path moved up and down. Their pseudo views, at poses no input or path
     frame has, are compared with ray-traced ground truth as above: guided they are good and better than unguided
-    sampling; each copy lies at its offset from the path; names and saved folders of the copies are their own."""
+    sampling; each copy lies at its offset from the path (an offset of 0, the path itself, adds none); names and saved
+    folders of the copies are their own."""
     from warpgs.pseudo.views import PseudoConfig, generate_pseudo_views
 
     cap, ids, inputs, render_fn, depths_in = _stand_in_model()
     h, w = cap.depths.shape[1:]
     results, seqs = {}, None
     for guided in (True, False):
-        cfg = PseudoConfig.load(overrides=["trajectory.n_frames=7", "sampler.steps=20", "trajectory.offsets=[-0.3, 0.3]",
+        cfg = PseudoConfig.load(overrides=["trajectory.n_frames=7", "sampler.steps=20", "trajectory.offsets=[-0.3, 0, 0.3]",
                                            f"sampler.guided={str(guided).lower()}"])
         seqs = generate_pseudo_views(render_fn, inputs, cfg, input_depths=depths_in,
                                      out_dir=tmp_path / "pseudo" if guided else None)

@@ -48,7 +48,8 @@ class TrajectoryConfig:
     # paper does for DL3DV); nearest: a nearest-neighbour path through the camera centres (any capture)
     order: str = "nearest"
     # copies of the path moved off it, each frame by offset x the pair's distance along the inputs' mean up direction
-    # (perpendicular to the pair), turned to keep its look-at point (offset_trajectories); [] = the path only
+    # (perpendicular to the pair), turned to keep its look-at point (offset_trajectories); [] = the path only (an
+    # offset of 0 is the path itself and adds nothing)
     offsets: list = field(default_factory=list)
 
     LIMITS = {"offsets": "[-2, 2]", "n_frames": ">= 2", "perturb_candidates": ">= 0", "perturb_translation": ">= 0",

@@ -106,7 +106,7 @@ class PseudoSequence:
 
     @property
     def tag(self) -> str:
-        """``<start>_<end>`` on the path; ``<start>_<end>`` after ``o<offset>`` off it (names of files and views)."""
+        """``<start>_<end>`` on the path, ``o<offset>_<start>_<end>`` off it (in the names of files and views)."""
         pair = f"{self.start}_{self.end}"
         return pair if self.offset == 0 else f"o{self.offset:+g}_{pair}"
 
@@ -205,8 +205,9 @@ def generate_pseudo_views(
 
     if trajectories is None:
         trajectories = path_trajectories(src_V.double().cpu().numpy(), tc.n_frames, tc.order)
-        if tc.offsets:
-            trajectories = trajectories + offset_trajectories(trajectories, src_V.double().cpu().numpy(), tc.offsets)
+        moves = [e for e in tc.offsets if e != 0]  # (an offset of 0 is the path itself)
+        if moves:
+            trajectories = trajectories + offset_trajectories(trajectories, src_V.double().cpu().numpy(), moves)
     if tc.guidance_source not in ("nearest", "halves", "best"):
         raise ValueError(f"trajectory.guidance_source must be nearest, halves or best, got {tc.guidance_source!r}")
     if tc.guidance_colour not in ("raw", "affine"):
