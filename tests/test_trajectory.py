@@ -7,6 +7,7 @@ import pytest
 from scipy.interpolate import CubicSpline
 from scipy.spatial.transform import Rotation, Slerp
 
+from warpgs.data.stress import look_along
 from warpgs.pseudo.trajectory import (
     Trajectory,
     camera_centres,
@@ -201,11 +202,7 @@ def _ring_looking_at(target, n=4, radius=3.0, height=0.0, spread_deg=60.0):
     out = []
     for a in np.radians(np.linspace(-spread_deg / 2, spread_deg / 2, n)):
         c = target + np.array([radius * np.cos(a), radius * np.sin(a), height])
-        z = (target - c) / np.linalg.norm(target - c)
-        x = np.cross(z, [0.0, 0.0, 1.0])
-        x /= np.linalg.norm(x)
-        y = np.cross(z, x)  # points down (-z of the world) for a level camera
-        out.append(pose(np.stack([x, y, z], 1), c))
+        out.append(look_along(c, target - c, np.array([0.0, 0.0, 1.0])))
     return np.stack(out)
 
 

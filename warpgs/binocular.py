@@ -170,30 +170,28 @@ class Binocular:
         fx = cam.K[0, 0]
         seen = depth.detach() > MIN_DEPTH
         partners = self.path.get(getattr(cam, "name", None))
+        vm = None  # a partner pose moved in any way (warped back by reprojection); None: the sideways shift by t
         if partners is not None:  # a pose of the capture path next to the input (drawn on the device)
             k = torch.randint(len(partners), (1,), device=self.device, generator=self.gen)
             vm = partners.index_select(0, k)[0]  # (no host read of k)
+        else:
+            zmed = torch.where(seen, depth.detach(), torch.nan).nanmedian().nan_to_num(1.0)
+            u = torch.rand(1, device=self.device, generator=self.gen)
+            t = (2 * u - 1) * self.shift * cam.width * zmed / fx
+            if self.axes == "xy":  # the move by t in a direction of the image plane (drawn on the device)
+                a = 2 * torch.pi * torch.rand(1, device=self.device, generator=self.gen)
+                vm = cam.viewmat.float().clone()
+                vm[:2, 3] = vm[:2, 3] - t * torch.cat([torch.cos(a), torch.sin(a)])
+        if vm is not None:
             rel = vm @ rigid_inverse(cam.viewmat.float())
             moved = model.render(vm, cam.K, cam.width, cam.height, background=bg, check_finite=False)
             warped, weight = pose_warp(moved.image, depth, rel, cam.K)
             ft = (fx * rel[:3, 3].norm()).reshape(1)  # the disparity of depth 1, for the smoothness below
         else:
-            zmed = torch.where(seen, depth.detach(), torch.nan).nanmedian().nan_to_num(1.0)
-            u = torch.rand(1, device=self.device, generator=self.gen)
-            t = (2 * u - 1) * self.shift * cam.width * zmed / fx
-            if self.axes == "xy":  # a direction of the image plane (drawn on the device)
-                a = 2 * torch.pi * torch.rand(1, device=self.device, generator=self.gen)
-                vm = cam.viewmat.float().clone()
-                vm[:2, 3] = vm[:2, 3] - t * torch.cat([torch.cos(a), torch.sin(a)])
-                rel = vm @ rigid_inverse(cam.viewmat.float())
-                moved = model.render(vm, cam.K, cam.width, cam.height, background=bg, check_finite=False)
-                warped, weight = pose_warp(moved.image, depth, rel, cam.K)
-                ft = (fx * t.abs()).reshape(1)
-            else:
-                moved = model.render(moved_viewmat(cam.viewmat, t), cam.K, cam.width, cam.height, background=bg,
-                                     check_finite=False)
-                ft = (fx * t).reshape(1)
-                warped, weight = shift_warp(moved.image, depth, ft)
+            moved = model.render(moved_viewmat(cam.viewmat, t), cam.K, cam.width, cam.height, background=bg,
+                                 check_finite=False)
+            ft = (fx * t).reshape(1)
+            warped, weight = shift_warp(moved.image, depth, ft)
         diff = (warped - cam.image).abs() * weight[..., None]
         term = diff.sum() / (3 * weight.sum() + 1e-6)
         if self.smooth > 0:

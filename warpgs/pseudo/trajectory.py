@@ -249,8 +249,8 @@ def offset_trajectories(trajs: list[Trajectory], viewmats: np.ndarray, offsets) 
                 turn = np.eye(3)
                 if focus is not None:
                     d = float(np.dot(focus - ci, f))
-                    if d > 0:
-                        g = ci + d * f - (ci + move)
+                    if d > 0:  # from the moved centre to the look-at point ci + d f
+                        g = d * f - move
                         turn = _turn(f, g / np.linalg.norm(g))
                 mats.append(pose(turn @ R_c2w, ci + move))
             out.append(Trajectory(t.start, t.end, np.stack(mats), offset=float(e)))

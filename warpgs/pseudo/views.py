@@ -201,13 +201,14 @@ def generate_pseudo_views(
         input_depths = [render_fn(c.viewmat.to(dev), c.K.to(dev), c.width, c.height)[1] for c in cams]
     src_D = torch.stack([d.to(dev).float() for d in input_depths])
     src_views = PosedViews(src_V, src_K, src_images, src_D)  # what the warps read of the inputs
-    centers = camera_centres(src_V.double().cpu().numpy())
+    poses = traj_poses(src_V)  # the inputs' poses for the trajectories (numpy, float64)
+    centers = camera_centres(poses)
 
     if trajectories is None:
-        trajectories = path_trajectories(src_V.double().cpu().numpy(), tc.n_frames, tc.order)
+        trajectories = path_trajectories(poses, tc.n_frames, tc.order)
         moves = [e for e in tc.offsets if e != 0]  # (an offset of 0 is the path itself)
         if moves:
-            trajectories = trajectories + offset_trajectories(trajectories, src_V.double().cpu().numpy(), moves)
+            trajectories = trajectories + offset_trajectories(trajectories, poses, moves)
     if tc.guidance_source not in ("nearest", "halves", "best"):
         raise ValueError(f"trajectory.guidance_source must be nearest, halves or best, got {tc.guidance_source!r}")
     if tc.guidance_colour not in ("raw", "affine"):
