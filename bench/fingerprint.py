@@ -4,9 +4,9 @@ across refactors of the orchestration layer.
     python bench/fingerprint.py --out bench/results/fingerprint_before.json     # record
     python bench/fingerprint.py --check bench/results/fingerprint_before.json   # compare (exit 1 on a change)
 
-Runs (``python -m warpgs.pipelines.sparse`` on the CPU, seed 0): the embedded synthetic scene with
-``--method compare`` (baseline and full), lego (8 views) and fern (3 views) with the baseline. Each record
-holds PSNR, SSIM, the Gaussian count and the SHA-256 of the written point_cloud.ply.
+Runs (``python -m warpgs.pipelines.sparse`` on the CPU, seed 0), each with ``--method compare`` (the baseline
+and the full method): the embedded synthetic scene, lego (8 views), fern (3 views) and castle_p30 (3 views).
+Each record holds PSNR, SSIM, the Gaussian count and the SHA-256 of the written point_cloud.ply.
 """
 
 from __future__ import annotations
@@ -24,9 +24,10 @@ ROOT = Path(__file__).resolve().parents[1]
 SHARED = Path(os.environ.get("WARPGS_SHARED_DATA", ROOT.parent / "shared" / "data"))  # the scenes of ../shared
 RUNS = {
     "synthetic_compare": ["--method", "compare", "--iterations", "60"],
-    "lego_baseline": ["--data", str(SHARED / "blender_lego"), "--method", "baseline", "--iterations", "40"],
-    "fern_baseline": ["--data", str(SHARED / "llff_fern"), "--views", "3", "--method", "baseline",
-                      "--iterations", "40"],
+    "lego_compare": ["--data", str(SHARED / "blender_lego"), "--method", "compare", "--iterations", "40"],
+    "fern_compare": ["--data", str(SHARED / "llff_fern"), "--views", "3", "--method", "compare", "--iterations", "40"],
+    "castle3_compare": ["--data", str(SHARED / "castle_p30"), "--views", "3", "--method", "compare",
+                        "--iterations", "40"],
 }
 
 
