@@ -8,7 +8,7 @@ the path clearance (``train.path_clearance``, ``PathClearance``, built as the ru
                                    [--data-root ../shared/data] [--out FILE.json]
 
 Each planted Gaussian is a sphere of radius 0.05 x its distance (about 2% of the view's pixels), opacity 0.998,
-colour near black: what sessions 14 and 20 found in front of castle_p30's frame 8 when its test PSNR collapsed.
+colour near black: what was found in front of castle_p30's frame 8 when its test PSNR collapsed.
 Prints and writes, per distance: the planted Gaussians' weight (pixels) in their test view and in all inputs
 together, and per pose count which of them the pass finds (ratio ``--ratio``, as ``train.path_floaters``).
 """

@@ -1,5 +1,5 @@
-"""Does the rasterizer of one code tree give the same floats as another's? (session 27: the figures that moved in
-session 24; the bisect is ``bench/gpu_session27.sh e`` and ``f``)
+"""Does the rasterizer of one code tree give the same floats as another's? (a bisect of figures that moved between
+two commits: dump or record with each tree's warpgs, then compare)
 
     PYTHONPATH=TREE python bench/diagnostics/rasterizer_commits.py dump OUT.pt [--device cuda]      # with TREE's warpgs
     PYTHONPATH=TREE python bench/diagnostics/rasterizer_commits.py dump-ply OUT.pt --ply MODEL.ply --data dtu --scene scan65

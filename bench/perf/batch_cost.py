@@ -1,15 +1,16 @@
 """What a sparse-view benchmark pass costs in GPU-hours, from measured per-run times.
 
-    python bench/perf/batch_cost.py                                   # DL3DV from session 7's runs (the README's figure)
+    python bench/perf/batch_cost.py                                   # DL3DV from the committed capture runs (H200)
     python bench/perf/batch_cost.py --runs outputs/batch/results.json # from a batch of warpgs.pipelines.batch
     python bench/perf/batch_cost.py --scenes 140 --views 3,6,9 --methods baseline,full --seeds 3 --json out.json
 
 GPU-seconds of one run:
 - from a batch's results.json: the run's wall time (all its attempts: start, initial points, training,
   evaluation, outputs) x the GPU share it held (``warpgs.pipelines.batch.gpu_share``);
-- from a gather_runs.py file (``bench/results/real_captures/*.json``), which holds only the stage times: initial
-  points + training, / ``--runs-per-gpu`` (runs that shared one GPU at a time while they were measured;
-  session 7 ran 12-13 runs on 2 H200s: 6.25). Start, evaluation and output writing are not in those files.
+- from a file of run records (``bench/results/perf/capture_runs_768x512_h200.json``: 768x512 captures, 10,000 it),
+  which holds only the stage times: initial points + training, / ``--runs-per-gpu`` (runs that shared one GPU at a
+  time while they were measured; those ran 12-13 runs on 2 H200s: 6.25). Start, evaluation and output writing are
+  not in those files.
 
 Each (method, views) gets the mean over the files' runs, x ``--pixel-scale`` (the benchmark's pixels per image
 over the measured runs': DL3DV's 960x540 images_4 against the 768x512 captures, 1.32; the training cost of the
@@ -24,7 +25,13 @@ import statistics
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[2]
-SESSION7 = ROOT / "bench" / "results" / "real_captures" / "session7_runs.json"
+CAPTURE_RUNS = ROOT / "bench" / "results" / "perf" / "capture_runs_768x512_h200.json"
+
+
+def _shown(p: Path) -> str:
+    """``p`` relative to the repository where it is in it (no machine's paths in a committed file)."""
+    p = Path(p).resolve()
+    return str(p.relative_to(ROOT)) if p.is_relative_to(ROOT) else str(p)
 
 
 def run_costs(path: Path, runs_per_gpu: float, iterations: int | None) -> dict[tuple[str, int], list[float]]:
@@ -64,7 +71,7 @@ def estimate(costs: dict, scenes: int, views: list[int], methods: list[str], see
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--runs", type=Path, action="append", default=None, help=f"measured runs (default {SESSION7.relative_to(ROOT)})")
+    ap.add_argument("--runs", type=Path, action="append", default=None, help=f"measured runs (default {CAPTURE_RUNS.relative_to(ROOT)})")
     ap.add_argument("--runs-per-gpu", type=float, default=6.25, help="gather_runs files: runs that shared one GPU (6.25)")
     ap.add_argument("--iterations", type=int, default=10000, help="only runs of this many steps (0: any)")
     ap.add_argument("--pixel-scale", type=float, default=960 * 540 / (768 * 512), help="benchmark / measured pixels (1.32)")
@@ -75,11 +82,11 @@ def main(argv=None) -> int:
     ap.add_argument("--json", type=Path, default=None, help="also write the estimate here")
     a = ap.parse_args(argv)
     costs: dict = {}
-    for p in a.runs or [SESSION7]:
+    for p in a.runs or [CAPTURE_RUNS]:
         for k, v in run_costs(p, a.runs_per_gpu, a.iterations or None).items():
             costs.setdefault(k, []).extend(v)
     est = estimate(costs, a.scenes, [int(v) for v in a.views.split(",")], a.methods.split(","), a.seeds, a.pixel_scale)
-    est["assumptions"] = {"runs": [str(p) for p in a.runs or [SESSION7]], "runs_per_gpu": a.runs_per_gpu,
+    est["assumptions"] = {"runs": [_shown(p) for p in a.runs or [CAPTURE_RUNS]], "runs_per_gpu": a.runs_per_gpu,
                           "iterations": a.iterations, "pixel_scale": round(a.pixel_scale, 3), "scenes": a.scenes,
                           "seeds": a.seeds}
     for r in est["rows"]:

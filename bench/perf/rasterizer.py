@@ -11,8 +11,8 @@ in --rounds interleaved rounds (each round times every one for --iters calls aft
 rotating from round to round, Python's garbage collector paused), and a time is the median over the rounds of
 the mean per call, measured with CUDA events; the rounds' range is in the JSON. Interleaving keeps a slow start
 of the process (clocks, caches, a busy host) from landing on whichever rasterizer happens to be timed first,
-which single back-to-back measurements did (session 18: the first configuration 1.38-1.70 when measured first,
-0.71-1.07 when measured last). On the CPU: one round. "warpgs" is the default deterministic backward (fixed-point sums),
+which single back-to-back measurements did (on an H100 the first configuration's ratio was 1.38-1.70 when measured
+first, 0.71-1.07 when measured last). On the CPU: one round. "warpgs" is the default deterministic backward (fixed-point sums),
 "warpgs_float_atomics" the float-atomic one (deterministic=False); forward+backward backpropagates a fixed random weighting of the image to
 means, quats, scales, opacities and colours. Peak memory is torch's allocator peak above the inputs
 plus Warp's memory-pool high-water mark (Warp's radix-sort scratch). The RGB agreement uses gsplat's

@@ -5,16 +5,15 @@ bench/perf/rasterizer.py (138,766 random Gaussians at 648x420), where both are b
 
 For each: the host's time per forward+backward over 100 calls issued without a sync, and the time until the GPU
 has finished them (equal when the GPU keeps up), then a cProfile of 200 calls (warpgs: by own time and by
-cumulative time; gsplat: by own time). Session 19's output: bench/results/s19/host_profile_138k.txt.
+cumulative time; gsplat: by own time).
 
     py-spy record --native --idle --threads -r 200 -f raw -o spy.txt -- python bench/perf/rasterizer_host.py --loop 10 --only warpgs
-    gzip spy.txt   # (session 31: --native at 1000 Hz fell 47 s behind and wrote over 16 MB)
+    gzip spy.txt   # (--native at 1000 Hz can fall far behind and write over 16 MB)
 
 ``--loop S``: instead of the cProfile (which slows every Python call, and so overstates the Python's share), calls
 forward+backward for S seconds (a sync every 100 calls), for a sampling profiler outside the process to split the
 host's real time; ``--only`` picks one rasterizer. ``python bench/diagnostics/spy_summary.py spy.txt --under timed_loop`` sums
-such a profile over the loop's calls alone, without the warm-up's (session 32's profiles, bench/results/s32/p/, were
-recorded before ``timed_loop`` existed: ``--at rasterizer_host.py:67``, the loop's call then).
+such a profile over the loop's calls alone, without the warm-up's.
 """
 
 from __future__ import annotations

@@ -104,10 +104,10 @@ def make_config(args):
     # (DropGaussian is the captures' and LLFF's default since issue 14); --set can still ask for them
     argv += ["--set", "train.drop_rate=0", "--set", "train.opacity_noise=0", "--set", "train.scale_reg=0",
              "--set", "train.co_reg=false", "--set", "train.far_field=none", "--set", "train.path_clearance=0",
-             "--set", "train.view_clearance=0", "--set", "train.alpha_binary=0",  # the captures' since session 14
+             "--set", "train.view_clearance=0", "--set", "train.alpha_binary=0",  # the captures' defaults
              "--set", "strategy.refine_stop_fraction=0",  # 3D-GS's schedule in steps (LLFF's, DTU's and the captures'
-             #   baseline stop growing at half the run since session 35; the plain loops read refine_stop_iter alone)
-             "--set", "train.opacity_decay=0", "--set", "train.binocular=0"]  # Binocular3DGS's terms (session 36)
+             #   baseline stop growing at half the run; the plain loops read refine_stop_iter alone)
+             "--set", "train.opacity_decay=0", "--set", "train.binocular=0"]  # Binocular3DGS's terms
     for s in args.set:
         argv += ["--set", s]
     cfg, _ = cli_config(build_parser().parse_args(argv))

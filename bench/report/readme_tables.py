@@ -39,7 +39,7 @@ DATASETS = "quality/datasets_h200.json"
 CAPTURES = (("quality/captures_384x256_h200.json", "384x256, 3000 it"),
             ("quality/captures_768x512_h200.json", "768x512 (images_4), 10,000 it"))
 NAMED = (("fern_3v", "LLFF fern, 3 views", "504x378, 3000 it"),
-         ("dtu_3v", "DTU scan65, 3 views (masked)", "400x300, 3000 it"),
+         ("scan65_3v", "DTU scan65, 3 views (masked)", "400x300, 3000 it"),
          ("lego_8v", "Blender lego, 8 views", "400x400, 10,000 it"))
 
 HEAD = ["scene", "setting", "machine", "seeds", "baseline", "full", "full - baseline", "source"]
