@@ -299,10 +299,12 @@ def test_a_deadline_stops_the_run_going_and_the_next_call_resumes_it(tmp_path):
     # the long run is stopped long before its end (no loss check: the tiny scene's loss jumps after 1000 steps)
     short, long_ = spec("short", 20), spec("long", 100_000)
     long_["argv"] += ["--set", "train.explode_factor=0"]
-    rec = batch.execute_run(short, str(runs / "short"), str(logs), "b1", deadline=time.time() + 600)
-    assert rec["status"] == "finished" and rec["metrics"]["iterations"] == 20
     t0 = time.time()
-    rec = batch.execute_run(long_, str(runs / "long"), str(logs), "b1", deadline=t0 + 20, grace=30)
+    rec = batch.execute_run(short, str(runs / "short"), str(logs), "b1", deadline=t0 + 600)
+    assert rec["status"] == "finished" and rec["metrics"]["iterations"] == 20
+    # long enough for the long run to start and write its first checkpoints on a busy machine, whatever its speed
+    budget = 15 + 3 * (time.time() - t0)
+    rec = batch.execute_run(long_, str(runs / "long"), str(logs), "b1", deadline=time.time() + budget, grace=30)
     assert rec["status"] == "stopped" and "deadline" in rec["error"], rec
     a = rec["attempts"][-1]
     assert a["deadline"] and a["returncode"] in batch.STOPPED, a
@@ -314,7 +316,7 @@ def test_a_deadline_stops_the_run_going_and_the_next_call_resumes_it(tmp_path):
     again = batch.execute_run(short, str(runs / "short"), str(logs), "b2", deadline=time.time() + 600)
     assert again["status"] == "finished" and again["reused"]
     assert len(batch.read_attempts(logs / "short.attempts.jsonl")) == 1
-    rec = batch.execute_run(long_, str(runs / "long"), str(logs), "b2", deadline=time.time() + 30, grace=30)
+    rec = batch.execute_run(long_, str(runs / "long"), str(logs), "b2", deadline=time.time() + budget, grace=30)
     b = rec["attempts"][-1]
     assert rec["status"] == "stopped" and b["resume"] and b["from_step"] >= 10, rec
     assert f"--resume {runs / 'long'}" in (logs / "long.log").read_text()
@@ -344,14 +346,21 @@ runs:
         assert "Traceback" not in p.stderr and p.returncode in (0, 1), p.stderr
         return p, {r["name"]: r for r in json.loads((out / "results.json").read_text())["runs"]}
 
-    p, by = call("45")
+    # a deadline well past Ray's start and the short run on this machine, however busy: 3x a tiny run's time
+    t0 = time.monotonic()
+    subprocess.run([sys.executable, "-m", "warpgs.pipelines.sparse", "--data", str(data), "--views", "3", "--method",
+                    "baseline", *TINY,
+                    "--iterations", "20", "--no-progress", "--out", str(tmp_path / "timing")], cwd=REPO, env=env,
+                   check=True, capture_output=True, timeout=300)
+    deadline = str(round(20 + 3 * (time.monotonic() - t0)))
+    p, by = call(deadline)
     assert p.returncode == 1, p.stderr  # not every run finished
     first, second = "scene_3v_baseline_s0", "scene_3v_baseline_s0_long"
     assert by[first]["status"] == "finished" and by[first]["metrics"]["iterations"] == 20
     assert by[second]["status"] == "stopped" and by[second]["attempts"][-1]["deadline"], by[second]
     assert "1 stopped or not started at the deadline" in p.stderr
     psnr = by[first]["metrics"]["psnr"]
-    p, by = call("40")
+    p, by = call(deadline)
     assert by[first]["status"] == "finished" and by[first]["reused"] and by[first]["metrics"]["psnr"] == psnr
     assert len(batch.read_attempts(out / "logs" / f"{first}.attempts.jsonl")) == 1
     a = batch.read_attempts(out / "logs" / f"{second}.attempts.jsonl")

@@ -35,7 +35,7 @@ def _shown(p: Path) -> str:
 
 
 def run_costs(path: Path, runs_per_gpu: float, iterations: int | None) -> dict[tuple[str, int], list[float]]:
-    """{(method, views): [GPU-seconds of each run]} from a batch's results.json or a gather_runs.py file."""
+    """{(method, views): [GPU-seconds of each run]} from a batch's results.json or a file of run records."""
     data = json.loads(Path(path).read_text())
     out: dict[tuple[str, int], list[float]] = {}
     if "runs" in data and isinstance(data["runs"], list):  # warpgs.pipelines.batch
@@ -44,7 +44,7 @@ def run_costs(path: Path, runs_per_gpu: float, iterations: int | None) -> dict[t
             if r.get("status") == "finished" and not r.get("reused") and (iterations is None or m.get("iterations") == iterations):
                 out.setdefault((m["method"], m["train_views"]), []).append(r["wall_s"] * r["spec"]["num_gpus"])
         return out
-    for row in data.values():  # bench/gather_runs.py: {name: {".": metrics}}
+    for row in data.values():  # a file of run records: {name: {".": metrics}}
         m = row.get(".") if isinstance(row, dict) else None
         if not m or "train_time_s" not in m or (iterations is not None and m.get("iterations") != iterations):
             continue
@@ -72,7 +72,7 @@ def estimate(costs: dict, scenes: int, views: list[int], methods: list[str], see
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--runs", type=Path, action="append", default=None, help=f"measured runs (default {CAPTURE_RUNS.relative_to(ROOT)})")
-    ap.add_argument("--runs-per-gpu", type=float, default=6.25, help="gather_runs files: runs that shared one GPU (6.25)")
+    ap.add_argument("--runs-per-gpu", type=float, default=6.25, help="files of run records: runs that shared one GPU (6.25)")
     ap.add_argument("--iterations", type=int, default=10000, help="only runs of this many steps (0: any)")
     ap.add_argument("--pixel-scale", type=float, default=960 * 540 / (768 * 512), help="benchmark / measured pixels (1.32)")
     ap.add_argument("--scenes", type=int, default=140)

@@ -6,7 +6,7 @@ one GPU, then two; the wall times and every run's metrics side by side.
     python bench/perf/batch_scaling.py run --gpus 2 --data-root D --out RUNS/gpu2
     python bench/perf/batch_scaling.py compare RUNS/gpu1 RUNS/gpu2 --json OUT.json  # ratio, identical metrics?
 
-(``bench/gpu_batch.sh`` is the exact GPU procedure.) The acceptance asks for a 2-GPU wall time of at most 0.6x
+Run on a 2-GPU host with the scenes' images_4 and transforms.json under D, one call per line. The acceptance asks for a 2-GPU wall time of at most 0.6x
 the 1-GPU one, and per-run metrics identical to the single-GPU runs of the same seeds: every key of metrics.json
 but the times, speeds and memory figures (``VARYING``).
 """

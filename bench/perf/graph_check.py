@@ -24,7 +24,7 @@ import torch
 ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT))
 
-from bench.perf.train_speed import Setup, load_scene, machine, make_config  # noqa: E402
+from bench.perf.train_speed import Setup, load_scene, machine, make_config, write_result  # noqa: E402
 
 
 def trainer_check(data_root: str | None, iterations: int, data: str = "llff", scene: str | None = None,
@@ -75,9 +75,7 @@ def main(argv=None) -> dict:
               "set": args.set}
     result["trainer"] = trainer_check(args.data_root, args.iterations, args.data, args.scene, args.views, args.set)
     print(json.dumps(result["trainer"], indent=1))
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(json.dumps(result, indent=2))
-    print(f"wrote {args.out}")
+    write_result(args.out, result)
     return result
 
 

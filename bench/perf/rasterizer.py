@@ -355,10 +355,15 @@ def main(argv=None):
             print(f"  speed-up over the oracle (fwd+bwd) {row['speedup_fwd_bwd']:.1f}x  "
                   f"max|RGB diff| {row['max_abs_rgb_diff']:.2e}")
         result["configs"].append(row)
-    out_path.parent.mkdir(parents=True, exist_ok=True)
-    out_path.write_text(json.dumps(result, indent=2))
-    print(f"wrote {out_path}")
+    write_result(out_path, result)
     return result
+
+
+def write_result(path: Path, result: dict) -> None:
+    """A benchmark's JSON (indented, its folder made), and a line saying where."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(result, indent=2))
+    print(f"wrote {path}")
 
 
 if __name__ == "__main__":

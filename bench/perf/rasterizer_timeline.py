@@ -27,7 +27,7 @@ ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "tests"))
 
-from bench.perf.rasterizer import calls, gsplat_fn, make_inputs, warpgs_fn  # noqa: E402
+from bench.perf.rasterizer import calls, gsplat_fn, make_inputs, warpgs_fn, write_result  # noqa: E402
 
 GPU_CATS = ("kernel", "gpu_memset", "gpu_memcpy")
 
@@ -129,9 +129,7 @@ def main(argv=None) -> dict:
         for k, v in list(r["gpu_us_per_call"].items())[:12]:
             print(f"    {v:8.1f} us  {k}")
     if args.out is not None:
-        args.out.parent.mkdir(parents=True, exist_ok=True)
-        args.out.write_text(json.dumps(result, indent=2))
-        print(f"wrote {args.out}")
+        write_result(args.out, result)
     return result
 
 

@@ -41,7 +41,6 @@ from __future__ import annotations
 import argparse
 import copy
 import dataclasses
-import json
 import os
 import platform
 import sys
@@ -55,6 +54,7 @@ ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT))
 
 from warpgs import losses  # noqa: E402
+from bench.perf.rasterizer import write_result  # noqa: E402
 from warpgs.model import PARAM_NAMES, GaussianModel  # noqa: E402
 
 LOOPS = ("warpgs_trainer", "plain_warpgs", "plain_gsplat", "warpgs_trainer_sync1", "warpgs_trainer_torch_guard",
@@ -394,9 +394,7 @@ def main(argv=None) -> dict:
             print(f"  the same model {what}: {result[key]}")
     for k, v in ratios.items():
         print(f"  time ratio {k}: {v:.3f}")
-    out_path.parent.mkdir(parents=True, exist_ok=True)
-    out_path.write_text(json.dumps(result, indent=2))
-    print(f"wrote {out_path}")
+    write_result(out_path, result)
     return result
 
 
