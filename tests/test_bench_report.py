@@ -118,3 +118,30 @@ def test_the_readme_table_is_the_committed_summaries_medians(tmp_path):
     assert readme.read_text() == f"intro\n{readme_tables.START}\n" + "\n".join(lines) + f"\n{readme_tables.END}\nrest\n"
     with pytest.raises(ValueError, match="no <!-- a: start -->"):
         replace_between_markers("no markers", "t", "<!-- a: start -->", "<!-- a: end -->")
+
+
+def test_the_docs_tables_are_the_committed_results(tmp_path):
+    import docs_tables
+
+    results = ROOT / "bench" / "results"
+    raster = docs_tables.rasterizer(results)
+    doc = json.loads((results / "perf" / "rasterizer_vs_gsplat_fern_h200.json").read_text())
+    c = doc["configs"][0]
+    p = c["ratio_fwd_bwd_paired"]
+    row = next(ln for ln in raster if f"{c['gaussians']:,} trained on fern | {c['width']}x{c['height']}" in ln)
+    assert f"| {p['median']:.2f} [{p['min']:.2f}, {p['max']:.2f}] |" in row and doc["device"] in row
+    assert len(raster) == 2 + sum(len(json.loads((results / n).read_text())["configs"]) for n, _ in docs_tables.RASTERIZER)
+    speed = docs_tables.train_speed(results)
+    doc = json.loads((results / "perf" / "train_speed_fern_h200.json").read_text())
+    trainer = doc["loops"]["warpgs_trainer"]
+    assert any(f"| warpgs_trainer | {trainer['seconds']:.2f} | {trainer['it_per_s']:.1f} |" in ln
+               and doc["machine"]["gpu"] in ln for ln in speed)
+    stab = json.loads((results / "quality" / "stability_cpu" / "stability.json").read_text())
+    assert sum(ln.startswith("| views_") or ln.startswith("| collinear") for ln in docs_tables.stability(results)) == \
+        sum(r["case"].startswith("views_") or r["case"] == "collinear" for r in stab["summary"])
+    # --write fills every table's markers and leaves the rest of the file as it was
+    md = tmp_path / "b.md"
+    md.write_text("top\n" + "".join(f"{s}\nold\n{e}\nbetween\n" for s, e in map(docs_tables.markers, docs_tables.TABLES)))
+    assert docs_tables.main(["--write", str(md)]) == 0
+    text = md.read_text()
+    assert text.startswith("top\n") and "old" not in text and text.count("between\n") == len(docs_tables.TABLES)

@@ -1,6 +1,6 @@
 """A variant against the default, run by run: median [min, max] over seeds of each, and the difference.
 
-    python bench/report/compare.py outputs/sweeps/captures_variants --variant pw02
+    python bench/report/compare.py outputs/sweeps/switches --variant drop0 --variant no-binocular
     python bench/report/compare.py DEFAULT_BATCH VARIANT_BATCH --variant pw02 --metric psnr --metric num_gaussians \\
         --json compare.json --md compare.md
 
