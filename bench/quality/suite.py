@@ -15,7 +15,7 @@ a run that already finished (metrics.json present) is reused unless --fresh, so 
 continues where it stopped. Each run records its test-PSNR curve (``train.eval_every``), so a chart
 shows PSNR against time along every run, not only its end point.
 
-Outputs in --out (default bench/results/suite_<device>): results.json (every run: config, metrics,
+Outputs in --out (default bench/results/quality/suite_<device>): results.json (every run: config, metrics,
 curve, status), psnr_vs_time.png, psnr_vs_gaussians.png and summary.md (tables per scene and the
 charts). A failed run is recorded with the end of its log and the suite goes on.
 
@@ -397,9 +397,10 @@ def select_runs(runs: list[Run], preset: str, only: list[str] | None = None, sce
 
 
 def default_out(device: str, preset: str) -> Path:
-    """bench/results/suite_<device> for the small and full presets, suite_<device>_<preset> for the others."""
+    """bench/results/quality/suite_<device> for the small and full presets, suite_<device>_<preset> for the others."""
     dev_tag = "cuda" if device.startswith("cuda") else "cpu"
-    return ROOT / "bench" / "results" / (f"suite_{dev_tag}" if preset in ("small", "full") else f"suite_{dev_tag}_{preset}")
+    name = f"suite_{dev_tag}" if preset in ("small", "full") else f"suite_{dev_tag}_{preset}"
+    return ROOT / "bench" / "results" / "quality" / name
 
 
 def earlier_records(path: Path, preset: str) -> list[dict]:
@@ -536,7 +537,7 @@ def main(argv=None) -> int:
                     "visible GPUs (default: all), --jobs in all")
     ap.add_argument("--data-root", default=None, help="folder holding llff_fern, blender_lego, dtu_scan65, castle_p30, "
                     "herz_jesus_p25, ...")
-    ap.add_argument("--out", type=Path, default=None, help="default bench/results/suite_<device> (small, full) or "
+    ap.add_argument("--out", type=Path, default=None, help="default bench/results/quality/suite_<device> (small, full) or "
                     "suite_<device>_<preset>")
     ap.add_argument("--work", type=Path, default=None, help="run folders (default outputs/suite_<device>_<preset>)")
     ap.add_argument("--fresh", action="store_true", help="rerun runs that already finished")
