@@ -365,3 +365,14 @@ runs:
     assert len(batch.read_attempts(out / "logs" / f"{first}.attempts.jsonl")) == 1
     a = batch.read_attempts(out / "logs" / f"{second}.attempts.jsonl")
     assert len(a) == 2 and a[1]["resume"] and a[1]["deadline"], a  # it went on from its checkpoint
+
+
+def test_every_committed_sweep_file_plans(capsys):
+    """bench/sweeps/*.yaml: every run's config builds as the run's own would, and no two runs share a name."""
+    sweeps = sorted((REPO / "bench" / "sweeps").glob("*.yaml"))
+    assert sweeps
+    for path in sweeps:
+        assert batch.main(["--sweep", str(path), "--list", "--device", "cpu"]) == 0, capsys.readouterr().err
+        lines = capsys.readouterr().out.splitlines()
+        names = [ln.split()[0] for ln in lines[1:]]
+        assert int(lines[0].split()[0]) == len(names) == len(set(names)) > 0, path
