@@ -136,7 +136,8 @@ def gpu_share(width: int, height: int, gaussians: int) -> float:
     that k runs fill a GPU with nothing left over) and kept in [1/8, 1]. At 768x512 (0.39 MP) with no
     Gaussian budget (estimated 500k) that is 1/4; the synthetic scene's 128x96 with 12k is 1/8; 1080p with
     1M Gaussians is 1. Measured peak allocations stay far below a GPU's memory (at most 3.3 GB at 768x512,
-    bench/results/perf/capture_runs_768x512_h200.json); the share limits how many runs contend for one GPU's compute."""
+    bench/results/perf/capture_runs_768x512_h200.json); the share limits how many runs contend for one GPU's
+    compute."""
     raw = width * height / PIXELS_PER_GPU + gaussians / GAUSSIANS_PER_GPU
     if raw >= 1:
         return 1.0
