@@ -173,7 +173,7 @@ def test_batch_with_killed_runs_and_a_bad_scene(tmp_path):
 
 
 def test_a_run_stopped_on_out_of_memory_is_resumed_not_kept(tmp_path, capsys, monkeypatch):
-    """A run that stopped itself on a GPU out of memory (runs sharing the GPU; session 30: 4 of 48 capture runs)
+    """A run that stopped itself on a GPU out of memory (runs sharing the GPU: 4 of 48 capture runs once)
     writes the last good state's metrics with ``stopped_early: out_of_memory``. The batch does not take that for
     a finished run: it resumes it, and the resumed run finishes all its steps. A diverged run's metrics stay final."""
     import torch
@@ -211,3 +211,168 @@ def test_a_run_stopped_on_out_of_memory_is_resumed_not_kept(tmp_path, capsys, mo
     # the batch again: now it is finished and reused as it is
     again = batch.execute_run({"name": "r", "method": "baseline", "argv": argv, "num_cpus": 1}, str(out), str(logs), "b2")
     assert again["status"] == "finished" and again["reused"]
+
+
+# ----------------------------------------------------------------------------------------------
+# sweep files, the deadline, GPU slots
+
+
+def _sweep(path: Path, text: str) -> Path:
+    path.write_text(text)
+    return path
+
+
+def test_a_sweep_file_plans_its_groups_and_variants(tmp_path, capsys):
+    data = write_nerfstudio(tmp_path / "scene")
+    sweep = _sweep(tmp_path / "s.yaml", f"""
+out: {tmp_path / 'b'}
+runs_per_gpu: 4
+set: [eval.fps_repeats=1]
+runs:
+  - data: [{data}]
+    views: [2, 3]
+    method: compare
+    seeds: [0, 1]
+    iterations: 50
+    variants:
+      default: []
+      pw02: [full.pseudo_weight=0.2]
+  - data: synthetic
+    method: baseline
+    iterations: 30
+""")
+    parser = batch.build_parser()
+    a = parser.parse_args(["--sweep", str(sweep), "--set", "eval.save_images=false"])
+    settings, groups = batch.load_sweep(sweep)
+    assert settings == {"out": str(tmp_path / "b"), "runs_per_gpu": 4}
+    specs = batch.plan_sweep(a, groups)
+    names = [s.name for s in specs]
+    want = [f"scene_{v}v_{m}_s{s}{suffix}" for suffix in ("", "_pw02") for v in (2, 3) for m in ("baseline", "full")
+            for s in (0, 1)] + ["synthetic_3v_baseline_s0"]
+    assert names == want
+    by = {s.name: s for s in specs}
+    variant, default = by["scene_3v_full_s1_pw02"].argv, by["scene_3v_full_s1"].argv
+    assert "full.pseudo_weight=0.2" in variant and "full.pseudo_weight=0.2" not in default
+    for argv in (variant, default):  # the command line's settings, then the file's, then the variant's
+        sets = [argv[i + 1] for i, x in enumerate(argv) if x == "--set"]
+        assert sets[:2] == ["eval.save_images=false", "eval.fps_repeats=1"]
+        assert argv[argv.index("--iterations") + 1] == "50"
+    syn = by[want[-1]].argv
+    assert syn[syn.index("--iterations") + 1] == "30" and syn[syn.index("--method") + 1] == "baseline"
+    # --list through main: the file's batch settings apply (4 runs per GPU: a quarter of one each)
+    assert batch.main(["--sweep", str(sweep), "--list"]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert lines[0] == f"17 runs into {tmp_path / 'b' / 'runs'}:" and all("0.25 GPU" in ln for ln in lines[1:])
+    # two groups giving one name, an unknown key, a bad variant name: one line each, nothing runs
+    for text, msg in ((f"runs: [{{data: {data}}}, {{data: {data}}}]", "two runs are named scene_3v_baseline_s0"),
+                      ("runs: [{data: synthetic}]\nsedds: [1]", "unknown keys sedds"),
+                      ("runs: [{data: synthetic, variants: {'a_b': []}}]", "variant 'a_b'")):
+        bad = _sweep(tmp_path / "bad.yaml", text)
+        assert batch.main(["--sweep", str(bad), "--list", "--method", "baseline", "--views", "3"]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and msg in err[0], err
+
+
+def test_the_deadline_is_a_duration_a_utc_time_or_an_iso_time():
+    now = 1_794_990_400.0  # 2026-11-18 08:26:40 UTC
+    assert batch.parse_deadline("600", now) == now + 600 and batch.parse_deadline("90s", now) == now + 90
+    assert batch.parse_deadline("45m", now) == now + 2700 and batch.parse_deadline("2h", now) == now + 7200
+    assert batch.parse_deadline("09:00", now) == now + 33 * 60 + 20
+    assert batch.parse_deadline("2026-11-18T10:26:40+01:00", now) == now + 3600
+    assert batch.parse_deadline("2026-11-18T10:26:40", now) == now + 7200  # UTC when it names no zone
+    for bad in ("08:00", "soon", "2026-11-18T08:00"):
+        with pytest.raises(batch.BatchError, match="--deadline"):
+            batch.parse_deadline(bad, now)
+
+
+def test_a_deadline_stops_the_run_going_and_the_next_call_resumes_it(tmp_path):
+    """Without Ray (the task's body): at the deadline the run still going gets SIGTERM and is recorded as stopped,
+    with its periodic checkpoint; a run whose turn comes after the deadline does not start; the next call skips the
+    finished run and resumes the stopped one from its checkpoint."""
+    data = write_nerfstudio(tmp_path / "scene")
+    runs, logs = tmp_path / "runs", tmp_path / "logs"
+    base = ["--data", str(data), "--views", "3", "--method", "baseline", *TINY[:-4], "--device", "cpu", "--no-progress"]
+
+    def spec(name, iterations):
+        return {"name": name, "method": "baseline", "argv": base + ["--iterations", str(iterations)], "num_cpus": 1}
+
+    # the long run is stopped long before its end (no loss check: the tiny scene's loss jumps after 1000 steps)
+    short, long_ = spec("short", 20), spec("long", 100_000)
+    long_["argv"] += ["--set", "train.explode_factor=0"]
+    t0 = time.time()
+    rec = batch.execute_run(short, str(runs / "short"), str(logs), "b1", deadline=t0 + 600)
+    assert rec["status"] == "finished" and rec["metrics"]["iterations"] == 20
+    # long enough for the long run to start and write its first checkpoints on a busy machine, whatever its speed
+    budget = 15 + 3 * (time.time() - t0)
+    rec = batch.execute_run(long_, str(runs / "long"), str(logs), "b1", deadline=time.time() + budget, grace=30)
+    assert rec["status"] == "stopped" and "deadline" in rec["error"], rec
+    a = rec["attempts"][-1]
+    assert a["deadline"] and a["returncode"] in batch.STOPPED, a
+    assert (runs / "long" / "checkpoint.pt").is_file() and not (runs / "long" / "metrics.json").exists()
+    late = batch.execute_run(spec("late", 20), str(runs / "late"), str(logs), "b1", deadline=time.time() - 1)
+    assert late["status"] == "not_started" and not (runs / "late").exists()
+    assert not (logs / "late.attempts.jsonl").exists()
+    # the next call: the finished run is not run again, the stopped one goes on from its checkpoint
+    again = batch.execute_run(short, str(runs / "short"), str(logs), "b2", deadline=time.time() + 600)
+    assert again["status"] == "finished" and again["reused"]
+    assert len(batch.read_attempts(logs / "short.attempts.jsonl")) == 1
+    rec = batch.execute_run(long_, str(runs / "long"), str(logs), "b2", deadline=time.time() + budget, grace=30)
+    b = rec["attempts"][-1]
+    assert rec["status"] == "stopped" and b["resume"] and b["from_step"] >= 10, rec
+    assert f"--resume {runs / 'long'}" in (logs / "long.log").read_text()
+
+
+def test_a_sweep_on_ray_cut_by_its_deadline_then_run_again(tmp_path):
+    """The batch runner end to end on a local Ray: a sweep of two tiny runs, the second far too long for the call's
+    deadline; then the same command again: the first is reused as it is, the second resumed."""
+    pytest.importorskip("ray", reason="the batch runner needs Ray: pip install 'warpgs[ray]'")
+    data = write_nerfstudio(tmp_path / "scene")
+    tiny = json.dumps([TINY[i + 1] for i, x in enumerate(TINY) if x == "--set"])  # (JSON is YAML)
+    sweep = _sweep(tmp_path / "two.yaml", f"""
+out: {tmp_path / 'batch'}
+device: cpu
+set: {tiny}
+runs:
+  - {{data: {data}, views: 3, method: baseline, iterations: 20}}
+  - {{data: {data}, views: 3, method: baseline, iterations: 100000, set: [train.explode_factor=0], variants: {{long: []}}}}
+""")
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(REPO), os.environ.get("PYTHONPATH", "")]), "OMP_NUM_THREADS": "1"}
+    out = tmp_path / "batch"
+
+    def call(deadline: str):
+        p = subprocess.run([sys.executable, "-m", "warpgs.pipelines.batch", "--sweep", str(sweep), "--cpus", "2",
+                            "--deadline", deadline, "--grace", "30", "--progress-every", "5"], cwd=REPO, env=env,
+                           capture_output=True, text=True, timeout=300)
+        assert "Traceback" not in p.stderr and p.returncode in (0, 1), p.stderr
+        return p, {r["name"]: r for r in json.loads((out / "results.json").read_text())["runs"]}
+
+    # a deadline well past Ray's start and the short run on this machine, however busy: 3x a tiny run's time
+    t0 = time.monotonic()
+    subprocess.run([sys.executable, "-m", "warpgs.pipelines.sparse", "--data", str(data), "--views", "3", "--method",
+                    "baseline", *TINY,
+                    "--iterations", "20", "--no-progress", "--out", str(tmp_path / "timing")], cwd=REPO, env=env,
+                   check=True, capture_output=True, timeout=300)
+    deadline = str(round(20 + 3 * (time.monotonic() - t0)))
+    p, by = call(deadline)
+    assert p.returncode == 1, p.stderr  # not every run finished
+    first, second = "scene_3v_baseline_s0", "scene_3v_baseline_s0_long"
+    assert by[first]["status"] == "finished" and by[first]["metrics"]["iterations"] == 20
+    assert by[second]["status"] == "stopped" and by[second]["attempts"][-1]["deadline"], by[second]
+    assert "1 stopped or not started at the deadline" in p.stderr
+    psnr = by[first]["metrics"]["psnr"]
+    p, by = call(deadline)
+    assert by[first]["status"] == "finished" and by[first]["reused"] and by[first]["metrics"]["psnr"] == psnr
+    assert len(batch.read_attempts(out / "logs" / f"{first}.attempts.jsonl")) == 1
+    a = batch.read_attempts(out / "logs" / f"{second}.attempts.jsonl")
+    assert len(a) == 2 and a[1]["resume"] and a[1]["deadline"], a  # it went on from its checkpoint
+
+
+def test_every_committed_sweep_file_plans(capsys):
+    """bench/sweeps/*.yaml: every run's config builds as the run's own would, and no two runs share a name."""
+    sweeps = sorted((REPO / "bench" / "sweeps").glob("*.yaml"))
+    assert sweeps
+    for path in sweeps:
+        assert batch.main(["--sweep", str(path), "--list", "--device", "cpu"]) == 0, capsys.readouterr().err
+        lines = capsys.readouterr().out.splitlines()
+        names = [ln.split()[0] for ln in lines[1:]]
+        assert int(lines[0].split()[0]) == len(names) == len(set(names)) > 0, path

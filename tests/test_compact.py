@@ -336,7 +336,7 @@ def test_cli_flag_and_bench(tmp_path, capsys):
     import importlib.util
     from pathlib import Path
 
-    spec = importlib.util.spec_from_file_location("bench_compact", Path(__file__).resolve().parents[1] / "bench" / "compact.py")
+    spec = importlib.util.spec_from_file_location("bench_compact", Path(__file__).resolve().parents[1] / "bench" / "quality" / "compact.py")
     bench = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(bench)
     res = bench.run_compact(str(data), "cpu", 24, tmp_path / "bench", views=3, overrides=sets,

@@ -1,4 +1,4 @@
-"""bench/depth_prior_trace.py: the check of a depth map against 3D points, on an analytic case."""
+"""bench/diagnostics/depth_prior_trace.py: the check of a depth map against 3D points, on an analytic case."""
 
 import sys
 from pathlib import Path
@@ -8,7 +8,7 @@ import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from bench.depth_prior_trace import check_against_points  # noqa: E402
+from bench.diagnostics.depth_prior_trace import check_against_points  # noqa: E402
 
 
 def test_points_on_confident_pixels_against_a_depth_map():

@@ -1,4 +1,4 @@
-"""bench/pseudo_quality.py: the held-out frames it compares with, its per-frame figures on analytic images, and one
+"""bench/quality/pseudo_quality.py: the held-out frames it compares with, its per-frame figures on analytic images, and one
 tiny end-to-end probe on the CPU (a capture written as nerfstudio frames on a ring)."""
 
 import json
@@ -12,7 +12,7 @@ import torch
 
 from tiny_scene import write_nerfstudio
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench" / "quality"))
 
 
 def _seq(renders, frames, warped, U):

@@ -1,6 +1,6 @@
-"""bench/spy_summary.py: own and inclusive shares per thread from py-spy's raw (collapsed stacks) format."""
+"""bench/diagnostics/spy_summary.py: own and inclusive shares per thread from py-spy's raw (collapsed stacks) format."""
 
-from bench import spy_summary as ss
+from bench.diagnostics import spy_summary as ss
 
 
 def test_shares_per_thread_and_the_under_filter(tmp_path):

@@ -1,4 +1,4 @@
-"""bench/rasterizer_timeline.py's analysis of a trace, on a hand-made timeline whose busy time and gaps are known."""
+"""bench/perf/rasterizer_timeline.py's analysis of a trace, on a hand-made timeline whose busy time and gaps are known."""
 
 import sys
 from pathlib import Path
@@ -6,7 +6,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from bench.rasterizer_timeline import analyse, short  # noqa: E402
+from bench.perf.rasterizer_timeline import analyse, short  # noqa: E402
 
 
 def _trace():

@@ -1,4 +1,4 @@
-"""bench/train_speed.py on the CPU at a tiny size: it writes its JSON, and the trainer (reading its verdicts
+"""bench/perf/train_speed.py on the CPU at a tiny size: it writes its JSON, and the trainer (reading its verdicts
 every 5 steps and every step) and the plain warpgs loop, started from the same Gaussians with the same views,
 rates, loss and densification, end with the same model."""
 
@@ -9,7 +9,7 @@ from pathlib import Path
 from tiny_scene import make_scene, tiny_config, write_nerfstudio
 from warpgs.train import Trainer
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench" / "perf"))
 
 
 def test_train_speed_writes_its_json_and_the_loops_train_alike(tmp_path):

@@ -5,12 +5,23 @@ cluster, ``python -m warpgs.pipelines.batch``. Needs Ray: ``pip install 'warpgs[
     python -m warpgs.pipelines.batch --data synthetic --views 3 --seeds 0,1,2 --iterations 300 --device cpu
     python -m warpgs.pipelines.batch --address auto ...     # on a cluster started with `ray start`
     python -m warpgs.pipelines.batch ... --list             # the runs and their GPU shares; nothing runs
+    python -m warpgs.pipelines.batch --sweep bench/sweeps/captures_384x256.yaml --deadline 9m   # a sweep file
 
 Each run is one Ray task that starts ``python -m warpgs.pipelines.sparse`` into ``OUT/runs/<name>`` (its own
 process: a run killed by the OOM killer or ``kill -9`` is a process death this module sees, and nothing of it
 stays in the worker). ``--method compare`` makes two runs, baseline and full. A ``--data`` entry is a dataset
 name (``synthetic``, ``llff``, ...), a scene folder, or a scene of ``--dataset`` (DL3DV by default:
-``castle_p30`` is ``--data dl3dv --scene castle_p30``).
+``castle_p30`` is ``--data dl3dv --scene castle_p30``). Runs are named ``<scene>_<views>v_<method>_s<seed>``, with
+``_<variant>`` after it for the runs of a variant (``--variant``; bench/report/compare.py matches them by that).
+
+Sweep files (``--sweep FILE``, YAML; ``load_sweep``): the runs of a batch written down, as groups of runs (each
+every combination of its lists, as on the command line), settings every group shares, each group's ``variants``
+(named sets of ``--set`` values, which repeat the group with the variant's name as suffix), and the batch's own
+settings (``out``, ``data_root``, ``device``, ``runs_per_gpu``, ...; a flag given on the command line wins).
+
+A call's time (``--deadline``: a duration, a UTC time or an ISO time): once it has passed no run starts, and a
+run still going gets SIGTERM (it writes its checkpoint and stops; SIGKILL ``--grace`` seconds later). Such runs
+are recorded as ``stopped`` and ``not_started`` (exit code 1), and the same command again resumes them.
 
 Faults (issue 17):
 
@@ -26,7 +37,8 @@ Faults (issue 17):
 
 Resources: a run asks Ray for ``--cpus-per-run`` CPUs (1) and, on CUDA, for a share of a GPU, so that small
 runs pack onto one GPU (``gpu_share``: megapixels / 2 + millions of Gaussians / 10, rounded up to 1/k and
-kept in [1/8, 1]; ``--gpus-per-run`` overrides it). Ray sets each run's ``CUDA_VISIBLE_DEVICES``.
+kept in [1/8, 1]; ``--gpus-per-run`` overrides it, and ``--runs-per-gpu N`` gives every GPU N slots: each run asks
+for 1/N). Ray spreads the runs over the visible GPUs and sets each run's ``CUDA_VISIBLE_DEVICES``.
 
 Outputs in ``--out`` (default ``outputs/batch``): ``results.json`` and ``results.md`` (median and range over
 seeds per scene, views and method; every run with its stage times, attempts and wall time; the GPU-hours
@@ -57,7 +69,9 @@ MIN_GPU_SHARE = 1 / 8
 PIXELS_PER_GPU = 2.0e6  # gpu_share: a run of this many pixels per image takes a whole GPU ...
 GAUSSIANS_PER_GPU = 1.0e7  # ... as does one of this many Gaussians
 GAUSSIANS_WITHOUT_BUDGET = 500_000  # the estimate where strategy.max_gaussians is 0 (no budget)
-STOPPED = (130, -signal.SIGINT)  # Ctrl-C: the run checkpointed and stopped; not a fault to retry
+# Ctrl-C or SIGTERM (the deadline's stop): the run stopped on request; not a fault to retry
+STOPPED = (130, -signal.SIGINT, 128 + signal.SIGTERM, -signal.SIGTERM)
+GRACE_S = 60.0  # seconds a run has after SIGTERM at the deadline before it is killed
 
 
 class BatchError(ValueError):
@@ -122,7 +136,8 @@ def gpu_share(width: int, height: int, gaussians: int) -> float:
     that k runs fill a GPU with nothing left over) and kept in [1/8, 1]. At 768x512 (0.39 MP) with no
     Gaussian budget (estimated 500k) that is 1/4; the synthetic scene's 128x96 with 12k is 1/8; 1080p with
     1M Gaussians is 1. Measured peak allocations stay far below a GPU's memory (at most 3.3 GB at 768x512,
-    bench/results/real_captures); the share limits how many runs contend for one GPU's compute."""
+    bench/results/perf/capture_runs_768x512_h200.json); the share limits how many runs contend for one GPU's
+    compute."""
     raw = width * height / PIXELS_PER_GPU + gaussians / GAUSSIANS_PER_GPU
     if raw >= 1:
         return 1.0
@@ -180,13 +195,17 @@ def probe_image_size(cfg) -> tuple[int, int] | None:
     return None
 
 
-def run_name(tag: str, views, method: str, seed) -> str:
+def run_name(tag: str, views, method: str, seed, variant: str | None = None) -> str:
+    """``<tag>_<views>v_<method>_s<seed>``, and ``_<variant>`` for a variant's run (what bench/report/compare.py
+    matches a variant's runs to the default's by)."""
     parts = [re.sub(r"[^A-Za-z0-9_.-]+", "_", tag)]
     if views is not None:
         parts.append(f"{views}v")
     parts.append(method)
     if seed is not None:
         parts.append(f"s{seed}")
+    if variant:
+        parts.append(variant)
     return "_".join(parts)
 
 
@@ -227,16 +246,132 @@ def plan(args) -> list[RunSpec]:
             cfg, _ = make_config(build_parser().parse_args(argv))
         except ConfigError as e:
             raise BatchError(f"{entry}, {method}: {e}") from None
-        name = run_name(tag, cfg.data.views, method, cfg.train.seed)
+        name = run_name(tag, cfg.data.views, method, cfg.train.seed, getattr(args, "variant", None))
         size = probe_image_size(cfg)
         spec = RunSpec(name, argv, tag, cfg.data.views, method, cfg.train.seed, num_cpus=args.cpus_per_run,
                        image_size=list(size) if size else None)
         if args.device != "cpu":  # main() drops the shares when the cluster has no GPU
             budget = cfg.strategy.max_gaussians or GAUSSIANS_WITHOUT_BUDGET
             # no size: the scene is not there, and the run will stop at once with the loader's message
-            spec.num_gpus = args.gpus_per_run or (gpu_share(*size, budget) if size else MIN_GPU_SHARE)
+            per_gpu = getattr(args, "runs_per_gpu", None)
+            spec.num_gpus = (1 / per_gpu if per_gpu else args.gpus_per_run
+                             or (gpu_share(*size, budget) if size else MIN_GPU_SHARE))
         runs.append(spec)
     return runs
+
+
+# ----------------------------------------------------------------------------------------------
+# sweep files: the runs of a batch written down
+
+
+SWEEP_BATCH_KEYS = ("out", "data_root", "device", "runs_per_gpu", "gpus_per_run", "cpus_per_run", "max_retries",
+                    "grace")  # a sweep's own settings (each a command-line flag, which wins over the file)
+SWEEP_RUN_KEYS = ("data", "dataset", "views", "method", "seeds", "iterations", "set", "config", "variants")
+
+
+def _csv(value) -> str | None:
+    if value is None:
+        return None
+    return ",".join(map(str, value)) if isinstance(value, (list, tuple)) else str(value)
+
+
+def _strings(value, where: str) -> list[str]:
+    if value is None:
+        return []
+    if isinstance(value, str):
+        return [value]
+    if isinstance(value, list) and all(isinstance(v, (str, int, float)) for v in value):
+        return [str(v) for v in value]
+    raise BatchError(f"{where}: expected a list of strings")
+
+
+def load_sweep(path) -> tuple[dict, list[dict]]:
+    """A sweep file (YAML) -> (its batch settings, its run groups). The file holds the batch settings
+    (``SWEEP_BATCH_KEYS``), settings every group shares (``SWEEP_RUN_KEYS``: ``set`` entries add up) and ``runs``: a
+    list of groups, each every combination of its ``data`` x ``views`` x ``method`` x ``seeds``; a group's
+    ``variants`` (``{name: [KEY=VALUE, ...]}``) repeat it once per variant with those settings on top, each run
+    named with the suffix ``_<name>`` (the name ``default`` adds no suffix and no setting)."""
+    import yaml
+
+    path = Path(path)
+    try:
+        doc = yaml.safe_load(path.read_text())
+    except (OSError, yaml.YAMLError) as e:
+        raise BatchError(f"--sweep {path}: {e}") from None
+    if not isinstance(doc, dict) or not isinstance(doc.get("runs"), list) or not doc["runs"]:
+        raise BatchError(f"--sweep {path}: expected a mapping with a non-empty list 'runs'")
+    unknown = set(doc) - set(SWEEP_BATCH_KEYS) - set(SWEEP_RUN_KEYS) - {"runs"}
+    if unknown:
+        raise BatchError(f"--sweep {path}: unknown keys {', '.join(sorted(unknown))} (known: "
+                         f"{', '.join(SWEEP_BATCH_KEYS + SWEEP_RUN_KEYS)}, runs)")
+    shared = {k: doc[k] for k in SWEEP_RUN_KEYS if k in doc}
+    groups = []
+    for i, g in enumerate(doc["runs"]):
+        where = f"--sweep {path}: runs[{i}]"
+        if not isinstance(g, dict) or set(g) - set(SWEEP_RUN_KEYS):
+            raise BatchError(f"{where}: expected a mapping of {', '.join(SWEEP_RUN_KEYS)}")
+        group = {**shared, **g, "set": _strings(shared.get("set"), where) + _strings(g.get("set"), where)}
+        variants = group.get("variants") or {"default": []}
+        if not isinstance(variants, dict):
+            raise BatchError(f"{where}: variants: expected a mapping of name: [KEY=VALUE, ...]")
+        for name in variants:
+            if name != "default" and not re.fullmatch(r"[A-Za-z0-9.-]+", str(name)):
+                raise BatchError(f"{where}: variant {name!r}: letters, digits, '.' and '-' only (it ends run names)")
+        group["variants"] = {str(k): _strings(v, f"{where}: variants.{k}") for k, v in variants.items()}
+        groups.append(group)
+    return {k: doc[k] for k in SWEEP_BATCH_KEYS if k in doc}, groups
+
+
+def plan_sweep(args, groups: list[dict]) -> list[RunSpec]:
+    """The runs of a sweep's groups (``load_sweep``), each planned as ``plan`` plans the command line's, with the
+    command line's ``--set`` and ``--config`` under each group's; ``BatchError`` when two runs get one name."""
+    specs: list[RunSpec] = []
+    for g in groups:
+        for variant, sets in g["variants"].items():
+            ns = argparse.Namespace(**vars(args))
+            for key in ("data", "views", "seeds"):
+                if key in g:
+                    setattr(ns, key, _csv(g[key]))
+            for key in ("dataset", "method", "iterations"):
+                if key in g:
+                    setattr(ns, key, g[key])
+            ns.set = list(args.set) + g["set"] + sets
+            ns.config = list(args.config) + _strings(g.get("config"), "config")
+            ns.variant = None if variant == "default" else variant
+            specs += plan(ns)
+    seen: set[str] = set()
+    for s in specs:
+        if s.name in seen:
+            raise BatchError(f"--sweep: two runs are named {s.name} (give one of the groups a variant name)")
+        seen.add(s.name)
+    return specs
+
+
+def parse_deadline(text: str | None, now: float | None = None) -> float | None:
+    """``--deadline`` -> epoch seconds: a duration from ``now`` (``600``, ``90s``, ``45m``, ``2h``), a UTC clock
+    time of today (``07:30``) or an ISO date and time (``2026-11-29T07:30``, UTC unless it says otherwise)."""
+    import datetime as dt
+
+    if text is None:
+        return None
+    now = time.time() if now is None else now
+    m = re.fullmatch(r"\s*(\d+(?:\.\d+)?)\s*([smh]?)\s*", text)
+    if m:
+        return now + float(m[1]) * {"": 1, "s": 1, "m": 60, "h": 3600}[m[2]]
+    utc = dt.timezone.utc
+    try:
+        if re.fullmatch(r"\d{1,2}:\d{2}", text.strip()):
+            h, mi = map(int, text.split(":"))
+            when = dt.datetime.fromtimestamp(now, utc).replace(hour=h, minute=mi, second=0, microsecond=0)
+        else:
+            when = dt.datetime.fromisoformat(text.strip())
+            when = when if when.tzinfo else when.replace(tzinfo=utc)
+    except ValueError:
+        raise BatchError(f"--deadline {text!r}: a duration (600, 90s, 45m, 2h), a UTC time (07:30) or an ISO "
+                         "date and time") from None
+    if when.timestamp() <= now:
+        raise BatchError(f"--deadline {text}: {when.isoformat()} has passed")
+    return when.timestamp()
 
 
 # ----------------------------------------------------------------------------------------------
@@ -342,12 +477,29 @@ def finished_record(name: str, out: Path, metrics: dict, attempts: list[dict]) -
             "metrics": slim_metrics(metrics)}
 
 
-def execute_run(spec: dict, out: str, logs: str, batch: str, overwrite: bool = False) -> dict:
+def _wait(proc: subprocess.Popen, deadline: float | None, grace: float) -> tuple[int, bool]:
+    """The exit code of ``proc``, and whether the deadline cut it: at ``deadline`` (epoch seconds) it gets SIGTERM
+    (the run checkpoints and stops), and SIGKILL when it is still there ``grace`` seconds later."""
+    try:
+        return proc.wait(timeout=None if deadline is None else max(0.0, deadline - time.time())), False
+    except subprocess.TimeoutExpired:
+        proc.send_signal(signal.SIGTERM)
+    try:
+        return proc.wait(timeout=grace), True
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        return proc.wait(), True
+
+
+def execute_run(spec: dict, out: str, logs: str, batch: str, overwrite: bool = False, deadline: float | None = None,
+                grace: float = GRACE_S) -> dict:
     """Runs ``spec`` (a ``RunSpec`` as a dict) into ``out`` -> its record; ``batch`` names this batch in the
     attempts file. A run with complete metrics is skipped (unless ``overwrite`` and this batch has not run it
     yet); one with a checkpoint (an earlier attempt, an earlier batch) is resumed. Raises ``RunDied`` when the
     run's process dies, so that Ray retries it; a clean error (exit code 2) is a record with status
-    ``failed``, not an exception."""
+    ``failed``, not an exception. ``deadline`` (epoch seconds): a run not started by then is not started (status
+    ``not_started``), one still going then is stopped with SIGTERM (``_wait``; status ``stopped``): the same batch
+    again resumes both."""
     out, logs = Path(out), Path(logs)
     logs.mkdir(parents=True, exist_ok=True)
     log, attempts_path = logs / f"{spec['name']}.log", logs / f"{spec['name']}.attempts.jsonl"
@@ -356,6 +508,10 @@ def execute_run(spec: dict, out: str, logs: str, batch: str, overwrite: bool = F
     done = None if fresh else metrics_complete(out, spec["method"])
     if done is not None:
         return finished_record(spec["name"], out, done, earlier)
+    if deadline is not None and time.time() >= deadline:
+        return {"name": spec["name"], "out": str(out), "status": "not_started", "attempts": earlier,
+                "wall_s": round(sum(a.get("wall_s", 0) for a in earlier), 2),
+                "error": "not started: the batch's deadline had passed (the same batch again runs it)"}
     resume = not fresh and (checkpoint_file(out) is not None or (out / "config.yaml").is_file())
     import warpgs
 
@@ -376,7 +532,7 @@ def execute_run(spec: dict, out: str, logs: str, batch: str, overwrite: bool = F
         proc = subprocess.Popen(cmd, stdout=f, stderr=subprocess.STDOUT, env=env,
                                 preexec_fn=_prepare_run_process if sys.platform.startswith("linux") else None)
         _append(attempts_path, {"attempt": number, "pid": proc.pid})
-        rc = proc.wait()
+        rc, cut = _wait(proc, deadline, grace)
     with open(log, errors="replace") as f:
         f.seek(offset)
         text = f.read()
@@ -384,11 +540,16 @@ def execute_run(spec: dict, out: str, logs: str, batch: str, overwrite: bool = F
     oom = rc not in (0, 2) and (re.search(r"out of memory|OutOfMemoryError|MemoryError", text[-3000:]) is not None
                                 or stopped_out_of_memory(read_metrics(out)))
     _append(attempts_path, {"attempt": number, "end": time.time(), "wall_s": round(time.time() - t0, 2),
-                            "returncode": rc, "oom": oom, "from_step": int(resumed.group(1)) if resumed else None})
+                            "returncode": rc, "oom": oom, "from_step": int(resumed.group(1)) if resumed else None,
+                            "deadline": cut})
     attempts = read_attempts(attempts_path, batch)
     metrics = metrics_complete(out, spec["method"])
     if metrics is not None and rc in (0, 1):  # 1: stopped early (diverged) with the last good state's metrics
         return finished_record(spec["name"], out, metrics, attempts)
+    if cut:
+        return {"name": spec["name"], "out": str(out), "status": "stopped", "returncode": rc, "attempts": attempts,
+                "wall_s": round(sum(a.get("wall_s", 0) for a in attempts), 2),
+                "error": f"stopped at the batch's deadline (SIGTERM; exit code {rc}): the same batch again resumes it"}
     if (rc < 0 and rc not in STOPPED) or oom:
         raise RunDied(f"{spec['name']}: attempt {number} {describe_end(attempts[-1])}")
     tail = text[-1500:]
@@ -440,7 +601,7 @@ class Progress:
     def __init__(self, total: int, log=print, every: float = 60.0):
         self.total, self.log, self.every = total, log, every
         self.t0 = time.time()
-        self.done = self.reused = self.failed = 0
+        self.done = self.reused = self.failed = self.cut = 0
         self.last: tuple | None = None
         self.last_time = 0.0
 
@@ -448,16 +609,19 @@ class Progress:
         if rec.get("status") == "finished":
             self.done += 1
             self.reused += bool(rec.get("reused"))
+        elif rec.get("status") in ("stopped", "not_started"):
+            self.cut += 1
         else:
             self.failed += 1
 
     def line(self, running: int) -> str:
         elapsed = time.time() - self.t0
-        left = self.total - self.done - self.failed
+        left = self.total - self.done - self.failed - self.cut
         ran = self.done - self.reused + self.failed
         eta = elapsed / ran * left if ran and left else (0.0 if not left else None)
         reused = f" ({self.reused} reused)" if self.reused else ""
-        return (f"batch: {self.done}/{self.total} done{reused}, {running} running, {self.failed} failed, "
+        cut = f", {self.cut} stopped or not started at the deadline" if self.cut else ""
+        return (f"batch: {self.done}/{self.total} done{reused}, {running} running, {self.failed} failed{cut}, "
                 f"{max(0, left - running)} waiting; {_fmt_time(elapsed)} elapsed, ETA {_fmt_time(eta)}")
 
     def show(self, running: int, force: bool = False) -> None:
@@ -502,11 +666,12 @@ def retries_in_words(attempts: list[dict]) -> list[str]:
 
 
 def run_on_ray(specs: list[RunSpec], work: Path, logs: Path, *, max_retries: int = 2, overwrite: bool = False,
-               log=print, progress_every: float = 60.0, ray_init: dict | None = None) -> list[dict]:
+               log=print, progress_every: float = 60.0, ray_init: dict | None = None, deadline: float | None = None,
+               grace: float = GRACE_S) -> list[dict]:
     """Runs ``specs`` as Ray tasks into ``work/<name>``, logs in ``logs``; returns their records in the order of
     ``specs``, each with its ``spec`` and ``retries``. A run that finished already is not submitted (unless
     ``overwrite``). Ray is started (``start_ray(**ray_init)``, shut down at the end) only where it is not
-    running yet and there is a run to submit."""
+    running yet and there is a run to submit. ``deadline``, ``grace``: ``execute_run``'s."""
     import secrets
 
     ray = import_ray()
@@ -529,7 +694,7 @@ def run_on_ray(specs: list[RunSpec], work: Path, logs: Path, *, max_retries: int
         start_ray(**(ray_init or {}))
         progress.t0 = time.time()  # the ETA counts from the first task
     try:
-        _run_tasks(ray, todo, work, logs, batch, records, progress, max_retries, overwrite)
+        _run_tasks(ray, todo, work, logs, batch, records, progress, max_retries, overwrite, deadline, grace)
     finally:
         if started:
             ray.shutdown()
@@ -539,7 +704,7 @@ def run_on_ray(specs: list[RunSpec], work: Path, logs: Path, *, max_retries: int
 
 
 def _run_tasks(ray, todo: list[RunSpec], work: Path, logs: Path, batch: str, records: dict, progress: Progress,
-               max_retries: int, overwrite: bool) -> None:
+               max_retries: int, overwrite: bool, deadline: float | None = None, grace: float = GRACE_S) -> None:
     """Submits one task per run of ``todo`` and collects their records into ``records`` as they end."""
     task = ray.remote(execute_run)
     refs = {}
@@ -547,7 +712,8 @@ def _run_tasks(ray, todo: list[RunSpec], work: Path, logs: Path, batch: str, rec
         opts = dict(num_cpus=s.num_cpus, max_retries=max_retries, retry_exceptions=[RunDied], name=s.name)
         if s.num_gpus:
             opts["num_gpus"] = s.num_gpus
-        refs[task.options(**opts).remote(asdict(s), str(work / s.name), str(logs), batch, overwrite)] = s
+        refs[task.options(**opts).remote(asdict(s), str(work / s.name), str(logs), batch, overwrite, deadline,
+                                         grace)] = s
     pending = set(refs)
     try:
         while pending:
@@ -598,6 +764,8 @@ def stop_runs(names: list[str], logs: Path, batch: str, timeout: float = 120.0) 
 def build_parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(prog="python -m warpgs.pipelines.batch", description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--sweep", default=None, metavar="FILE", help="a sweep file (YAML, bench/sweeps/): its groups of runs "
+                    "instead of --data ... --iterations, its batch settings where the command line gives none")
     g = ap.add_argument_group("runs (every combination of the lists)")
     g.add_argument("--data", default="synthetic",
                    help="comma-separated: dataset names, scene folders, or scenes of --dataset (default: synthetic)")
@@ -610,12 +778,21 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="config override of every run (repeatable)")
     g.add_argument("--config", action="append", default=[], metavar="FILE", help="extra YAML config of every run (repeatable)")
     g.add_argument("--device", default=None, help="cpu or cuda (default: cuda when the Ray cluster has GPUs)")
+    g.add_argument("--variant", default=None, help="a suffix of every run's name: <scene>_<views>v_<method>_s<seed>_VARIANT "
+                   "(the runs of a --set variant, beside the default's; bench/report/compare.py)")
     g = ap.add_argument_group("scheduling")
     g.add_argument("--address", default=None, help="Ray cluster to join (auto, HOST:PORT, ray://...); default: a local Ray")
     g.add_argument("--cpus", type=int, default=None, help="local Ray: CPUs it may use (default: all)")
     g.add_argument("--gpus", type=int, default=None, help="local Ray: GPUs it may use (default: all)")
     g.add_argument("--cpus-per-run", type=float, default=1.0, help="CPUs each run asks for (default: 1)")
     g.add_argument("--gpus-per-run", type=float, default=None, help="GPU share each run asks for (default: gpu_share)")
+    g.add_argument("--runs-per-gpu", type=int, default=None, help="GPU slots: N runs at a time on each visible GPU "
+                   "(each asks for 1/N of one; overrides --gpus-per-run)")
+    g.add_argument("--deadline", default=None, help="wall-clock end of this call: a duration (600, 45m, 2h), a UTC time "
+                   "(07:30) or an ISO time; then no run starts, and the runs still going get SIGTERM (they checkpoint "
+                   "and stop; killed --grace s later). The same command again skips the finished runs and resumes the rest")
+    g.add_argument("--grace", type=float, default=GRACE_S, help=f"seconds between SIGTERM and SIGKILL at the deadline "
+                   f"(default {GRACE_S:g})")
     g.add_argument("--max-retries", type=int, default=2, help="retries of a run whose process or worker died (default: 2)")
     g = ap.add_argument_group("outputs")
     g.add_argument("--out", default="outputs/batch", help="batch folder: runs/, logs/, results (default: outputs/batch)")
@@ -632,6 +809,12 @@ def check_args(a) -> None:
         raise BatchError(f"--cpus-per-run {a.cpus_per_run}: must be > 0")
     if a.max_retries < 0:
         raise BatchError(f"--max-retries {a.max_retries}: must be >= 0")
+    if a.runs_per_gpu is not None and a.runs_per_gpu < 1:
+        raise BatchError(f"--runs-per-gpu {a.runs_per_gpu}: must be >= 1")
+    if a.grace < 0:
+        raise BatchError(f"--grace {a.grace}: must be >= 0")
+    if a.variant is not None and not re.fullmatch(r"[A-Za-z0-9.-]+", a.variant):
+        raise BatchError(f"--variant {a.variant!r}: letters, digits, '.' and '-' only (it ends run names)")
     if a.device is not None and a.device != "cpu" and not a.device.startswith("cuda"):
         raise BatchError(f"--device {a.device!r}: cpu or cuda (Ray gives each run its GPU)")
     if a.device is not None and a.device.startswith("cuda:"):
@@ -648,14 +831,24 @@ def print_plan(specs: list[RunSpec], log=print) -> None:
 def main(argv=None) -> int:
     from warpgs.pipelines.batch_report import write_results
 
-    a = build_parser().parse_args(argv)
-    out = Path(a.out).resolve()
+    parser = build_parser()
+    a = parser.parse_args(argv)
     ray = started = None
     try:
+        deadline = parse_deadline(a.deadline)
+        groups = None
+        if a.sweep is not None:
+            settings, groups = load_sweep(a.sweep)
+            settings.setdefault("out", str(Path("outputs") / "sweeps" / Path(a.sweep).stem))
+            for key, value in settings.items():  # the command line wins where it gives a value
+                if getattr(a, key) == parser.get_default(key):
+                    setattr(a, key, value)
+        out = Path(a.out).resolve()
         check_args(a)
         if not a.list:
             import_ray()  # before any work: what to install, when it is missing
-        specs = plan(a)  # every config checked before Ray starts; GPU shares unless --device cpu
+        # every config checked before Ray starts; GPU shares unless --device cpu
+        specs = plan_sweep(a, groups) if groups is not None else plan(a)
         if a.list:
             print(f"{len(specs)} runs into {out / 'runs'}:")
             print_plan(specs)
@@ -678,14 +871,16 @@ def main(argv=None) -> int:
         info = {"command": "python -m warpgs.pipelines.batch " + " ".join(argv if argv is not None else sys.argv[1:]),
                 "date": time.strftime("%Y-%m-%d %H:%M"), "device": device, "address": a.address or "local",
                 "cluster": {k: res[k] for k in ("CPU", "GPU") if k in res}, "nodes": len(ray.nodes()),
-                "max_retries": a.max_retries, "runs": len(specs)}
+                "max_retries": a.max_retries, "runs": len(specs), "sweep": a.sweep,
+                "deadline": time.strftime("%Y-%m-%d %H:%M:%S UTC", time.gmtime(deadline)) if deadline else None}
         print(f"batch: {len(specs)} runs on {info['nodes']} node(s) "
               f"({', '.join(f'{v:g} {k}' for k, v in info['cluster'].items())}); runs in {out / 'runs'}, "
               f"logs in {out / 'logs'}", file=sys.stderr)
         t0 = time.time()
         try:
             records = run_on_ray(specs, out / "runs", out / "logs", max_retries=a.max_retries, overwrite=a.overwrite,
-                                 log=lambda msg: print(msg, file=sys.stderr), progress_every=a.progress_every)
+                                 log=lambda msg: print(msg, file=sys.stderr), progress_every=a.progress_every,
+                                 deadline=deadline, grace=a.grace)
         except BatchError as e:
             print(f"error: {e}", file=sys.stderr)
             return 2
@@ -696,6 +891,10 @@ def main(argv=None) -> int:
         info["wall_s"] = round(time.time() - t0, 2)
         paths = write_results(records, info, out)
         print(f"batch: wrote {', '.join(str(p) for p in paths)}", file=sys.stderr)
+        cut = sum(r["status"] in ("stopped", "not_started") for r in records)
+        if cut:
+            print(f"batch: {cut} run(s) stopped or not started at the deadline: run the same command again to go on "
+                  "(finished runs are skipped, stopped ones resumed)", file=sys.stderr)
         return 0 if all(r["status"] == "finished" for r in records) else 1
     finally:
         if started and ray.is_initialized():
