@@ -84,9 +84,12 @@ def test_hf_layout_and_loading(svd_dir, backend):
 
 def test_missing_weights_error_names_the_download(tmp_path, monkeypatch):
     monkeypatch.delenv(SVD_ENV, raising=False)
+    monkeypatch.setenv("HF_HUB_CACHE", str(tmp_path / "empty_cache"))
     with pytest.raises(SVDWeightsNotFound) as e:
         SVDBackend.from_pretrained(None)
-    assert SVD_REPO in str(e.value) and SVD_ENV in str(e.value) and "--svd-path" in str(e.value)
+    msg = str(e.value)
+    assert SVD_REPO in msg and SVD_ENV in msg and "--svd-path" in msg and "empty_cache" in msg
+    assert "\n" not in msg  # one line under error:
     (tmp_path / "partial" / "unet").mkdir(parents=True)
     with pytest.raises(SVDWeightsNotFound) as e:
         SVDBackend.from_pretrained(tmp_path / "partial")

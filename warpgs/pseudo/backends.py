@@ -184,13 +184,15 @@ class SVDConfig:
     min_guidance_scale: float = 1.0  # classifier-free guidance ramps from min (frame 0) to max (frame N-1)
     max_guidance_scale: float = 3.0
     encode_chunk_size: int = 4  # frames per VAE encoder call (the guidance frames)
-    decode_chunk_size: int = 4  # frames per VAE decoder call (the temporal decoder sees them together)
+    decode_chunk_size: int = 4  # frames per VAE decoder call (the temporal decoder sees them together: unlike the
+    #   other memory settings this one changes the frames a little)
     vae_upcast: bool = False  # true: the VAE encoder in float32 as diffusers' pipeline runs it (force_upcast);
     #   false: in the model's dtype, a chunk whose latents come out non-finite is redone in float32
     unet_batch_frames: int = 50  # most frames in one UNet call: the classifier-free-guidance halves and the
     #   sampler's forward and backward passes go into one call while they fit (2 x 25 frames: one pass a call)
     offload: str = "none"  # none: all on the device | model: each component (image encoder, VAE, UNet) on the
-    #   device only for its stage | sequential: as model, plus one UNet half a call, chunked feed-forward, VAE chunks of 1
+    #   device only for its stage | sequential: as model, plus one UNet half a call, the spatial blocks' feed-forward
+    #   one frame at a time, VAE encoder chunks of 1
     channels_last: bool = True  # the UNet's convolutions in channels-last layout on CUDA
     dtype: str = "auto"  # auto: float16 on CUDA, float32 on the CPU
 
@@ -461,8 +463,8 @@ class SVDBackend:
         return 1 if self.cfg.offload == "sequential" else max(1, self.cfg.encode_chunk_size)
 
     @property
-    def decode_chunk(self) -> int:
-        return 1 if self.cfg.offload == "sequential" else max(1, self.cfg.decode_chunk_size)
+    def decode_chunk(self) -> int:  # the temporal decoder mixes the frames of a chunk: its size changes the output
+        return max(1, self.cfg.decode_chunk_size)
 
     # -- geometry --------------------------------------------------------------------------------
 

@@ -1,0 +1,118 @@
+"""The svd backend's memory options and batching on the tiny random Stable Video Diffusion (CPU).
+
+Each option must give the frames of the plain path (``offload: none``, every pass its own UNet call) within
+floating-point tolerance: ``model`` and ``sequential`` offload (components on the device only for their stage,
+one UNet half a call, chunked feed-forward, VAE encoder chunks of 1), the forward and backward passes batched into one
+UNet call, and smaller VAE chunks for the encoder. Loading prints nothing.
+"""
+
+from __future__ import annotations
+
+import pytest
+import torch
+
+pytest.importorskip("diffusers", reason="the svd backend needs diffusers (pip install 'warpgs[svd]')")
+pytest.importorskip("transformers", reason="the svd backend needs transformers (pip install 'warpgs[svd]')")
+
+from test_svd_tiny import N, S, _image, build_tiny_svd  # noqa: E402
+
+from warpgs.pseudo.backends import SVDBackend, SVDConfig  # noqa: E402
+from warpgs.pseudo.sampler import SamplerConfig, sample_video  # noqa: E402
+
+
+@pytest.fixture(scope="module")
+def svd_dir(tmp_path_factory):
+    return build_tiny_svd(tmp_path_factory.mktemp("svd") / "tiny")
+
+
+def load(svd_dir, **kw):
+    return SVDBackend.from_pretrained(svd_dir, device="cpu", cfg=SVDConfig(width=S, height=S, **kw))
+
+
+class OnePassAtATime:
+    """The independent reference: the backend without its batched calls, so the sampler calls ``condition``
+    and ``denoise`` once per pass."""
+
+    def __init__(self, backend):
+        self.b = backend
+        self.default_noise_scale = backend.default_noise_scale
+
+    def __getattr__(self, name):
+        if name in ("condition_batch", "denoise_batch"):
+            raise AttributeError(name)
+        return getattr(self.b, name)
+
+
+def trajectory(backend):
+    start = torch.from_numpy(_image(3)).float() / 255.0
+    end = torch.from_numpy(_image(4)).float() / 255.0
+    w = torch.linspace(0, 1, N).view(N, 1, 1, 1)
+    guidance = (1 - w) * start + w * end
+    U = torch.zeros(N, S, S)
+    U[:, :, S // 2:] = 0.9
+    cfg = SamplerConfig(steps=3, bidirectional=True, guided=True)
+    return sample_video(backend, start, end, guidance=guidance, uncertainty=U, cfg=cfg,
+                        generator=torch.Generator().manual_seed(0))
+
+
+@pytest.fixture(scope="module")
+def reference(svd_dir):
+    return trajectory(OnePassAtATime(load(svd_dir, offload="none", unet_batch_frames=N, encode_chunk_size=N,
+                                          decode_chunk_size=N)))
+
+
+@pytest.mark.parametrize("options", [
+    dict(offload="none"),  # the defaults: both passes and both guidance halves in one UNet call
+    dict(offload="none", encode_chunk_size=1),
+    dict(offload="model"),
+    dict(offload="sequential"),
+])
+def test_options_give_the_plain_paths_frames(svd_dir, reference, options):
+    backend = load(svd_dir, **options)
+    calls = []
+    backend.unet.register_forward_pre_hook(lambda m, a, kw: calls.append((a[0].shape[0], set(backend.active))),
+                                           with_kwargs=True)
+    out = trajectory(backend)
+    assert torch.allclose(out.latents, reference.latents, atol=1e-4), float((out.latents - reference.latents).abs().max())
+    assert (out.frames - reference.frames).abs().max() < 1e-4
+    batch = {"none": 4, "model": 4, "sequential": 1}[options["offload"]]  # 2 passes x 2 guidance halves
+    assert {b for b, _ in calls} == {batch} and len(calls) == 3 * 4 // batch
+    if options["offload"] != "none":  # the UNet alone on the device while it runs
+        assert all(active == {"unet"} for _, active in calls)
+    assert set(out.times) == {"conditioning_s", "encode_s", "denoise_s", "decode_s"}
+    assert all(v >= 0 for v in out.times.values())
+
+
+def test_unet_batch_limit_splits_the_calls(svd_dir, reference):
+    """unet_batch_frames = 2 N: two rows (N frames each) a call, two calls a step."""
+    backend = load(svd_dir, unet_batch_frames=2 * N)
+    sizes = []
+    backend.unet.register_forward_pre_hook(lambda m, a: sizes.append(a[0].shape[0]))
+    out = trajectory(backend)
+    assert sizes == [2] * 6
+    assert torch.allclose(out.latents, reference.latents, atol=1e-4)
+
+
+def test_offload_moves_each_component_for_its_stage(svd_dir):
+    backend = load(svd_dir, offload="model")
+    seen = {}
+    for name in ("image_encoder", "vae", "unet"):
+        getattr(backend, name).register_forward_pre_hook(
+            lambda m, a, name=name: seen.setdefault(name, set()).add(frozenset(backend.active)))
+    backend.vae.decoder.register_forward_pre_hook(lambda m, a: seen.setdefault("decoder", set()).add(
+        frozenset(backend.active)))
+    backend.vae.encoder.register_forward_pre_hook(lambda m, a: seen.setdefault("encoder", set()).add(
+        frozenset(backend.active)))
+    trajectory(backend)
+    assert seen["image_encoder"] == {frozenset({"image_encoder"})}
+    assert seen["encoder"] == {frozenset({"vae"})} and seen["decoder"] == {frozenset({"vae"})}
+    assert seen["unet"] == {frozenset({"unet"})}
+    with pytest.raises(ValueError, match="offload"):
+        SVDBackend(backend.unet, backend.vae, backend.image_encoder, backend.scheduler, SVDConfig(offload="disk"))
+
+
+def test_loading_prints_nothing(svd_dir, capfd):
+    capfd.readouterr()
+    load(svd_dir)
+    out, err = capfd.readouterr()
+    assert out == "" and err == "", (out, err)
