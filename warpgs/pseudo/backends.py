@@ -302,7 +302,8 @@ WEIGHT_FREE_NOTE = ("warpgs: without a learned video prior the full method's pse
 def choose_backend(name: str, svd_path=None) -> tuple[str, Path | None, str]:
     """-> (``default`` or ``svd``, the weights' folder or None, one line saying which and why; empty for an
     explicit ``default``). ``auto`` takes svd when its weights are found, else the weight-free prior;
-    ``svd`` without them raises ``SVDWeightsNotFound``."""
+    ``svd`` without them, or a folder given (--svd-path, $WARPGS_SVD_PATH) that is not usable, raises
+    ``SVDWeightsNotFound``."""
     if name not in BACKENDS:
         raise ValueError(f"pseudo.backend must be one of {', '.join(BACKENDS)}, got {name!r}")
     if name == "default":
@@ -310,7 +311,7 @@ def choose_backend(name: str, svd_path=None) -> tuple[str, Path | None, str]:
     found, where, problem = find_svd_weights(svd_path)
     if found is not None:
         return "svd", found, f"warpgs: pseudo views from Stable Video Diffusion in {found} (from {where})"
-    if name == "svd":
+    if name == "svd" or where in ("--svd-path", f"${SVD_ENV}"):  # a folder named but unusable is an error
         raise SVDWeightsNotFound(svd_missing_message(problem))
     return "default", None, (f"warpgs: pseudo views from the weight-free prior (Stable Video Diffusion weights: "
                              f"{problem}; --svd-path DIR uses them)")
