@@ -48,6 +48,7 @@ def parse(argv=None) -> argparse.Namespace:
     st.add_argument("--size", default="576x1024", help="HxW of the model (and of the frames)")
     st.add_argument("--steps", type=int, default=25)
     st.add_argument("--repeats", type=int, default=2, help="trajectories per option (the first warms up)")
+    st.add_argument("--device", default="cuda", help="cuda (the measurement); cpu for a smoke test of a tiny model")
     for name in ("run", "runs3", "runs9"):
         r = sub.add_parser(name, help="the full method with svd" + ("" if name == "run" else f" on both scenes, "
                                                                                             f"{name[-1]} views"))
@@ -88,7 +89,14 @@ def stages(args) -> dict:
     from warpgs.pseudo.backends import SVDBackend, SVDConfig
     from warpgs.pseudo.sampler import SamplerConfig, StageClock, sample_video
 
-    folder, dev = svd_folder(), torch.device("cuda")
+    folder, dev = svd_folder(), torch.device(args.device)
+    cuda = dev.type == "cuda"
+
+    def sync_reset():
+        if cuda:
+            torch.cuda.synchronize(dev)
+            torch.cuda.reset_peak_memory_stats(dev)
+
     n, H, W = args.frames, args.height, args.width
     g = torch.Generator().manual_seed(0)
     start, end = torch.rand(H, W, 3, generator=g), torch.rand(H, W, 3, generator=g)
@@ -97,27 +105,30 @@ def stages(args) -> dict:
     U = torch.rand(n, H, W, generator=g).to(dev)  # about half the pixels reliable (delta 0.5)
     results = {}
     for offload in args.offloads:
-        torch.cuda.empty_cache()
-        torch.cuda.reset_peak_memory_stats()
+        if cuda:
+            torch.cuda.empty_cache()
+        sync_reset()
         t0 = time.perf_counter()
         backend = SVDBackend.from_pretrained(folder, device=dev, cfg=SVDConfig(width=W, height=H, offload=offload))
-        torch.cuda.synchronize()
-        row = {"load_s": time.perf_counter() - t0, "resident_mb": torch.cuda.memory_allocated() / 2**20,
-               "trajectories": []}
+        sync_reset()
+        row = {"load_s": time.perf_counter() - t0,
+               "resident_mb": torch.cuda.memory_allocated(dev) / 2**20 if cuda else 0.0, "trajectories": []}
         for _ in range(args.repeats):
-            torch.cuda.reset_peak_memory_stats()
+            sync_reset()
             clock = StageClock(dev, memory=True)
             t0 = time.perf_counter()
             sample_video(backend, start.to(dev), end.to(dev), guidance=guidance, uncertainty=U,
                          cfg=SamplerConfig(steps=args.steps), clock=clock)
-            torch.cuda.synchronize()
+            sync_reset()
             row["trajectories"].append({"total_s": time.perf_counter() - t0, **clock.times, **clock.peaks})
-        row["peak_mb"] = max(max(v for k, v in t.items() if k.endswith("_peak_mb")) for t in row["trajectories"])
+        row["peak_mb"] = max((v for t in row["trajectories"] for k, v in t.items() if k.endswith("_peak_mb")),
+                             default=0.0)
         results[offload] = row
         print(json.dumps({offload: summarise_stages(row)}), flush=True)
         del backend
         gc.collect()
-    report = {"frames": n, "size": [H, W], "steps": args.steps, "device": torch.cuda.get_device_name(),
+    report = {"frames": n, "size": [H, W], "steps": args.steps,
+              "device": torch.cuda.get_device_name(dev) if cuda else str(dev),
               "options": results}
     write(f"stages_{'_'.join(args.offloads)}.json", report)
     return report
