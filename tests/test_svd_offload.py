@@ -14,7 +14,7 @@ import torch
 pytest.importorskip("diffusers", reason="the svd backend needs diffusers (pip install 'warpgs[svd]')")
 pytest.importorskip("transformers", reason="the svd backend needs transformers (pip install 'warpgs[svd]')")
 
-from test_svd_tiny import N, S, _image, build_tiny_svd  # noqa: E402
+from test_svd_tiny import N, S, build_tiny_svd, guided_inputs  # noqa: E402
 
 from warpgs.pseudo.backends import SVDBackend, SVDConfig  # noqa: E402
 from warpgs.pseudo.sampler import SamplerConfig, sample_video  # noqa: E402
@@ -44,12 +44,7 @@ class OnePassAtATime:
 
 
 def trajectory(backend):
-    start = torch.from_numpy(_image(3)).float() / 255.0
-    end = torch.from_numpy(_image(4)).float() / 255.0
-    w = torch.linspace(0, 1, N).view(N, 1, 1, 1)
-    guidance = (1 - w) * start + w * end
-    U = torch.zeros(N, S, S)
-    U[:, :, S // 2:] = 0.9
+    start, end, guidance, U = guided_inputs()
     cfg = SamplerConfig(steps=3, bidirectional=True, guided=True)
     return sample_video(backend, start, end, guidance=guidance, uncertainty=U, cfg=cfg,
                         generator=torch.Generator().manual_seed(0))

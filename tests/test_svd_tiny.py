@@ -115,13 +115,18 @@ def test_matches_diffusers_pipeline(svd_dir, backend):
     assert torch.allclose(out.frames, ref, atol=1e-4), float((out.frames - ref).abs().max())
 
 
-def test_modulated_bidirectional_sampler(backend):
+def guided_inputs():
+    """(start, end, guidance, U): two random images, the guidance blending them, its right half unreliable."""
     start = torch.from_numpy(_image(3)).float() / 255.0
     end = torch.from_numpy(_image(4)).float() / 255.0
     w = torch.linspace(0, 1, N).view(N, 1, 1, 1)
-    guidance = (1 - w) * start + w * end
     U = torch.zeros(N, S, S)
     U[:, :, S // 2:] = 0.9  # right half unreliable: no fusion there
+    return start, end, (1 - w) * start + w * end, U
+
+
+def test_modulated_bidirectional_sampler(backend):
+    start, end, guidance, U = guided_inputs()
     cfg = SamplerConfig(steps=4, bidirectional=True, guided=True, b=-1.0, k=0.0)  # guidance on at every step
     t = time.perf_counter()
     out = sample_video(backend, start, end, guidance=guidance, uncertainty=U, cfg=cfg,
