@@ -106,8 +106,13 @@ def test_offload_moves_each_component_for_its_stage(svd_dir):
         SVDBackend(backend.unet, backend.vae, backend.image_encoder, backend.scheduler, SVDConfig(offload="disk"))
 
 
-def test_loading_prints_nothing(svd_dir, capfd):
+def test_loading_prints_nothing_and_attention_is_sdpa(svd_dir, capfd):
+    from diffusers.models.attention_processor import AttnProcessor2_0
+
     capfd.readouterr()
-    load(svd_dir)
+    backend = load(svd_dir)
     out, err = capfd.readouterr()
     assert out == "" and err == "", (out, err)
+    # torch's scaled_dot_product_attention (flash / memory-efficient kernels on CUDA) in every attention layer
+    procs = backend.unet.attn_processors
+    assert procs and all(isinstance(p, AttnProcessor2_0) for p in procs.values())
