@@ -77,6 +77,9 @@ def test_hf_layout_and_loading(svd_dir, backend):
         assert (svd_dir / sub).exists(), sub
     assert backend.dtype == torch.float32  # fp32 on the CPU (fp16 is for CUDA)
     assert backend.latent_shape(S, S) == (4, S // 2, S // 2)  # two VAE blocks: downsampling by 2
+    # without width and height: the frames' aspect at about pseudo.svd.area pixels, in multiples of 8 x 2
+    sized = SVDBackend(backend.unet, backend.vae, backend.image_encoder, backend.scheduler, SVDConfig(area=64 * 64))
+    assert sized.model_size(60, 120) == (48, 96)  # 60 x 120 x (4096 / 7200): 45.3 x 90.5, rounded to 16s
     # the scheduler's sigmas are EDM's Karras schedule between SVD's sigma_min and sigma_max
     assert torch.allclose(backend.sigmas(7, "cpu"), karras_sigmas(7, 0.002, 700.0), rtol=1e-5)
     assert backend.init_noise_sigma(backend.sigmas(7, "cpu")) == pytest.approx((700.0**2 + 1) ** 0.5, rel=1e-5)

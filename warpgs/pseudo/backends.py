@@ -176,8 +176,9 @@ class GaussianVideoBackend:
 @dataclass
 class SVDConfig:
     path: str | None = None  # local folder with the HF layout; None: $WARPGS_SVD_PATH, then the Hugging Face cache
-    width: int | None = None  # model resolution; None: the frames' aspect at about 1024 x 576, multiples of 64
+    width: int | None = None  # model resolution; None: the frames' aspect at about ``area`` pixels, multiples of 64
     height: int | None = None
+    area: int = 576 * 1024  # the model's pixels when width and height are not given (SVD-xt's 1024 x 576)
     fps: int = 7
     motion_bucket_id: int = 127
     noise_aug_strength: float = 0.02
@@ -194,11 +195,12 @@ class SVDConfig:
     #   device only for its stage | sequential: as model, plus one UNet half a call, the spatial blocks' feed-forward
     #   one frame at a time, VAE encoder chunks of 1
     channels_last: bool = True  # the UNet's convolutions in channels-last layout on CUDA
+    compile: bool = False  # torch.compile the UNet on CUDA (a first call that compiles; for measurements)
     dtype: str = "auto"  # auto: float16 on CUDA, float32 on the CPU
 
     LIMITS = {"encode_chunk_size": ">= 1", "decode_chunk_size": ">= 1", "unet_batch_frames": ">= 1",
               "offload": "{none, model, sequential}", "dtype": "{auto, float16, bfloat16, float32}",
-              "noise_aug_strength": ">= 0"}
+              "noise_aug_strength": ">= 0", "area": ">= 4096"}
 
 
 class SVDWeightsNotFound(FileNotFoundError):
@@ -401,6 +403,8 @@ class SVDBackend:
             self._chunk_feed_forward()
         if self.cfg.channels_last and self.device.type == "cuda":
             self.unet.to(memory_format=torch.channels_last)
+        if self.cfg.compile and self.device.type == "cuda":
+            self.unet = torch.compile(self.unet)
 
     @property
     def offloading(self) -> bool:
@@ -472,7 +476,7 @@ class SVDBackend:
     def model_size(self, height: int, width: int) -> tuple[int, int]:
         if self.cfg.height and self.cfg.width:
             return int(self.cfg.height), int(self.cfg.width)
-        return _auto_size(height, width, multiple=max(8, self.vae_scale * 8))
+        return _auto_size(height, width, area=self.cfg.area, multiple=max(8, self.vae_scale * 8))
 
     def latent_shape(self, height: int, width: int) -> tuple[int, int, int]:
         mh, mw = self.model_size(height, width)
