@@ -9,6 +9,7 @@ pseudo views are meaningless, the memory and time are the real model's. Phases, 
                                                                        # peak memory per stage
     python bench/perf/svd_fullsize.py run castle_p30 9 [--offload model] [--set KEY=VALUE ...]
     python bench/perf/svd_fullsize.py runs3        # castle_p30 and herz_jesus_p25 at 3 views, one after the other
+    python bench/perf/svd_fullsize.py run herz_jesus_p25 9 --set pseudo.svd.area=327680   # a variant: fewer pixels
     python bench/perf/svd_fullsize.py summary      # the table of what $OUT holds
 
 A run is the full method with svd at images_4 (--downscale 4), 10,000 iterations, scenes in $SVD_DATA (default
@@ -48,6 +49,7 @@ def parse(argv=None) -> argparse.Namespace:
     st.add_argument("--size", default="576x1024", help="HxW of the model (and of the frames)")
     st.add_argument("--steps", type=int, default=25)
     st.add_argument("--repeats", type=int, default=2, help="trajectories per option (the first warms up)")
+    st.add_argument("--compile", action="store_true", help="pseudo.svd.compile: torch.compile the UNet")
     st.add_argument("--device", default="cuda", help="cuda (the measurement); cpu for a smoke test of a tiny model")
     for name in ("run", "runs3", "runs9"):
         r = sub.add_parser(name, help="the full method with svd" + ("" if name == "run" else f" on both scenes, "
@@ -109,7 +111,8 @@ def stages(args) -> dict:
             torch.cuda.empty_cache()
         sync_reset()
         t0 = time.perf_counter()
-        backend = SVDBackend.from_pretrained(folder, device=dev, cfg=SVDConfig(width=W, height=H, offload=offload))
+        svd = SVDConfig(width=W, height=H, offload=offload, compile=args.compile)
+        backend = SVDBackend.from_pretrained(folder, device=dev, cfg=svd)
         sync_reset()
         row = {"load_s": time.perf_counter() - t0,
                "resident_mb": torch.cuda.memory_allocated(dev) / 2**20 if cuda else 0.0, "trajectories": []}
@@ -127,7 +130,7 @@ def stages(args) -> dict:
         print(json.dumps({offload: summarise_stages(row)}), flush=True)
         del backend
         gc.collect()
-    report = {"frames": n, "size": [H, W], "steps": args.steps,
+    report = {"frames": n, "size": [H, W], "steps": args.steps, "compile": args.compile,
               "device": torch.cuda.get_device_name(dev) if cuda else str(dev),
               "options": results}
     write(f"stages_{'_'.join(args.offloads)}.json", report)
