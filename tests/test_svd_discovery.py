@@ -166,3 +166,17 @@ def test_the_main_command_runs_the_full_method_with_svd_path(tiny_svd, tmp_path)
     assert c["pseudo_trajectories"] == 2 and c["pseudo_frames_per_trajectory"] == 4
     assert c["pseudo_denoise_s"] > 0 and c["pseudo_per_trajectory_s"] > 0
     assert c["pseudo_per_trajectory_s"] * 2 <= c["pseudo_views_s"] + 1e-6
+
+
+def test_the_model_is_loaded_once_for_the_cycles(tiny_svd):
+    """generate_pseudo_views asks backend_from_config at every cycle: the loaded model is reused while the settings
+    and device are the same, and replaced (not kept beside) when they change."""
+    from warpgs.pseudo.views import PseudoConfig, backend_from_config
+
+    cfg = PseudoConfig.load(overrides=[f"svd.path={tiny_svd}", "svd.width=32", "svd.height=32"])
+    first = backend_from_config(cfg, "cpu")
+    assert first.name == "svd" and backend_from_config(cfg, "cpu") is first
+    assert cfg.backend == "auto"  # the caller's settings are not changed by the resolution
+    other = backend_from_config(PseudoConfig.load(overrides=[f"svd.path={tiny_svd}", "svd.width=64",
+                                                             "svd.height=64"]), "cpu")
+    assert other is not first and other.model_size(10, 10) == (64, 64)
