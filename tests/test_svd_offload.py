@@ -113,6 +113,43 @@ def test_loading_prints_nothing_and_attention_is_sdpa(svd_dir, capfd):
     backend = load(svd_dir)
     out, err = capfd.readouterr()
     assert out == "" and err == "", (out, err)
+    # and in a fresh process, where the libraries' say-once advice has not been said yet
+    import subprocess
+    import sys
+
+    code = ("from warpgs.pseudo.backends import SVDBackend, SVDConfig; "
+            f"SVDBackend.from_pretrained({str(svd_dir)!r}, cfg=SVDConfig(width={S}, height={S}))")
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300,
+                       cwd=__import__("pathlib").Path(__file__).resolve().parents[1])
+    assert r.returncode == 0 and r.stdout == "" and r.stderr == "", (r.stdout, r.stderr)
     # torch's scaled_dot_product_attention (flash / memory-efficient kernels on CUDA) in every attention layer
     procs = backend.unet.attn_processors
     assert procs and all(isinstance(p, AttnProcessor2_0) for p in procs.values())
+
+
+def test_half_precision_encoder_retries_an_overflowing_chunk_in_float32(svd_dir, monkeypatch):
+    """The VAE encoder runs in the model's dtype; a chunk whose latents come out non-finite (float16 overflow) is
+    encoded again in float32 and the VAE is back in its dtype after. Reference: the same weights' float32 encode."""
+    backend = load(svd_dir, encode_chunk_size=2)
+    x = torch.rand(N, 3, S, S, generator=torch.Generator().manual_seed(5)) * 2 - 1
+    with torch.no_grad():  # chunk 1 in float32, chunk 2 from float16 input
+        ref = torch.cat([backend.vae.encode(x[:2]).latent_dist.mode(),
+                         backend.vae.encode(x[2:].half().float()).latent_dist.mode()])
+    encode, dtypes = backend.vae.encode, []
+
+    def overflowing(images, *a, **kw):  # float16 overflows on the first chunk only
+        dtypes.append(images.dtype)
+        out = encode(images.float() if images.dtype == torch.float16 else images, *a, **kw)
+        if images.dtype == torch.float16 and len(dtypes) == 1:
+            out.latent_dist.mean[0, 0, 0, 0] = float("inf")
+        return out
+
+    monkeypatch.setattr(backend.vae, "encode", overflowing)
+    # the CPU lacks some float16 kernels: the VAE computes in float32 and says float16, as it would on CUDA
+    monkeypatch.setattr(type(backend.vae), "dtype", property(lambda m: dtypes_state["dtype"]), raising=False)
+    dtypes_state = {"dtype": torch.float16}
+    monkeypatch.setattr(backend, "_vae_dtype", lambda dt: dtypes_state.update(dtype=dt))
+    lat = backend._vae_encode(x)
+    assert dtypes == [torch.float16, torch.float32, torch.float16]  # chunk 1, its float32 retry, chunk 2
+    assert dtypes_state["dtype"] == torch.float16  # back in its dtype
+    assert torch.isfinite(lat).all() and torch.allclose(lat, ref, atol=1e-5)
