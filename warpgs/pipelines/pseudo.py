@@ -10,7 +10,13 @@ import sys
 import torch
 
 from warpgs.data import add_data_args, load_scene_from_args
-from warpgs.pseudo.views import add_pseudo_args, config_from_args, generate_pseudo_views, model_renderer, resolve_backend
+from warpgs.pseudo.views import (
+    add_pseudo_args,
+    config_from_args,
+    generate_pseudo_views,
+    model_renderer,
+    resolve_backend,
+)
 from warpgs.train import CheckpointError, load_trained
 
 

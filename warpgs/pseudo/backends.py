@@ -237,7 +237,7 @@ def svd_missing_parts(folder: Path) -> list[str]:
                 missing.append(part)
         elif not (p / inner).is_file():
             missing.append(f"{part}/")
-        elif part in SVD_WEIGHTED and not any(f.is_file() for ext in ("safetensors", "bin") for f in p.glob(f"*.{ext}")):
+        elif part in SVD_WEIGHTED and not any(f.is_file() for e in ("safetensors", "bin") for f in p.glob(f"*.{e}")):
             missing.append(f"{part}/ weights")
     return missing
 

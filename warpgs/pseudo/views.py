@@ -137,7 +137,7 @@ class PseudoSequence:
     sources: torch.Tensor  # [N, H, W] input index each pixel's guidance was warped from
     tau: torch.Tensor  # [N] guidance stop time per frame
     offset: float = 0.0  # off the path (trajectory.offsets): frames 0 and N-1 are moved off the inputs too
-    valid: torch.Tensor | None = None  # [N] bool: frames the model gave finite values (None: all); others not trained on
+    valid: torch.Tensor | None = None  # [N] bool: frames with finite values (None: all); the others are not trained on
     times: dict = field(default_factory=dict)  # seconds: the sampler's stages and the whole trajectory (trajectory_s)
 
     @property
