@@ -79,6 +79,20 @@ def test_options_give_the_plain_paths_frames(svd_dir, reference, options):
     assert all(v >= 0 for v in out.times.values())
 
 
+def test_channels_last_gives_the_same_frames(svd_dir, reference):
+    """pseudo.svd.channels_last (on CUDA): the UNet's 2-D convolutions in channels-last layout, its 5-D temporal
+    ones left; applied here on the CPU by hand."""
+    from warpgs.pseudo.backends import channels_last_convs
+
+    backend = load(svd_dir)
+    assert channels_last_convs(backend.unet) > 0
+    convs = [m for m in backend.unet.modules() if isinstance(m, torch.nn.Conv2d)]
+    assert all(m.weight.is_contiguous(memory_format=torch.channels_last) for m in convs)
+    assert any(p.dim() == 5 for p in backend.unet.parameters())  # the temporal layers are there, untouched
+    out = trajectory(backend)
+    assert float((out.latents - reference.latents).abs().max()) < 1e-4
+
+
 def test_unet_batch_limit_splits_the_calls(svd_dir, reference):
     """unet_batch_frames = 2 N: two rows (N frames each) a call, two calls a step."""
     backend = load(svd_dir, unet_batch_frames=2 * N)

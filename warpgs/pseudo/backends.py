@@ -376,6 +376,17 @@ class SVDCondition:
 COMPONENTS = ("image_encoder", "vae", "unet")
 
 
+def channels_last_convs(module: torch.nn.Module) -> int:
+    """The 2-D convolutions' weights in channels-last layout (cuDNN's fast path for float16); the temporal
+    layers' 5-D weights stay as they are (``module.to(memory_format=...)`` refuses them). -> how many."""
+    n = 0
+    for m in module.modules():
+        if isinstance(m, torch.nn.Conv2d):
+            m.weight.data = m.weight.data.contiguous(memory_format=torch.channels_last)
+            n += 1
+    return n
+
+
 class SVDBackend:
     """Stable Video Diffusion (img2vid / img2vid-xt) as a sampler backend (see module doc)."""
 
@@ -402,7 +413,7 @@ class SVDBackend:
         if self.cfg.offload == "sequential":
             self._chunk_feed_forward()
         if self.cfg.channels_last and self.device.type == "cuda":
-            self.unet.to(memory_format=torch.channels_last)
+            channels_last_convs(self.unet)
         if self.cfg.compile and self.device.type == "cuda":
             self.unet = torch.compile(self.unet)
 
