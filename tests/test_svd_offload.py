@@ -168,3 +168,13 @@ def test_half_precision_encoder_retries_an_overflowing_chunk_in_float32(svd_dir,
     assert dtypes == [torch.float16, torch.float32, torch.float16]  # chunk 1, its float32 retry, chunk 2
     assert dtypes_state["dtype"] == torch.float16  # back in its dtype
     assert torch.isfinite(lat).all() and torch.allclose(lat, ref, atol=1e-5)
+
+
+@pytest.mark.parametrize("n,size", [(9, 4), (25, 4), (25, 8), (4, 4), (1, 4), (5, 1), (7, 100)])
+def test_even_chunks_cover_the_frames_in_near_equal_parts(n, size):
+    from warpgs.pseudo.backends import even_chunks
+
+    parts = even_chunks(n, size)
+    lengths = [p.stop - p.start for p in parts]
+    assert [i for p in parts for i in range(p.start, p.stop)] == list(range(n))  # in order, each frame once
+    assert len(parts) == -(-n // size) and max(lengths) <= size and max(lengths) - min(lengths) <= 1

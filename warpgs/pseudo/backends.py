@@ -185,8 +185,8 @@ class SVDConfig:
     min_guidance_scale: float = 1.0  # classifier-free guidance ramps from min (frame 0) to max (frame N-1)
     max_guidance_scale: float = 3.0
     encode_chunk_size: int = 4  # frames per VAE encoder call (the guidance frames)
-    decode_chunk_size: int = 4  # frames per VAE decoder call (the temporal decoder sees them together: unlike the
-    #   other memory settings this one changes the frames a little)
+    decode_chunk_size: int = 4  # most frames per VAE decoder call, in chunks of even length (the temporal decoder
+    #   sees a chunk's frames together: unlike the other memory settings this one changes the frames a little)
     vae_upcast: bool = False  # true: the VAE encoder in float32 as diffusers' pipeline runs it (force_upcast);
     #   false: in the model's dtype, a chunk whose latents come out non-finite is redone in float32
     unet_batch_frames: int = 50  # most frames in one UNet call: the classifier-free-guidance halves and the
@@ -376,6 +376,14 @@ class SVDCondition:
 COMPONENTS = ("image_encoder", "vae", "unet")
 
 
+def even_chunks(n: int, size: int) -> list[slice]:
+    """``n`` items in ceil(n / size) chunks of at most ``size`` whose lengths differ by one at most (9 frames in
+    chunks of 4: 3, 3, 3, not 4, 4, 1: the temporal decoder sees no lone frame)."""
+    k = max(1, -(-n // max(1, size)))
+    edges = [round(i * n / k) for i in range(k + 1)]
+    return [slice(a, b) for a, b in zip(edges, edges[1:]) if b > a]
+
+
 def channels_last_convs(module: torch.nn.Module) -> int:
     """The 2-D convolutions' weights in channels-last layout (cuDNN's fast path for float16); the temporal
     layers' 5-D weights stay as they are (``module.to(memory_format=...)`` refuses them). -> how many."""
@@ -522,8 +530,8 @@ class SVDBackend:
         half = self.vae.dtype != torch.float32
         out = []
         with torch.no_grad():
-            for i in range(0, len(images), self.encode_chunk):
-                x = images[i:i + self.encode_chunk].to(self.device)
+            for part in even_chunks(len(images), self.encode_chunk):
+                x = images[part].to(self.device)
                 lat = None
                 if not (half and self.cfg.vae_upcast):
                     lat = self.vae.encode(x.to(self.vae.dtype)).latent_dist.mode().float()
@@ -563,8 +571,8 @@ class SVDBackend:
         z = latents / float(self.vae.config.scaling_factor)
         out = []
         with torch.no_grad():
-            for i in range(0, len(z), self.decode_chunk):
-                zi = z[i:i + self.decode_chunk].to(self.device, self.vae.dtype)
+            for part in even_chunks(len(z), self.decode_chunk):
+                zi = z[part].to(self.device, self.vae.dtype)
                 xi = (self.vae.decode(zi, num_frames=len(zi)).sample.float() / 2.0 + 0.5).clamp(0.0, 1.0)
                 out.append(self._resize(xi, size).clamp(0.0, 1.0))  # resized per chunk: one full-size copy less
         return _to_hwc(torch.cat(out)).contiguous()
