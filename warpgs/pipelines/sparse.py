@@ -10,6 +10,7 @@ Examples:
     python -m warpgs.pipelines.sparse --data dl3dv --views 9 --method full --device cuda
     python -m warpgs.pipelines.sparse --data llff --method compare --cycles 2
     python -m warpgs.pipelines.sparse --method full --ablation no_densify --ablation l1_pseudo
+    python -m warpgs.pipelines.sparse --data dl3dv --method full --svd-path /path/to/svd   # Stable Video Diffusion
     python -m warpgs.pipelines.sparse --data llff --views 3 --device cuda
     python -m warpgs.pipelines.sparse --data blender --iterations 10000 --out outputs/lego
     python -m warpgs.pipelines.sparse --data /path/to/scene --set strategy.max_gaussians=200000
