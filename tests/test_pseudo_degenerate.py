@@ -1,7 +1,8 @@
 """Pseudo views a video model can produce must not break the full method (issue 60): black, constant, noise,
-NaN frames, or a copy of the input. A test backend returns each kind; the full method runs its cycle on the
-embedded synthetic scene (CPU, few iterations) through pseudo-view generation, densification from them and
-training on them: no exception, a finite model, and NaN frames dropped with one warning line."""
+NaN frames, or a copy of the input. A test backend (the weight-free one or the tiny random SVD, wrapped) returns
+each kind; the full method runs its cycle on the embedded synthetic scene (CPU, few iterations) through
+pseudo-view generation, densification from them and training on them: no exception, a finite model, and NaN
+frames dropped with one warning line."""
 
 from __future__ import annotations
 
@@ -9,26 +10,29 @@ import pytest
 import torch
 
 from warpgs.pseudo.backends import GaussianVideoBackend
+from warpgs.pseudo.sampler import condition_passes
 
 KINDS = ("black", "constant", "noise", "nan", "copy")
 
 
-class DegenerateBackend(GaussianVideoBackend):
-    """The weight-free backend whose decoded frames are replaced by one degenerate kind."""
+class DegenerateBackend:
+    """Wraps a backend (the weight-free one, or the tiny random SVD) and replaces its decoded frames by one
+    degenerate kind; everything else is the wrapped backend's."""
 
-    def __init__(self, kind: str):
-        super().__init__()
-        self.kind = kind
+    def __init__(self, inner, kind: str):
+        self.inner, self.kind = inner, kind
         self.start = None
         self.gen = torch.Generator().manual_seed(0)
 
-    def condition(self, image, n_frames, prior=None, generator=None):
-        if self.start is None:  # the forward pass is conditioned first, on its start input
-            self.start = image.clone()
-        return super().condition(image, n_frames, prior, generator)
+    def __getattr__(self, name):
+        return getattr(self.inner, name)
+
+    def condition_batch(self, images, n_frames, priors=None, generator=None):
+        self.start = images[0].clone()  # the forward pass's start input
+        return condition_passes(self.inner, images, n_frames, priors, generator)
 
     def decode(self, latents, size):
-        frames = super().decode(latents, size)
+        frames = self.inner.decode(latents, size)
         if self.kind == "black":
             return torch.zeros_like(frames)
         if self.kind == "constant":
@@ -40,12 +44,29 @@ class DegenerateBackend(GaussianVideoBackend):
             frames[1, 3:7, 2:5] = float("nan")  # one interior frame has a few NaN pixels, another is all NaN
             frames[-2] = float("nan")
             return frames
-        start, self.start = self.start, None  # every frame the start input
-        return start.to(frames).expand_as(frames).contiguous()
+        return self.start.to(frames).expand_as(frames).contiguous()  # every frame the start input
 
 
+@pytest.fixture(scope="module")
+def tiny_svd(tmp_path_factory):
+    pytest.importorskip("diffusers")
+    pytest.importorskip("transformers")
+    from test_svd_tiny import build_tiny_svd
+
+    return build_tiny_svd(tmp_path_factory.mktemp("svd") / "tiny")
+
+
+def make_inner(name: str, request):
+    if name == "default":
+        return GaussianVideoBackend()
+    from warpgs.pseudo.backends import SVDBackend, SVDConfig
+
+    return SVDBackend.from_pretrained(request.getfixturevalue("tiny_svd"), cfg=SVDConfig(width=32, height=32))
+
+
+@pytest.mark.parametrize("inner", ["default", "svd"])
 @pytest.mark.parametrize("kind", KINDS)
-def test_full_method_survives_degenerate_pseudo_views(kind, monkeypatch, capfd):
+def test_full_method_survives_degenerate_pseudo_views(kind, inner, request, monkeypatch, capfd):
     import warpgs.console as console
     import warpgs.pseudo.views as views
     from warpgs.config import build_config
@@ -53,7 +74,7 @@ def test_full_method_survives_degenerate_pseudo_views(kind, monkeypatch, capfd):
     from warpgs.pipelines.full import FullMethod
     from warpgs.train import Trainer
 
-    backend = DegenerateBackend(kind)
+    backend = DegenerateBackend(make_inner(inner, request), kind)
     monkeypatch.setattr(views, "backend_from_config", lambda cfg, device="cpu": backend)
     monkeypatch.setattr(console, "_said", set())  # warn_once's memory: this run's lines are said afresh
     n_frames = 5
