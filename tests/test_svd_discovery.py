@@ -180,3 +180,20 @@ def test_the_model_is_loaded_once_for_the_cycles(tiny_svd):
     other = backend_from_config(PseudoConfig.load(overrides=[f"svd.path={tiny_svd}", "svd.width=64",
                                                              "svd.height=64"]), "cpu")
     assert other is not first and other.model_size(10, 10) == (64, 64)
+
+
+def test_one_line_says_which_prior_and_what_the_weight_free_one_costs_on_real_data(monkeypatch, capsys):
+    import warpgs.console as console
+    from warpgs.pseudo.views import PseudoConfig, resolve_backend
+
+    monkeypatch.setattr(console, "_said", set())
+    cfg = PseudoConfig()
+    assert resolve_backend(cfg, real_data=False) == "default" and cfg.backend == "default"
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "weight-free prior" in err[0] and "--svd-path" in err[0]
+    cfg = PseudoConfig()
+    resolve_backend(cfg, real_data=True)  # on a real capture: what that costs, with the measured figure, once
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "-0.09 dB" in err[0] and "2.5x the Gaussians" in err[0]
+    resolve_backend(PseudoConfig(), real_data=True)
+    assert capsys.readouterr().err == ""
