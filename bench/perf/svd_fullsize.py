@@ -9,6 +9,7 @@ pseudo views are meaningless, the memory and time are the real model's. Phases, 
                                                                        # peak memory per stage
     python bench/perf/svd_fullsize.py run castle_p30 9 [--offload model] [--set KEY=VALUE ...]
     python bench/perf/svd_fullsize.py runs3        # castle_p30 and herz_jesus_p25 at 3 views, one after the other
+    python bench/perf/svd_fullsize.py runs9        # the same at 9 views (over 10 minutes today: use run per scene)
     python bench/perf/svd_fullsize.py run herz_jesus_p25 9 --set pseudo.svd.area=327680   # a variant: fewer pixels
     python bench/perf/svd_fullsize.py summary      # the table of what $OUT holds
 
