@@ -416,7 +416,7 @@ def test_pseudo_config_file_and_overrides(tmp_path):
 
     cfg = PseudoConfig.load()
     assert (cfg.uncertainty.s1, cfg.uncertainty.s2, cfg.sampler.delta) == (100.0, 0.25, 0.5)
-    assert cfg.trajectory.n_frames == 25 and cfg.backend == "default"
+    assert cfg.trajectory.n_frames == 25 and cfg.backend == "auto"
     cfg = PseudoConfig.load(overrides=["sampler.steps=7", "svd.path=/x", "uncertainty.reference_width=null"])
     assert cfg.sampler.steps == 7 and cfg.svd.path == "/x" and cfg.uncertainty.reference_width is None
     with pytest.raises(ValueError, match="valid"):

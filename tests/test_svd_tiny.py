@@ -77,6 +77,9 @@ def test_hf_layout_and_loading(svd_dir, backend):
         assert (svd_dir / sub).exists(), sub
     assert backend.dtype == torch.float32  # fp32 on the CPU (fp16 is for CUDA)
     assert backend.latent_shape(S, S) == (4, S // 2, S // 2)  # two VAE blocks: downsampling by 2
+    # without width and height: the frames' aspect at about pseudo.svd.area pixels, in multiples of 8 x 2
+    sized = SVDBackend(backend.unet, backend.vae, backend.image_encoder, backend.scheduler, SVDConfig(area=64 * 64))
+    assert sized.model_size(60, 120) == (48, 96)  # 60 x 120 x (4096 / 7200): 45.3 x 90.5, rounded to 16s
     # the scheduler's sigmas are EDM's Karras schedule between SVD's sigma_min and sigma_max
     assert torch.allclose(backend.sigmas(7, "cpu"), karras_sigmas(7, 0.002, 700.0), rtol=1e-5)
     assert backend.init_noise_sigma(backend.sigmas(7, "cpu")) == pytest.approx((700.0**2 + 1) ** 0.5, rel=1e-5)
@@ -84,9 +87,12 @@ def test_hf_layout_and_loading(svd_dir, backend):
 
 def test_missing_weights_error_names_the_download(tmp_path, monkeypatch):
     monkeypatch.delenv(SVD_ENV, raising=False)
+    monkeypatch.setenv("HF_HUB_CACHE", str(tmp_path / "empty_cache"))
     with pytest.raises(SVDWeightsNotFound) as e:
         SVDBackend.from_pretrained(None)
-    assert SVD_REPO in str(e.value) and SVD_ENV in str(e.value) and "--svd-path" in str(e.value)
+    msg = str(e.value)
+    assert SVD_REPO in msg and SVD_ENV in msg and "--svd-path" in msg and "empty_cache" in msg
+    assert "\n" not in msg  # one line under error:
     (tmp_path / "partial" / "unet").mkdir(parents=True)
     with pytest.raises(SVDWeightsNotFound) as e:
         SVDBackend.from_pretrained(tmp_path / "partial")
@@ -112,13 +118,18 @@ def test_matches_diffusers_pipeline(svd_dir, backend):
     assert torch.allclose(out.frames, ref, atol=1e-4), float((out.frames - ref).abs().max())
 
 
-def test_modulated_bidirectional_sampler(backend):
+def guided_inputs():
+    """(start, end, guidance, U): two random images, the guidance blending them, its right half unreliable."""
     start = torch.from_numpy(_image(3)).float() / 255.0
     end = torch.from_numpy(_image(4)).float() / 255.0
     w = torch.linspace(0, 1, N).view(N, 1, 1, 1)
-    guidance = (1 - w) * start + w * end
     U = torch.zeros(N, S, S)
     U[:, :, S // 2:] = 0.9  # right half unreliable: no fusion there
+    return start, end, (1 - w) * start + w * end, U
+
+
+def test_modulated_bidirectional_sampler(backend):
+    start, end, guidance, U = guided_inputs()
     cfg = SamplerConfig(steps=4, bidirectional=True, guided=True, b=-1.0, k=0.0)  # guidance on at every step
     t = time.perf_counter()
     out = sample_video(backend, start, end, guidance=guidance, uncertainty=U, cfg=cfg,

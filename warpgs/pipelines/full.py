@@ -202,7 +202,7 @@ class FullMethod(Method):
 
     def update_pseudo_views(self, cycle: int) -> dict:
         """Generates this cycle's pseudo views and densifies from them; returns stage times (s)."""
-        from warpgs.pseudo.views import generate_pseudo_views, model_renderer, save_sequence
+        from warpgs.pseudo.views import generate_pseudo_views, model_renderer, pseudo_times, save_sequence
 
         tr = self.trainer
         times = {}
@@ -210,6 +210,7 @@ class FullMethod(Method):
         pcfg = self.pseudo_config()
         seqs = generate_pseudo_views(model_renderer(tr.model, tr.background_for), tr.train_cams, pcfg, device=tr.device)
         times["pseudo_views_s"] = time.perf_counter() - t0
+        times.update(pseudo_times(seqs))  # the video model's stages, per cycle and per trajectory
         cams, reliable = [], {}
         limit = {"reliable": pcfg.sampler.delta, "all": math.inf}.get(self.settings.pseudo_mask, 1.0)
         for seq in seqs:

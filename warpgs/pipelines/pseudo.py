@@ -10,7 +10,13 @@ import sys
 import torch
 
 from warpgs.data import add_data_args, load_scene_from_args
-from warpgs.pseudo.views import add_pseudo_args, config_from_args, generate_pseudo_views, model_renderer
+from warpgs.pseudo.views import (
+    add_pseudo_args,
+    config_from_args,
+    generate_pseudo_views,
+    model_renderer,
+    resolve_backend,
+)
 from warpgs.train import CheckpointError, load_trained
 
 
@@ -27,6 +33,7 @@ def main(argv=None) -> int:
     device = ("cuda" if torch.cuda.is_available() else "cpu") if args.device == "auto" else args.device
     try:
         cfg = config_from_args(args)
+        resolve_backend(cfg)  # the video model's weights (auto: found or not, said in one line), before anything loads
         scene = load_scene_from_args(args)
         model = load_trained(args.model, device=device, drop_invalid=args.drop_invalid)
     except (ValueError, OSError, CheckpointError) as e:  # ConfigError, SceneError, a refused PLY or checkpoint

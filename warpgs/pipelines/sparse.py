@@ -10,6 +10,7 @@ Examples:
     python -m warpgs.pipelines.sparse --data dl3dv --views 9 --method full --device cuda
     python -m warpgs.pipelines.sparse --data llff --method compare --cycles 2
     python -m warpgs.pipelines.sparse --method full --ablation no_densify --ablation l1_pseudo
+    python -m warpgs.pipelines.sparse --data dl3dv --method full --svd-path /path/to/svd   # Stable Video Diffusion
     python -m warpgs.pipelines.sparse --data llff --views 3 --device cuda
     python -m warpgs.pipelines.sparse --data blender --iterations 10000 --out outputs/lego
     python -m warpgs.pipelines.sparse --data /path/to/scene --set strategy.max_gaussians=200000
@@ -75,6 +76,9 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--drop-invalid", action="store_true",
                    help="model.init=ply: drop points with non-finite values (one warning) instead of refusing the file")
     g.add_argument("--no-progress", action="store_true", help="no progress bar")
+    from warpgs.pseudo.views import add_backend_args
+
+    add_backend_args(ap.add_argument_group("pseudo views (the full method)"))
     g.add_argument("--jobs", type=int, default=None, metavar="N",
                    help="compare: 2 trains baseline and full method at once (default on a multi-core CPU), 1 in turn")
     return ap
@@ -121,6 +125,10 @@ def flag_layers(args) -> list[tuple[str, dict]]:
         if name not in ABLATIONS:
             raise ConfigError(f"--ablation {name!r}: available ablations are {', '.join(ABLATIONS)}")
         layers.append((f"--ablation {name}", ABLATIONS[name]))
+    if getattr(args, "pseudo_backend", None):
+        layers.append((f"--pseudo-backend {args.pseudo_backend}", {"pseudo": {"backend": args.pseudo_backend}}))
+    if getattr(args, "svd_path", None):
+        layers.append((f"--svd-path {args.svd_path}", {"pseudo": {"svd": {"path": args.svd_path}}}))
     if args.out is not None:
         layers.append(("--out", {"out": args.out}))
     return layers
@@ -351,6 +359,7 @@ def main(argv=None) -> int:
     """The command line. Bad input of any kind (config, scene, output folder, checkpoint) ends with one line,
     ``error: ...``, and exit code 2, before any training; Ctrl-C with 130."""
     from warpgs.data.scene import SceneError
+    from warpgs.pseudo.backends import SVDWeightsNotFound
     from warpgs.runfolder import RunFolderError, open_run_folder
     from warpgs.train import CheckpointError, prepare_geometry
 
@@ -361,6 +370,10 @@ def main(argv=None) -> int:
         try:
             cfg, resume_dir = make_config(args)
             resume = resume_dir is not None
+            if cfg.method != "baseline":  # the video model's weights, before the run folder is made
+                from warpgs.pseudo.views import resolve_backend
+
+                resolve_backend(cfg.pseudo, real_data=cfg.data.name != "synthetic")
             chosen = args.out is not None or resume or cfg.out != DEFAULT_OUT
             if chosen:  # the folder is checked and locked before the scene loads
                 folder = open_run_folder(cfg.out, resume=resume, overwrite=args.overwrite)
@@ -371,7 +384,7 @@ def main(argv=None) -> int:
             out = Path(cfg.out)
             print(f"warpgs: {scene.summary()}", file=sys.stderr)
             prepare_geometry(cfg, scene)  # once for both methods of a compare run
-        except (ConfigError, SceneError, RunFolderError, CheckpointError, ValueError) as e:
+        except (ConfigError, SceneError, RunFolderError, CheckpointError, ValueError, SVDWeightsNotFound) as e:
             print(f"error: {e}", file=sys.stderr)
             return 2
         if cfg.method != "compare":

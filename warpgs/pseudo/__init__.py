@@ -20,9 +20,10 @@ Pieces, each usable alone:
 - ``sampler``: ``sample_video``, EDM Euler steps with per-pixel fusion of x0_hat and the encoded guidance
   (gamma = 1/(U + eps) where U < delta, until the frame's tau = k mean(U) + b), forward and reversed
   backward passes blended with beta_i = (N - 1 - i)/(N - 1). Backend-agnostic.
-- ``backends``: ``svd`` (Stable Video Diffusion img2vid(-xt) through diffusers, from a local folder:
-  download stabilityai/stable-video-diffusion-img2vid-xt from Hugging Face, pass ``--svd-path`` or set
-  ``WARPGS_SVD_PATH``) and ``default``, which needs no weights.
+- ``backends``: ``svd`` (Stable Video Diffusion img2vid(-xt) through diffusers: ``huggingface-cli download
+  stabilityai/stable-video-diffusion-img2vid-xt`` puts it where it is found without flags, or pass ``--svd-path``
+  or set ``WARPGS_SVD_PATH``; ``pseudo.svd.offload`` trades time for GPU memory) and ``default``, which needs no
+  weights. ``auto`` (the default) takes svd when its weights are found, else default, and says which.
 
 What the default backend is, plainly: an exact MMSE denoiser for a Gaussian video prior centred on the
 3D-GS renders (a residual that is smooth in space and time, plus per-pixel detail). Run through the
@@ -32,7 +33,16 @@ It cannot invent what neither the inputs nor the render show: the paper's gains 
 video prior (SVD), which completes such regions with plausible content.
 """
 
-from .backends import DefaultBackendConfig, GaussianVideoBackend, SVDBackend, SVDConfig, SVDWeightsNotFound, make_backend
+from .backends import (
+    DefaultBackendConfig,
+    GaussianVideoBackend,
+    SVDBackend,
+    SVDConfig,
+    SVDWeightsNotFound,
+    choose_backend,
+    find_svd_weights,
+    make_backend,
+)
 from .guidance import PosedViews, UncertaintyConfig, WarpResult, guidance_and_uncertainty, uncertainty_map, warp_guidance
 from .sampler import SampleResult, SamplerConfig, VideoBackend, sample_video
 from .trajectory import (
@@ -70,6 +80,8 @@ __all__ = [
     "UncertaintyConfig",
     "VideoBackend",
     "WarpResult",
+    "choose_backend",
+    "find_svd_weights",
     "generate_pseudo_views",
     "guidance_and_uncertainty",
     "guidance_sources",

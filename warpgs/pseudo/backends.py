@@ -26,6 +26,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import math
 import os
 import warnings
@@ -169,50 +170,177 @@ class GaussianVideoBackend:
 
 
 # ----------------------------------------------------------------------------------------------
-# Stable Video Diffusion
+# Stable Video Diffusion: where the weights are
 
 
 @dataclass
 class SVDConfig:
-    path: str | None = None  # local folder with the HF layout; None: $WARPGS_SVD_PATH
-    width: int | None = None  # model resolution; None: the frames' aspect at about 1024 x 576, multiples of 64
+    path: str | None = None  # local folder with the HF layout; None: $WARPGS_SVD_PATH, then the Hugging Face cache
+    width: int | None = None  # model resolution; None: the frames' aspect at about ``area`` pixels, multiples of 64
     height: int | None = None
+    area: int = 576 * 1024  # the model's pixels when width and height are not given (SVD-xt's 1024 x 576)
     fps: int = 7
     motion_bucket_id: int = 127
     noise_aug_strength: float = 0.02
     min_guidance_scale: float = 1.0  # classifier-free guidance ramps from min (frame 0) to max (frame N-1)
     max_guidance_scale: float = 3.0
-    decode_chunk_size: int = 8
+    encode_chunk_size: int = 4  # frames per VAE encoder call (the guidance frames)
+    decode_chunk_size: int = 4  # most frames per VAE decoder call, in chunks of even length (the temporal decoder
+    #   sees a chunk's frames together: unlike the other memory settings this one changes the frames a little)
+    vae_upcast: bool = False  # true: the VAE encoder in float32 as diffusers' pipeline runs it (force_upcast);
+    #   false: in the model's dtype, a chunk whose latents come out non-finite is redone in float32
+    unet_batch_frames: int = 50  # most frames in one UNet call: the classifier-free-guidance halves and the
+    #   sampler's forward and backward passes go into one call while they fit (2 x 25 frames: one pass a call)
+    offload: str = "none"  # none: all on the device | model: each component (image encoder, VAE, UNet) on the
+    #   device only for its stage | sequential: as model, plus one UNet half a call, the spatial blocks' feed-forward
+    #   one frame at a time, VAE encoder chunks of 1
+    channels_last: bool = True  # the UNet's convolutions in channels-last layout on CUDA
+    compile: bool = False  # torch.compile the UNet on CUDA (a first call that compiles; for measurements)
     dtype: str = "auto"  # auto: float16 on CUDA, float32 on the CPU
+
+    LIMITS = {"encode_chunk_size": ">= 1", "decode_chunk_size": ">= 1", "unet_batch_frames": ">= 1",
+              "offload": "{none, model, sequential}", "dtype": "{auto, float16, bfloat16, float32}",
+              "noise_aug_strength": ">= 0", "area": ">= 4096"}
 
 
 class SVDWeightsNotFound(FileNotFoundError):
-    pass
+    """The svd backend was asked for and its weights are absent or incomplete (one line: what and how to get them)."""
 
 
-def svd_missing_message(path: str | None, problem: str) -> str:
-    where = path or "<folder>"
-    return (
-        f"Stable Video Diffusion weights: {problem}.\n"
-        f"Download {SVD_REPO} from Hugging Face into a local folder, e.g.\n"
-        f"    huggingface-cli download {SVD_REPO} --local-dir {where}\n"
-        f"(it must hold model_index.json and the folders unet/, vae/, image_encoder/, scheduler/, "
-        f"feature_extractor/), then pass --svd-path {where} or set {SVD_ENV}={where}. "
-        f"The weight-free default backend (--pseudo-backend default) needs nothing."
-    )
+SVD_HF_FOLDER = "models--" + SVD_REPO.replace("/", "--")
+# what StableVideoDiffusionPipeline loads: (part, a file that must be in it; None: the part is a file)
+SVD_PARTS = (("model_index.json", None), ("unet", "config.json"), ("vae", "config.json"),
+             ("image_encoder", "config.json"), ("scheduler", "scheduler_config.json"),
+             ("feature_extractor", "preprocessor_config.json"))
+SVD_WEIGHTED = ("unet", "vae", "image_encoder")
+
+
+def hf_hub_cache() -> Path:
+    """Where ``huggingface-cli download`` puts models: $HF_HUB_CACHE, else $HF_HOME/hub, else
+    $XDG_CACHE_HOME/huggingface/hub, else ~/.cache/huggingface/hub."""
+    if os.environ.get("HF_HUB_CACHE"):
+        return Path(os.environ["HF_HUB_CACHE"]).expanduser()
+    if os.environ.get("HF_HOME"):
+        return Path(os.environ["HF_HOME"]).expanduser() / "hub"
+    base = os.environ.get("XDG_CACHE_HOME") or "~/.cache"
+    return Path(base).expanduser() / "huggingface" / "hub"
+
+
+def svd_missing_parts(folder: Path) -> list[str]:
+    """What of the pipeline's files ``folder`` lacks (empty: complete). A weights file that is a broken link
+    (an interrupted download into the cache) counts as missing."""
+    missing = []
+    for part, inner in SVD_PARTS:
+        p = folder / part
+        if inner is None:
+            if not p.is_file():
+                missing.append(part)
+        elif not (p / inner).is_file():
+            missing.append(f"{part}/")
+        elif part in SVD_WEIGHTED and not any(f.is_file() for e in ("safetensors", "bin") for f in p.glob(f"*.{e}")):
+            missing.append(f"{part}/ weights")
+    return missing
+
+
+def hf_snapshots(cache: Path | None = None) -> list[Path]:
+    """The cache's snapshots of SVD img2vid-xt, the one ``refs/main`` names first, then the newest first."""
+    root = (cache or hf_hub_cache()) / SVD_HF_FOLDER
+    snaps = [p for p in (root / "snapshots").glob("*") if p.is_dir()]
+    ref = root / "refs" / "main"
+    main = ref.read_text().strip() if ref.is_file() else None
+    return sorted(snaps, key=lambda p: (p.name != main, -p.stat().st_mtime))
+
+
+def find_svd_weights(path: str | os.PathLike | None = None) -> tuple[Path | None, str, str | None]:
+    """Looks for the weights -> (folder or None, where it looked or found them, what is wrong or None).
+
+    ``path`` (--svd-path, ``pseudo.svd.path``) when given, else $WARPGS_SVD_PATH when set: that folder decides.
+    Else the Hugging Face cache's snapshots of img2vid-xt: the first complete one."""
+    for given, where in ((path, "--svd-path"), (os.environ.get(SVD_ENV), f"${SVD_ENV}")):
+        if given:
+            p = Path(given).expanduser()
+            if not p.is_dir():
+                return None, where, f"{p} ({where}) is not a folder"
+            missing = svd_missing_parts(p)
+            return (p, where, None) if not missing else (None, where, f"{p} ({where}) lacks {', '.join(missing)}")
+    cache = hf_hub_cache()
+    snaps = hf_snapshots(cache)
+    problems = []
+    for s in snaps:
+        missing = svd_missing_parts(s)
+        if not missing:
+            return s, "the Hugging Face cache", None
+        problems.append(f"{s} lacks {', '.join(missing)}")
+    if problems:
+        return None, "the Hugging Face cache", problems[0]
+    return None, "", (f"none found (--svd-path, ${SVD_ENV}, or the Hugging Face cache "
+                      f"{cache / SVD_HF_FOLDER / 'snapshots'})")
+
+
+def svd_missing_message(problem: str) -> str:
+    """One line: what is wrong and how to get the weights, naming flags the commands accept."""
+    return (f"Stable Video Diffusion weights: {problem}. Get them with `huggingface-cli download {SVD_REPO}` "
+            f"(the Hugging Face cache is searched without flags) or download them into a folder and pass "
+            f"--svd-path DIR (or set {SVD_ENV}=DIR); --pseudo-backend default needs no weights")
 
 
 def resolve_svd_path(path: str | os.PathLike | None = None) -> Path:
-    p = path if path is not None else os.environ.get(SVD_ENV)
-    if not p:
-        raise SVDWeightsNotFound(svd_missing_message(None, f"no folder given (--svd-path or ${SVD_ENV})"))
-    p = Path(p).expanduser()
-    if not p.is_dir():
-        raise SVDWeightsNotFound(svd_missing_message(str(p), f"{p} is not a folder"))
-    missing = [s for s in ("model_index.json", "unet", "vae", "image_encoder", "scheduler") if not (p / s).exists()]
-    if missing:
-        raise SVDWeightsNotFound(svd_missing_message(str(p), f"{p} lacks {', '.join(missing)}"))
-    return p
+    """The weights' folder (``find_svd_weights``), or ``SVDWeightsNotFound`` saying what is missing."""
+    found, _, problem = find_svd_weights(path)
+    if found is None:
+        raise SVDWeightsNotFound(svd_missing_message(problem))
+    return found
+
+
+BACKENDS = ("auto", "default", "svd")
+# the weight-free full method against the baseline on real captures (issue 60's measurement): the one line that
+# says so when it runs there
+WEIGHT_FREE_NOTE = ("warpgs: without a learned video prior the full method's pseudo views come from the weight-free "
+                    "prior: on six held-out real captures (3-9 views, H200, medians of seeds 0-2) its mean gain over "
+                    "the baseline was -0.09 dB, at more time and up to 2.5x the Gaussians; with Stable Video "
+                    "Diffusion weights (--svd-path DIR) it runs the paper's prior")
+
+
+def choose_backend(name: str, svd_path=None) -> tuple[str, Path | None, str]:
+    """-> (``default`` or ``svd``, the weights' folder or None, one line saying which and why; empty for an
+    explicit ``default``). ``auto`` takes svd when its weights are found, else the weight-free prior;
+    ``svd`` without them, or a folder given (--svd-path, $WARPGS_SVD_PATH) that is not usable, raises
+    ``SVDWeightsNotFound``."""
+    if name not in BACKENDS:
+        raise ValueError(f"pseudo.backend must be one of {', '.join(BACKENDS)}, got {name!r}")
+    if name == "default":
+        return "default", None, ""
+    found, where, problem = find_svd_weights(svd_path)
+    if found is not None:
+        return "svd", found, f"warpgs: pseudo views from Stable Video Diffusion in {found} (from {where})"
+    if name == "svd" or where in ("--svd-path", f"${SVD_ENV}"):  # a folder named but unusable is an error
+        raise SVDWeightsNotFound(svd_missing_message(problem))
+    return "default", None, (f"warpgs: pseudo views from the weight-free prior (Stable Video Diffusion weights: "
+                             f"{problem}; --svd-path DIR uses them)")
+
+
+@contextlib.contextmanager
+def quiet_loading():
+    """diffusers' and transformers' loaders say nothing but errors inside: their loggers at error level,
+    their progress bars off, their warnings (accelerate / torchvision advice) ignored; restored after."""
+    from diffusers.utils import logging as dlog
+    from transformers.utils import logging as tlog
+
+    levels = dlog.get_verbosity(), tlog.get_verbosity()
+    bars = dlog.is_progress_bar_enabled(), tlog.is_progress_bar_enabled()
+    dlog.set_verbosity_error()
+    tlog.set_verbosity_error()
+    dlog.disable_progress_bar()
+    tlog.disable_progress_bar()
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            yield
+    finally:
+        dlog.set_verbosity(levels[0])
+        tlog.set_verbosity(levels[1])
+        for mod, on in ((dlog, bars[0]), (tlog, bars[1])):
+            (mod.enable_progress_bar if on else mod.disable_progress_bar)()
 
 
 def _import_diffusers():
@@ -233,12 +361,38 @@ def _auto_size(height: int, width: int, area: int = 576 * 1024, multiple: int = 
             max(multiple, int(round(width * s / multiple)) * multiple))
 
 
+# ----------------------------------------------------------------------------------------------
+# Stable Video Diffusion: the backend
+
+
 @dataclass
 class SVDCondition:
-    embeddings: torch.Tensor  # [B, 1, D] CLIP image embedding (B = 2 with classifier-free guidance)
+    embeddings: torch.Tensor  # [B, 1, D] CLIP image embedding (B = 2 with classifier-free guidance: zero, image)
     image_latents: torch.Tensor  # [B, N, C, h, w] conditioning latents (not scaled), per frame
     time_ids: torch.Tensor  # [B, 3] (fps - 1, motion bucket, noise augmentation)
     guidance_scale: torch.Tensor | None  # [1, N, 1, 1, 1] or None without CFG
+
+
+COMPONENTS = ("image_encoder", "vae", "unet")
+
+
+def even_chunks(n: int, size: int) -> list[slice]:
+    """``n`` items in ceil(n / size) chunks of at most ``size`` whose lengths differ by one at most (9 frames in
+    chunks of 4: 3, 3, 3, not 4, 4, 1: the temporal decoder sees no lone frame)."""
+    k = max(1, -(-n // max(1, size)))
+    edges = [round(i * n / k) for i in range(k + 1)]
+    return [slice(a, b) for a, b in zip(edges, edges[1:]) if b > a]
+
+
+def channels_last_convs(module: torch.nn.Module) -> int:
+    """The 2-D convolutions' weights in channels-last layout (cuDNN's fast path for float16); the temporal
+    layers' 5-D weights stay as they are (``module.to(memory_format=...)`` refuses them). -> how many."""
+    n = 0
+    for m in module.modules():
+        if isinstance(m, torch.nn.Conv2d):
+            m.weight.data = m.weight.data.contiguous(memory_format=torch.channels_last)
+            n += 1
+    return n
 
 
 class SVDBackend:
@@ -248,23 +402,40 @@ class SVDBackend:
     default_noise_scale = 1.0
 
     def __init__(self, unet, vae, image_encoder, scheduler, cfg: SVDConfig | None = None, image_mean=CLIP_MEAN,
-                 image_std=CLIP_STD):
+                 image_std=CLIP_STD, device=None):
         self.unet, self.vae, self.image_encoder, self.scheduler = unet, vae, image_encoder, scheduler
         self.cfg = cfg or SVDConfig()
-        self.device = unet.device
+        if self.cfg.offload not in ("none", "model", "sequential"):
+            raise ValueError(f"pseudo.svd.offload must be none, model or sequential, got {self.cfg.offload!r}")
+        self.device = torch.device(device) if device is not None else unet.device
         self.dtype = unet.dtype
         self.vae_scale = 2 ** (len(vae.config.block_out_channels) - 1)
         self.clip_size = int(image_encoder.config.image_size)
         self.image_mean = torch.tensor(image_mean, dtype=torch.float32).view(1, 3, 1, 1)
         self.image_std = torch.tensor(image_std, dtype=torch.float32).view(1, 3, 1, 1)
-        self._size: tuple[int, int] | None = None
+        self.active: set[str] = set(COMPONENTS)  # the components on self.device (offload: one at a time)
+        for m in (unet, vae, image_encoder):  # offload: all on the CPU until their stage
+            m.to("cpu" if self.offloading else self.device)
+        if self.offloading:
+            self.active = set()
+        if self.cfg.offload == "sequential":
+            self._chunk_feed_forward()
+        if self.cfg.channels_last and self.device.type == "cuda":
+            channels_last_convs(self.unet)
+        if self.cfg.compile and self.device.type == "cuda":
+            self.unet = torch.compile(self.unet)
+
+    @property
+    def offloading(self) -> bool:
+        return self.cfg.offload in ("model", "sequential")
 
     # -- loading ---------------------------------------------------------------------------------
 
     @classmethod
     def from_pretrained(cls, path=None, device="cpu", cfg: SVDConfig | None = None) -> "SVDBackend":
         """Loads the pipeline's components from a local folder (``path``, else ``cfg.path``, else
-        ``$WARPGS_SVD_PATH``); a clear error names what to download when they are absent."""
+        $WARPGS_SVD_PATH, else the Hugging Face cache), quietly; a clear error names what to download
+        when they are absent or incomplete."""
         cfg = cfg or SVDConfig()
         root = resolve_svd_path(path if path is not None else cfg.path)
         diffusers = _import_diffusers()
@@ -274,10 +445,8 @@ class SVDBackend:
         else:
             dtype = getattr(torch, cfg.dtype)
         variant = "fp16" if dtype == torch.float16 and any((root / "unet").glob("*.fp16.*")) else None
-        with warnings.catch_warnings():  # newer diffusers rename torch_dtype to dtype; both accept torch_dtype
-            warnings.filterwarnings("ignore", message=".*torch_dtype.*", category=FutureWarning)
+        with quiet_loading():
             pipe = diffusers.StableVideoDiffusionPipeline.from_pretrained(root, torch_dtype=dtype, variant=variant)
-        pipe.to(device)
         sched_cfg = dict(pipe.scheduler.config)
         sched_cfg.update({k: v for k, v in SVD_SCHEDULER.items() if k not in ("sigma_min", "sigma_max")})
         sched_cfg["sigma_min"] = pipe.scheduler.config.get("sigma_min") or SVD_SCHEDULER["sigma_min"]
@@ -286,14 +455,47 @@ class SVDBackend:
         fe = getattr(pipe, "feature_extractor", None)
         mean = tuple(getattr(fe, "image_mean", None) or CLIP_MEAN)
         std = tuple(getattr(fe, "image_std", None) or CLIP_STD)
-        return cls(pipe.unet, pipe.vae, pipe.image_encoder, scheduler, cfg, mean, std)
+        return cls(pipe.unet, pipe.vae, pipe.image_encoder, scheduler, cfg, mean, std, device=device)
+
+    # -- where the components are ------------------------------------------------------------------
+
+    def _use(self, *names: str) -> None:
+        """Offload: ``names`` on the device for the coming stage, the others back on the CPU (plain ``.to()``
+        moves; a component already in place is not moved). Without offload everything stays on the device."""
+        if not self.offloading:
+            return
+        want = set(names)
+        for n in COMPONENTS:
+            if (n in want) != (n in self.active):
+                getattr(self, n).to(self.device if n in want else "cpu")
+        if self.device.type == "cuda" and self.active - want:
+            torch.cuda.empty_cache()  # what the parked component held goes back to the device
+        self.active = want
+
+    def _chunk_feed_forward(self) -> None:
+        """The spatial transformer blocks' feed-forward one frame at a time (``enable_forward_chunking``'s
+        switch, on the blocks whose batch is frames; the temporal blocks' batch is pixels, thousands of
+        chunks, so they are left whole)."""
+        from diffusers.models.attention import BasicTransformerBlock
+
+        for m in self.unet.modules():
+            if type(m) is BasicTransformerBlock:
+                m.set_chunk_feed_forward(1, 0)
+
+    @property
+    def encode_chunk(self) -> int:
+        return 1 if self.cfg.offload == "sequential" else max(1, self.cfg.encode_chunk_size)
+
+    @property
+    def decode_chunk(self) -> int:  # the temporal decoder mixes the frames of a chunk: its size changes the output
+        return max(1, self.cfg.decode_chunk_size)
 
     # -- geometry --------------------------------------------------------------------------------
 
     def model_size(self, height: int, width: int) -> tuple[int, int]:
         if self.cfg.height and self.cfg.width:
             return int(self.cfg.height), int(self.cfg.width)
-        return _auto_size(height, width, multiple=max(8, self.vae_scale * 8))
+        return _auto_size(height, width, area=self.cfg.area, multiple=max(8, self.vae_scale * 8))
 
     def latent_shape(self, height: int, width: int) -> tuple[int, int, int]:
         mh, mw = self.model_size(height, width)
@@ -321,16 +523,32 @@ class SVDBackend:
     # -- VAE -------------------------------------------------------------------------------------
 
     def _vae_encode(self, images: torch.Tensor) -> torch.Tensor:
-        """images [B, 3, h, w] in [-1, 1] -> latent mode, the VAE upcast to float32 where its config asks."""
-        upcast = self.vae.dtype == torch.float16 and getattr(self.vae.config, "force_upcast", False)
-        if upcast:
-            self._vae_dtype(torch.float32)
+        """images [B, 3, h, w] in [-1, 1] -> latent mode (float32), ``encode_chunk`` images a call. The encoder
+        runs in the model's dtype unless ``vae_upcast`` (or a chunk's latents overflow there: that chunk again
+        in float32)."""
+        self._use("vae")
+        half = self.vae.dtype != torch.float32
+        out = []
+        with torch.no_grad():
+            for part in even_chunks(len(images), self.encode_chunk):
+                x = images[part].to(self.device)
+                lat = None
+                if not (half and self.cfg.vae_upcast):
+                    lat = self.vae.encode(x.to(self.vae.dtype)).latent_dist.mode().float()
+                if lat is None or not torch.isfinite(lat).all():
+                    lat = self._encode_float32(x)
+                out.append(lat)
+        return torch.cat(out)
+
+    def _encode_float32(self, x: torch.Tensor) -> torch.Tensor:
+        dtype = self.vae.dtype
+        if dtype == torch.float32:
+            return self.vae.encode(x.float()).latent_dist.mode().float()
+        self._vae_dtype(torch.float32)
         try:
-            with torch.no_grad():
-                return self.vae.encode(images.to(self.device, self.vae.dtype)).latent_dist.mode().float()
+            return self.vae.encode(x.float()).latent_dist.mode().float()
         finally:
-            if upcast:
-                self._vae_dtype(torch.float16)
+            self._vae_dtype(dtype)
 
     def _vae_dtype(self, dtype) -> None:
         """Casts the VAE as the pipeline does around encoding, without diffusers' warning about ``to()``."""
@@ -346,27 +564,26 @@ class SVDBackend:
     def encode(self, frames: torch.Tensor) -> torch.Tensor:
         size = self.model_size(*frames.shape[1:3])
         x = self._resize(_to_chw(frames.float()), size) * 2.0 - 1.0
-        chunk = max(1, self.cfg.decode_chunk_size)
-        lat = torch.cat([self._vae_encode(x[i:i + chunk]) for i in range(0, len(x), chunk)])
-        return lat * float(self.vae.config.scaling_factor)
+        return self._vae_encode(x) * float(self.vae.config.scaling_factor)
 
     def decode(self, latents: torch.Tensor, size: tuple[int, int]) -> torch.Tensor:
+        self._use("vae")
         z = latents / float(self.vae.config.scaling_factor)
-        chunk = max(1, self.cfg.decode_chunk_size)
         out = []
         with torch.no_grad():
-            for i in range(0, len(z), chunk):
-                zi = z[i:i + chunk].to(self.device, self.vae.dtype)
-                out.append(self.vae.decode(zi, num_frames=len(zi)).sample.float())
-        x = (torch.cat(out) / 2.0 + 0.5).clamp(0.0, 1.0)
-        return _to_hwc(self._resize(x, size).clamp(0.0, 1.0)).contiguous()
+            for part in even_chunks(len(z), self.decode_chunk):
+                zi = z[part].to(self.device, self.vae.dtype)
+                xi = (self.vae.decode(zi, num_frames=len(zi)).sample.float() / 2.0 + 0.5).clamp(0.0, 1.0)
+                out.append(self._resize(xi, size).clamp(0.0, 1.0))  # resized per chunk: one full-size copy less
+        return _to_hwc(torch.cat(out)).contiguous()
 
     # -- conditioning and the denoiser ------------------------------------------------------------
 
     def clip_embedding(self, image: torch.Tensor) -> torch.Tensor:
-        """CLIP image embedding [1, 1, D] of image [H, W, 3] in [0, 1], preprocessed as the pipeline does
-        for PIL input (antialiased resize to 224 in [-1, 1], then CLIP normalisation)."""
-        x = _to_chw(image[None].float().cpu()) * 2.0 - 1.0
+        """CLIP image embeddings [B, 1, D] of images [B, H, W, 3] (or one [H, W, 3]) in [0, 1], preprocessed as
+        the pipeline does for PIL input (antialiased resize to 224 in [-1, 1], then CLIP normalisation)."""
+        images = image[None] if image.dim() == 3 else image
+        x = _to_chw(images.float().cpu()) * 2.0 - 1.0
         try:
             from diffusers.pipelines.stable_video_diffusion.pipeline_stable_video_diffusion import (
                 _resize_with_antialiasing,
@@ -375,6 +592,7 @@ class SVDBackend:
         except ImportError:  # pragma: no cover - other diffusers versions
             x = F.interpolate(x, size=(self.clip_size, self.clip_size), mode="bicubic", antialias=True)
         x = ((x + 1.0) / 2.0 - self.image_mean) / self.image_std
+        self._use("image_encoder")
         with torch.no_grad():
             emb = self.image_encoder(x.to(self.device, self.image_encoder.dtype)).image_embeds
         return emb[:, None]
@@ -385,43 +603,73 @@ class SVDBackend:
 
     def condition(self, image: torch.Tensor, n_frames: int, prior: torch.Tensor | None = None,
                   generator: torch.Generator | None = None) -> SVDCondition:
+        return self.condition_batch([image], n_frames, [prior], generator)[0]
+
+    def condition_batch(self, images, n_frames: int, priors=None,
+                        generator: torch.Generator | None = None) -> list[SVDCondition]:
+        """The conditioning of several passes at once (each component moved once under offload): as
+        ``condition`` on each image in turn, the noise augmentation drawn in that order."""
         c = self.cfg
-        emb = self.clip_embedding(image)
-        size = self.model_size(*image.shape[:2])
-        x = self._resize(_to_chw(image[None].float()), size) * 2.0 - 1.0
-        noise = torch.randn(x.shape, generator=generator, device="cpu", dtype=x.dtype).to(x.device)
-        lat = self._vae_encode(x + c.noise_aug_strength * noise)  # not scaled, as the pipeline does
-        lat = lat[:, None].repeat(1, n_frames, 1, 1, 1)
+        embs = self.clip_embedding(torch.stack([im.float() for im in images]))
+        size = self.model_size(*images[0].shape[:2])
+        x = self._resize(_to_chw(torch.stack([im.float() for im in images])), size) * 2.0 - 1.0
+        noise = torch.cat([torch.randn((1, *x.shape[1:]), generator=generator, device="cpu", dtype=x.dtype)
+                           for _ in images]).to(x.device)
+        lats = self._vae_encode(x + c.noise_aug_strength * noise)  # not scaled, as the pipeline does
         ids = torch.tensor([[c.fps - 1, c.motion_bucket_id, c.noise_aug_strength]], dtype=torch.float32)
         scale = None
         if self.uses_cfg:
-            emb = torch.cat([torch.zeros_like(emb), emb])
-            lat = torch.cat([torch.zeros_like(lat), lat])
-            ids = torch.cat([ids, ids])
             scale = torch.linspace(c.min_guidance_scale, c.max_guidance_scale, n_frames).view(1, n_frames, 1, 1, 1)
             scale = scale.to(self.device)
-        return SVDCondition(emb.to(self.device, self.dtype), lat.to(self.device, self.dtype),
-                            ids.to(self.device, self.dtype), scale)
+        out = []
+        for emb, lat in zip(embs, lats):
+            emb, lat, ids_i = emb[None], lat[None, None].repeat(1, n_frames, 1, 1, 1), ids
+            if self.uses_cfg:
+                emb, lat, ids_i = torch.cat([torch.zeros_like(emb), emb]), torch.cat([torch.zeros_like(lat), lat]), \
+                    torch.cat([ids, ids])
+            out.append(SVDCondition(emb.to(self.device, self.dtype), lat.to(self.device, self.dtype),
+                                    ids_i.to(self.device, self.dtype), scale))
+        return out
 
     def denoise(self, x: torch.Tensor, sigma: float, cond: SVDCondition) -> torch.Tensor:
-        """x0_hat = c_skip x + c_out v(c_in x, c_noise), v-prediction with EDM preconditioning:
+        return self.denoise_batch([x], sigma, [cond])[0]
+
+    def denoise_batch(self, xs, sigma: float, conds) -> list[torch.Tensor]:
+        """x0_hat of each pass's latents ``xs[k]`` [N, C, h, w] under ``conds[k]``, the passes' UNet inputs
+        (both halves of classifier-free guidance each) batched into as few calls as ``unet_batch_frames``
+        allows. v-prediction with EDM preconditioning: x0_hat = c_skip x + c_out v(c_in x, c_noise),
         c_in = 1/sqrt(sigma^2 + 1), c_noise = log(sigma)/4, c_skip = 1/(sigma^2 + 1), c_out = -sigma/sqrt(sigma^2 + 1)."""
+        self._use("unet")
         s = torch.tensor(sigma, dtype=torch.float32)
-        x = x.float()
-        inp = (x / (s**2 + 1) ** 0.5)[None]
-        if cond.guidance_scale is not None:
-            inp = torch.cat([inp, inp])
-        inp = torch.cat([inp.to(self.dtype), cond.image_latents], dim=2)
+        c_in = float(1 / (s**2 + 1) ** 0.5)
+        rows = []  # one UNet batch row each: (latents, embedding, image latents, time ids)
+        for x, cond in zip(xs, conds):
+            inp = (x.float() * c_in).to(self.device, self.dtype)
+            for b in range(cond.embeddings.shape[0]):
+                rows.append((inp, cond.embeddings[b], cond.image_latents[b], cond.time_ids[b]))
+        n = max(1, xs[0].shape[0])
+        per_call = 1 if self.cfg.offload == "sequential" else max(1, self.cfg.unet_batch_frames // n)
         t = (0.25 * s.log()).to(self.device)
+        v = []
         with torch.no_grad():
-            v = self.unet(inp, t, encoder_hidden_states=cond.embeddings, added_time_ids=cond.time_ids,
-                          return_dict=False)[0]
-        if cond.guidance_scale is not None:
-            v_unc, v_cond = v.chunk(2)
-            v = v_unc + cond.guidance_scale.to(v.dtype) * (v_cond - v_unc)
-        v = v[0].float()
-        s = s.to(x.device)
-        return v * (-s / (s**2 + 1) ** 0.5) + x / (s**2 + 1)
+            for i in range(0, len(rows), per_call):
+                part = rows[i:i + per_call]
+                inp = torch.stack([torch.cat([r[0], r[2]], dim=1) for r in part])
+                v += list(self.unet(inp, t, encoder_hidden_states=torch.stack([r[1] for r in part]),
+                                    added_time_ids=torch.stack([r[3] for r in part]), return_dict=False)[0])
+        out, k = [], 0
+        for x, cond in zip(xs, conds):
+            if cond.guidance_scale is not None:
+                v_unc, v_cond = v[k], v[k + 1]
+                vk = v_unc + cond.guidance_scale[0].to(v_unc.dtype) * (v_cond - v_unc)
+                k += 2
+            else:
+                vk = v[k]
+                k += 1
+            xf = x.float()
+            sd = s.to(xf.device)
+            out.append(vk.float().to(xf.device) * (-sd / (sd**2 + 1) ** 0.5) + xf / (sd**2 + 1))
+        return out
 
 
 # ----------------------------------------------------------------------------------------------
@@ -429,9 +677,12 @@ class SVDBackend:
 
 def make_backend(name: str, device="cpu", *, default: DefaultBackendConfig | None = None,
                  svd: SVDConfig | None = None, svd_path=None) -> Any:
-    """A backend by name: ``default`` (weight-free Gaussian video prior) or ``svd``."""
+    """A backend by name: ``default`` (weight-free Gaussian video prior), ``svd``, or ``auto`` (svd when its
+    weights are found, else default; ``choose_backend``)."""
+    if name == "auto":
+        name, svd_path, _ = choose_backend("auto", svd_path if svd_path is not None else (svd.path if svd else None))
     if name == "default":
         return GaussianVideoBackend(default)
     if name == "svd":
         return SVDBackend.from_pretrained(svd_path, device=device, cfg=svd)
-    raise ValueError(f"pseudo-view backend must be 'default' or 'svd', got {name!r}")
+    raise ValueError(f"pseudo-view backend must be one of {', '.join(BACKENDS)}, got {name!r}")

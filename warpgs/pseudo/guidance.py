@@ -276,9 +276,9 @@ def match_colour(warped: torch.Tensor, target: torch.Tensor, mask: torch.Tensor,
     and offset that fit ``target`` best in least squares over the ``mask`` pixels [F, H, W] (the reliable ones),
     applied to all its pixels and clipped to [0, 1] (``pseudo.trajectory.guidance_colour: affine``). The inputs of
     a capture differ in exposure and white balance, so a warped input disagrees with the render even where the
-    geometry agrees (session 16: the warps were 0.4-3.9 dB worse than the render in the reliable pixels); the fit
-    removes that difference and keeps the photo's detail. A frame's source with fewer than ``min_pixels`` masked
-    pixels is left as it is; the gain is held within ``gain_range``."""
+    geometry agrees (measured on the captures: the warps were 0.4-3.9 dB worse than the render in the reliable
+    pixels); the fit removes that difference and keeps the photo's detail. A frame's source with fewer than
+    ``min_pixels`` masked pixels is left as it is; the gain is held within ``gain_range``."""
     out = warped.clone()
     src = torch.zeros(mask.shape, dtype=torch.long, device=mask.device) if sources is None else sources.long()
     for f in range(warped.shape[0]):

@@ -23,12 +23,17 @@ Bidirectional view interpolation: a forward pass conditioned on the start image 
 conditioned on the end image over the reversed frames run side by side, and after each step both are
 replaced by ``beta * x_fwd + (1 - beta) * R(x_bwd)``, ``beta[i] = (N - 1 - i) / (N - 1)`` for frame
 ``i = 0 .. N-1`` (the paper's ``(N - i) / (N - 1)`` with frames counted from 1), R reversing frames.
+A backend with ``condition_batch`` / ``denoise_batch`` gets both passes in one call (SVD batches them into
+one UNet call); otherwise they are called in turn. ``SampleResult.times`` has the seconds of each stage
+(conditioning, encode, denoise, decode), measured by a ``StageClock``.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+import time
+from contextlib import contextmanager
+from dataclasses import dataclass, field
 from typing import Any, Protocol
 
 import torch
@@ -92,6 +97,55 @@ class SampleResult:
     tau: torch.Tensor  # [N] per-frame guidance stop time (normalised)
     gamma: torch.Tensor  # [N, 1, h, w] fusion weight while guidance is on (0 = never guided)
     guided_steps: torch.Tensor  # [N] steps on which each frame's guidance was on
+    times: dict = field(default_factory=dict)  # seconds per stage: conditioning_s, encode_s, denoise_s, decode_s
+
+
+STAGES = ("conditioning", "encode", "denoise", "decode")
+
+
+class StageClock:
+    """Wall-clock seconds per stage (the device synchronised at each stage's end, so the time is the stage's
+    work), and with ``memory`` the peak CUDA memory allocated within each stage (the peak statistic is
+    reset at each stage's start: for measurements, not inside a training run whose own peak it would hide)."""
+
+    def __init__(self, device, memory: bool = False):
+        self.device = torch.device(device)
+        self.cuda = self.device.type == "cuda" and torch.cuda.is_available()
+        self.memory = memory and self.cuda
+        self.times: dict[str, float] = {}
+        self.peaks: dict[str, float] = {}  # MB
+
+    @contextmanager
+    def stage(self, name: str):
+        if self.cuda:
+            torch.cuda.synchronize(self.device)
+            if self.memory:
+                torch.cuda.reset_peak_memory_stats(self.device)
+        t0 = time.perf_counter()
+        try:
+            yield
+        finally:
+            if self.cuda:
+                torch.cuda.synchronize(self.device)
+            key = f"{name}_s"
+            self.times[key] = self.times.get(key, 0.0) + time.perf_counter() - t0
+            if self.memory:
+                mb = torch.cuda.max_memory_allocated(self.device) / 2**20
+                self.peaks[f"{name}_peak_mb"] = max(self.peaks.get(f"{name}_peak_mb", 0.0), mb)
+
+
+def condition_passes(backend, images, n: int, priors, generator):
+    """``backend.condition`` of each pass (``condition_batch`` when the backend has it)."""
+    if hasattr(backend, "condition_batch"):
+        return backend.condition_batch(images, n, priors, generator)
+    return [backend.condition(im, n, p, generator) for im, p in zip(images, priors)]
+
+
+def denoise_passes(backend, xs, sigma: float, conds) -> list:
+    """``backend.denoise`` of each pass (``denoise_batch``, one model call for all, when the backend has it)."""
+    if hasattr(backend, "denoise_batch"):
+        return backend.denoise_batch(xs, sigma, conds)
+    return [backend.denoise(x, sigma, c) for x, c in zip(xs, conds)]
 
 
 # ----------------------------------------------------------------------------------------------
@@ -168,6 +222,7 @@ def sample_video(
     cfg: SamplerConfig | None = None,
     noise: torch.Tensor | None = None,
     generator: torch.Generator | None = None,
+    clock: StageClock | None = None,
 ) -> SampleResult:
     """Samples a video of N frames from ``start`` (and ``end`` when bidirectional), guided where reliable.
 
@@ -179,6 +234,7 @@ def sample_video(
         n_frames: N when neither guidance nor prior gives it.
         noise: initial noise [N, C, h, w] (standard normal); default drawn from ``generator`` /
             ``cfg.seed``. The backward pass starts from the same noise, reversed.
+        clock: times the stages (a new ``StageClock`` by default); its times end in ``SampleResult.times``.
     """
     cfg = cfg or SamplerConfig()
     dev = start.device
@@ -192,6 +248,7 @@ def sample_video(
     if cfg.steps < 1:
         raise ValueError(f"steps must be >= 1, got {cfg.steps}")
     C, h, w = backend.latent_shape(H, W)
+    clock = clock or StageClock(dev)
     if generator is None:
         generator = torch.Generator(device="cpu").manual_seed(cfg.seed)
     sigmas = backend.sigmas(cfg.steps, dev).float()
@@ -206,22 +263,29 @@ def sample_video(
             raise ValueError("guidance needs its uncertainty map")
         if guidance.shape[:3] != uncertainty.shape or guidance.shape[0] != n:
             raise ValueError(f"guidance {tuple(guidance.shape)} and uncertainty {tuple(uncertainty.shape)} disagree")
-        g_lat = backend.encode(guidance.to(dev).float()).float()
+        with clock.stage("encode"):
+            g_lat = backend.encode(guidance.to(dev).float()).float()
         gamma = guidance_weights(pool_uncertainty(uncertainty.to(dev), (h, w)), cfg.delta, cfg.eps)
         tau = guidance_stop(uncertainty.to(dev).float(), cfg.k, cfg.b, cfg.tau_mode)
     if cfg.pin_end_frames:
         ends = [(0, start)] + ([(n - 1, end)] if end is not None else [])
-        for i, img in ends:
-            g_lat[i] = backend.encode(img[None].to(dev).float())[0].float()
+        with clock.stage("encode"):
+            lat = backend.encode(torch.stack([img.to(dev).float() for _, img in ends])).float()
+        for (i, _), li in zip(ends, lat):
+            g_lat[i] = li
             gamma[i] = 1.0 / cfg.eps
             tau[i] = -math.inf
 
     # conditioning of the passes
     prior_f = None if prior is None else prior.to(dev).float()
-    cond_f = backend.condition(start.to(dev).float(), n, prior_f, generator)
+    images, priors = [start.to(dev).float()], [prior_f]
     if bidirectional:
-        cond_b = backend.condition(end.to(dev).float(), n, None if prior_f is None else prior_f.flip(0), generator)
+        images.append(end.to(dev).float())
+        priors.append(None if prior_f is None else prior_f.flip(0))
         beta = blend_weights(n, dev).view(n, 1, 1, 1)
+    with clock.stage("conditioning"):
+        conds = condition_passes(backend, images, n, priors, generator)
+    cond_f = conds[0]
 
     scale = backend.default_noise_scale if cfg.noise_scale is None else cfg.noise_scale
     if noise is None:
@@ -229,21 +293,23 @@ def sample_video(
     x = noise.to(dev).float() * (backend.init_noise_sigma(sigmas) * scale) + backend.prior_mean(cond_f)
 
     guided_steps = torch.zeros(n, device=dev, dtype=torch.int64)
-    for i in range(cfg.steps):
-        s, s_next = sig[i], sig[i + 1]
-        on = (step_time(i, cfg.steps) > tau).view(n, 1, 1, 1)
-        gam = gamma * on
-        guided_steps += on.view(n).long() * (gamma.flatten(1).amax(1) > 0).long()
+    guided_any = (gamma.flatten(1).amax(1) > 0).long()
+    with clock.stage("denoise"):
+        for i in range(cfg.steps):
+            s, s_next = sig[i], sig[i + 1]
+            on = (step_time(i, cfg.steps) > tau).view(n, 1, 1, 1)
+            gam = gamma * on
+            guided_steps += on.view(n).long() * guided_any
+            if bidirectional:  # the backward pass runs over the reversed frames, in the same model call
+                x0, x0b = denoise_passes(backend, [x, x.flip(0)], s, conds)
+                x_fwd = euler_step(x, fuse(x0.float(), g_lat, gam), s, s_next)
+                x_bwd = euler_step(x.flip(0), fuse(x0b.float(), g_lat.flip(0), gam.flip(0)), s, s_next)
+                x = beta * x_fwd + (1.0 - beta) * x_bwd.flip(0)
+            else:
+                x0 = denoise_passes(backend, [x], s, conds)[0]
+                x = euler_step(x, fuse(x0.float(), g_lat, gam), s, s_next)
 
-        x0 = fuse(backend.denoise(x, s, cond_f).float(), g_lat, gam)
-        x_fwd = euler_step(x, x0, s, s_next)
-        if bidirectional:
-            xb = x.flip(0)
-            x0b = fuse(backend.denoise(xb, s, cond_b).float(), g_lat.flip(0), gam.flip(0))
-            x_bwd = euler_step(xb, x0b, s, s_next)
-            x = beta * x_fwd + (1.0 - beta) * x_bwd.flip(0)
-        else:
-            x = x_fwd
-
-    frames = backend.decode(x, (H, W)).float()
-    return SampleResult(frames=frames, latents=x, tau=tau, gamma=gamma, guided_steps=guided_steps)
+    with clock.stage("decode"):
+        frames = backend.decode(x, (H, W)).float()
+    return SampleResult(frames=frames, latents=x, tau=tau, gamma=gamma, guided_steps=guided_steps,
+                        times=dict(clock.times))

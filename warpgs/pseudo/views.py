@@ -21,6 +21,8 @@ Command line (a trained model and its scene)::
 from __future__ import annotations
 
 import argparse
+import copy
+import time
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import SimpleNamespace
@@ -32,7 +34,7 @@ import torch
 from warpgs.configio import apply_values, parse_override, read_yaml
 from warpgs.viz import save_image
 
-from .backends import DefaultBackendConfig, SVDConfig, make_backend
+from .backends import BACKENDS, WEIGHT_FREE_NOTE, DefaultBackendConfig, SVDConfig, choose_backend, make_backend
 from .guidance import PosedViews, UncertaintyConfig, WarpResult, guidance_and_uncertainty, match_colour
 from .sampler import SamplerConfig, sample_video
 from .trajectory import (
@@ -54,12 +56,15 @@ RenderFn = Callable[[torch.Tensor, torch.Tensor, int, int], tuple[torch.Tensor, 
 
 @dataclass
 class PseudoConfig:
-    backend: str = "default"  # default (weight-free Gaussian video prior) | svd
+    backend: str = "auto"  # auto: svd when its weights are found (--svd-path, $WARPGS_SVD_PATH, the Hugging Face
+    #   cache), else default | default (the weight-free Gaussian video prior) | svd (an error without weights)
     trajectory: TrajectoryConfig = field(default_factory=TrajectoryConfig)
     uncertainty: UncertaintyConfig = field(default_factory=UncertaintyConfig)
     sampler: SamplerConfig = field(default_factory=SamplerConfig)
     default_backend: DefaultBackendConfig = field(default_factory=DefaultBackendConfig)
     svd: SVDConfig = field(default_factory=SVDConfig)
+
+    LIMITS = {"backend": "{" + ", ".join(BACKENDS) + "}"}
 
     @classmethod
     def load(cls, path: str | Path | None = None, overrides: Sequence[str] | dict | None = None) -> "PseudoConfig":
@@ -76,8 +81,37 @@ class PseudoConfig:
         return cfg
 
 
+def resolve_backend(cfg: PseudoConfig, real_data: bool = False) -> str:
+    """Turns ``auto`` into ``svd`` (its weights' folder set in ``cfg.svd.path``) or ``default`` in ``cfg`` and
+    says which in one line (once per process); with ``real_data`` a run without the learned prior also says
+    what that costs (``WEIGHT_FREE_NOTE``). ``svd`` without weights raises ``SVDWeightsNotFound``. -> the backend."""
+    from warpgs.console import warn_once
+
+    name, folder, line = choose_backend(cfg.backend, cfg.svd.path)
+    if cfg.backend == "auto" and line:
+        warn_once(line, key="pseudo-backend")
+    if name == "default" and real_data:
+        warn_once(WEIGHT_FREE_NOTE, key="pseudo-weight-free")
+    cfg.backend = name
+    if folder is not None:
+        cfg.svd.path = str(folder)
+    return name
+
+
+_LOADED: dict = {}  # the last backend made: a run's cycles (and its videos) share one loaded model
+
+
 def backend_from_config(cfg: PseudoConfig, device="cpu"):
-    return make_backend(cfg.backend, device, default=cfg.default_backend, svd=cfg.svd, svd_path=cfg.svd.path)
+    """The backend ``cfg`` names (``auto`` resolved by ``resolve_backend``), loaded once per process for the same
+    settings and device: the cycles of a run reuse the loaded Stable Video Diffusion."""
+    cfg = copy.deepcopy(cfg)
+    resolve_backend(cfg)
+    key = (cfg.backend, repr(cfg.svd) if cfg.backend == "svd" else repr(cfg.default_backend), str(device))
+    if key not in _LOADED:
+        _LOADED.clear()  # one model at a time
+        _LOADED[key] = make_backend(cfg.backend, device, default=cfg.default_backend, svd=cfg.svd,
+                                    svd_path=cfg.svd.path)
+    return _LOADED[key]
 
 
 # ----------------------------------------------------------------------------------------------
@@ -103,6 +137,8 @@ class PseudoSequence:
     sources: torch.Tensor  # [N, H, W] input index each pixel's guidance was warped from
     tau: torch.Tensor  # [N] guidance stop time per frame
     offset: float = 0.0  # off the path (trajectory.offsets): frames 0 and N-1 are moved off the inputs too
+    valid: torch.Tensor | None = None  # [N] bool: frames with finite values (None: all); the others are not trained on
+    times: dict = field(default_factory=dict)  # seconds: the sampler's stages and the whole trajectory (trajectory_s)
 
     @property
     def tag(self) -> str:
@@ -119,16 +155,21 @@ class PseudoSequence:
         from warpgs.data.scene import CameraTensors
 
         prefix = prefix or f"pseudo_{self.tag}"
-        masks = self.interior_below(max_uncertainty) if max_uncertainty != float("inf") else [None] * (len(self) - 2)
+        frames = self.interior()
+        masks = self.interior_below(max_uncertainty) if max_uncertainty != float("inf") else [None] * len(frames)
         return [
             CameraTensors(name=f"{prefix}_{i:03d}", viewmat=self.viewmats[i], K=self.K, width=self.width,
-                          height=self.height, image=self.frames[i], mask=masks[i - 1])
-            for i in range(1, len(self) - 1)
+                          height=self.height, image=self.frames[i], mask=m)
+            for i, m in zip(frames, masks, strict=True)
         ]
+
+    def interior(self) -> list[int]:
+        """The interior frames that are training views: 1..N-2, less those the model gave non-finite values."""
+        return [i for i in range(1, len(self) - 1) if self.valid is None or bool(self.valid[i])]
 
     def interior_below(self, limit: float) -> list:
         """[H, W] bool per interior frame, in ``pseudo_cameras``' order: U < ``limit``."""
-        return [self.uncertainty[i] < limit for i in range(1, len(self) - 1)]
+        return [self.uncertainty[i] < limit for i in self.interior()]
 
 
 def model_renderer(model, background=None) -> RenderFn:
@@ -258,13 +299,45 @@ def generate_pseudo_views(
         guidance = torch.where(reliable[..., None], warped, renders)
         # the video is conditioned on its end frames: the inputs on the path, the guidance there off it
         first, last = (src_images[traj.start], src_images[traj.end]) if traj.offset == 0 else (guidance[0], guidance[-1])
+        t0 = time.perf_counter()
         res = sample_video(backend, first, last, guidance=guidance,
                            uncertainty=r.uncertainty, prior=renders, cfg=cfg.sampler, generator=generator)
-        seq = PseudoSequence(traj.start, traj.end, V, K, W, H, res.frames.to(dev), guidance, r.guidance,
-                             r.uncertainty, renders, depths, sources, res.tau, traj.offset)
+        times = {**res.times, "trajectory_s": time.perf_counter() - t0}
+        frames, valid = finite_frames(res.frames.to(dev), renders, f"{traj.start} -> {traj.end}")
+        seq = PseudoSequence(traj.start, traj.end, V, K, W, H, frames, guidance, r.guidance,
+                             r.uncertainty, renders, depths, sources, res.tau, traj.offset, valid, times)
         if out_dir is not None:
             save_sequence(seq, out_dir)
         out.append(seq)
+    return out
+
+
+def finite_frames(frames: torch.Tensor, fallback: torch.Tensor, what: str) -> tuple[torch.Tensor, torch.Tensor | None]:
+    """A model's frames [N, H, W, 3] with those holding a non-finite value replaced by ``fallback``'s (the
+    renders, for the saved images) and marked invalid -> (frames in [0, 1], valid [N] or None when all are).
+    Said in one line, once per process."""
+    from warpgs.console import warn_once
+
+    ok = torch.isfinite(frames).flatten(1).all(1)
+    if bool(ok.all()):
+        return frames.clamp(0.0, 1.0), None
+    warn_once(f"warpgs: the video model gave non-finite values in {int((~ok).sum())} of {len(ok)} frames of the "
+              f"trajectory {what}; those pseudo views are dropped (said once)", key="pseudo-nonfinite")
+    frames = torch.where(ok.view(-1, 1, 1, 1), torch.nan_to_num(frames), fallback.to(frames.dtype))
+    return frames.clamp(0.0, 1.0), ok
+
+
+def pseudo_times(seqs: Sequence[PseudoSequence]) -> dict:
+    """One cycle's video-model seconds for the run's records: per stage summed over its trajectories
+    (``pseudo_<stage>_s``), the trajectories' count and mean seconds each (``pseudo_per_trajectory_s``)."""
+    from .sampler import STAGES
+
+    if not seqs:
+        return {}
+    out = {f"pseudo_{k}_s": sum(s.times.get(f"{k}_s", 0.0) for s in seqs) for k in STAGES}
+    out["pseudo_trajectories"] = len(seqs)
+    out["pseudo_frames_per_trajectory"] = len(seqs[0])
+    out["pseudo_per_trajectory_s"] = sum(s.times.get("trajectory_s", 0.0) for s in seqs) / len(seqs)
     return out
 
 
@@ -295,11 +368,19 @@ def save_sequence(seq: PseudoSequence, out_dir: str | Path) -> Path:
 def add_pseudo_args(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
     g = parser.add_argument_group("pseudo views")
     g.add_argument("--pseudo-config", default=None, help="a YAML file of PseudoConfig fields (default: none, the paper's settings)")
-    g.add_argument("--pseudo-backend", choices=["default", "svd"], default=None, help="video backend")
-    g.add_argument("--svd-path", default=None, help="local Stable Video Diffusion folder (or $WARPGS_SVD_PATH)")
+    add_backend_args(g)
     g.add_argument("--set", dest="pseudo_set", action="append", default=[], metavar="SECTION.KEY=VALUE",
                    help="override a setting, e.g. --set sampler.steps=50")
     return parser
+
+
+def add_backend_args(group) -> None:
+    """--pseudo-backend and --svd-path (pseudo.backend, pseudo.svd.path), in every command that makes pseudo views."""
+    group.add_argument("--pseudo-backend", choices=list(BACKENDS), default=None,
+                       help="video model of the pseudo views: auto (the default: svd when its weights are found, "
+                            "else the weight-free prior), svd, or default (weight-free)")
+    group.add_argument("--svd-path", default=None,
+                       help="Stable Video Diffusion folder (default: $WARPGS_SVD_PATH, then the Hugging Face cache)")
 
 
 def config_from_args(args: argparse.Namespace) -> PseudoConfig:

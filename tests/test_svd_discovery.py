@@ -1,0 +1,199 @@
+"""``pseudo.backend: auto`` finds Stable Video Diffusion without flags, and the front door takes the flags.
+
+The tiny random model is laid out as ``huggingface-cli download`` lays it out in the Hugging Face cache
+(``models--stabilityai--stable-video-diffusion-img2vid-xt/snapshots/<hash>/`` with the component folders, files
+linked to ``blobs/``, ``refs/main`` naming the snapshot); auto must find it through --svd-path,
+$WARPGS_SVD_PATH, $HF_HOME and $HF_HUB_CACHE, name what an incomplete folder lacks, and fall back to the
+weight-free prior with one line when there is nothing. Through the command line (a subprocess): a missing
+folder is one ``error:`` line naming flags the command accepts, exit 2, no run folder made.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from warpgs.pseudo.backends import SVD_ENV, SVD_HF_FOLDER, SVDWeightsNotFound, choose_backend, find_svd_weights
+
+ROOT = Path(__file__).resolve().parents[1]
+HASH = "0123456789abcdef0123456789abcdef01234567"
+
+
+@pytest.fixture(autouse=True)
+def no_weights_anywhere(tmp_path, monkeypatch):
+    """Nothing found unless a test puts it there: no $WARPGS_SVD_PATH, an empty cache."""
+    monkeypatch.delenv(SVD_ENV, raising=False)
+    monkeypatch.delenv("HF_HOME", raising=False)
+    monkeypatch.setenv("HF_HUB_CACHE", str(tmp_path / "empty_cache"))
+
+
+@pytest.fixture(scope="module")
+def tiny_svd(tmp_path_factory):
+    pytest.importorskip("diffusers")
+    pytest.importorskip("transformers")
+    from test_svd_tiny import build_tiny_svd
+
+    return build_tiny_svd(tmp_path_factory.mktemp("svd") / "tiny")
+
+
+def lay_out_as_hf_cache(model: Path, hub: Path) -> Path:
+    """``model``'s files in the cache's layout under ``hub``: blobs by content hash, the snapshot's files links to
+    them, refs/main. -> the snapshot folder."""
+    repo = hub / SVD_HF_FOLDER
+    snap = repo / "snapshots" / HASH
+    for f in sorted(p for p in model.rglob("*") if p.is_file()):
+        blob = repo / "blobs" / hashlib.sha256(f.read_bytes()).hexdigest()
+        blob.parent.mkdir(parents=True, exist_ok=True)
+        shutil.copyfile(f, blob)
+        link = snap / f.relative_to(model)
+        link.parent.mkdir(parents=True, exist_ok=True)
+        os.symlink(os.path.relpath(blob, link.parent), link)
+    (repo / "refs").mkdir(parents=True, exist_ok=True)
+    (repo / "refs" / "main").write_text(HASH)
+    return snap
+
+
+def test_auto_finds_the_weights_in_each_place(tiny_svd, tmp_path, monkeypatch):
+    from warpgs.pseudo.backends import SVDBackend, make_backend
+
+    assert choose_backend("auto")[0] == "default"  # nothing anywhere: the weight-free prior
+    # --svd-path (pseudo.svd.path)
+    name, folder, line = choose_backend("auto", str(tiny_svd))
+    assert (name, folder) == ("svd", tiny_svd) and "--svd-path" in line and str(tiny_svd) in line
+    # $WARPGS_SVD_PATH
+    monkeypatch.setenv(SVD_ENV, str(tiny_svd))
+    assert choose_backend("auto")[:2] == ("svd", tiny_svd)
+    monkeypatch.delenv(SVD_ENV)
+    # the Hugging Face cache under $HF_HOME/hub, then $HF_HUB_CACHE (which wins over HF_HOME)
+    snap = lay_out_as_hf_cache(tiny_svd, tmp_path / "hf_home" / "hub")
+    monkeypatch.delenv("HF_HUB_CACHE")
+    monkeypatch.setenv("HF_HOME", str(tmp_path / "hf_home"))
+    name, folder, line = choose_backend("auto")
+    assert (name, folder) == ("svd", snap) and "Hugging Face cache" in line
+    other = lay_out_as_hf_cache(tiny_svd, tmp_path / "hub_cache")
+    monkeypatch.setenv("HF_HUB_CACHE", str(tmp_path / "hub_cache"))
+    assert choose_backend("auto")[:2] == ("svd", other)
+    # and the cache's snapshot loads: the components behind the links are the model
+    backend = make_backend("auto", "cpu")
+    assert isinstance(backend, SVDBackend) and backend.latent_shape(32, 32)[0] == 4
+
+
+def test_incomplete_folders_name_what_is_missing(tiny_svd, tmp_path, monkeypatch):
+    partial = tmp_path / "partial"
+    shutil.copytree(tiny_svd, partial)
+    shutil.rmtree(partial / "feature_extractor")
+    for f in (partial / "unet").glob("*.safetensors"):
+        f.unlink()
+    with pytest.raises(SVDWeightsNotFound) as e:
+        choose_backend("svd", str(partial))
+    msg = str(e.value)
+    assert "feature_extractor/" in msg and "unet/ weights" in msg and "vae" not in msg.split("lacks")[1].split(".")[0]
+    # an interrupted download into the cache: a snapshot whose weights link to a blob that is not there
+    snap = lay_out_as_hf_cache(tiny_svd, tmp_path / "cache")
+    target = next((snap / "vae").glob("*.safetensors"))
+    (target.parent / os.readlink(target)).unlink()
+    monkeypatch.setenv("HF_HUB_CACHE", str(tmp_path / "cache"))
+    name, folder, line = choose_backend("auto")  # auto: the weight-free prior, saying what the cache's folder lacks
+    assert name == "default" and folder is None and "vae/ weights" in line and str(snap) in line
+    assert find_svd_weights()[0] is None
+
+
+def test_choose_backend_without_weights(tmp_path):
+    assert choose_backend("default") == ("default", None, "")
+    name, folder, line = choose_backend("auto")
+    assert name == "default" and "--svd-path" in line and "empty_cache" in line
+    for name in ("svd", "auto"):  # a folder given that is not there is an error, auto or not
+        with pytest.raises(SVDWeightsNotFound, match="not a folder"):
+            choose_backend(name, str(tmp_path / "nowhere"))
+    with pytest.raises(ValueError, match="auto, default, svd"):
+        choose_backend("svdx")
+
+
+def run_cli(args, tmp_path, env_extra=None):
+    env = {k: v for k, v in os.environ.items() if k not in (SVD_ENV, "HF_HOME")}
+    env.update({"HF_HUB_CACHE": str(tmp_path / "empty_cache"), "PYTHONPATH": str(ROOT)}, **(env_extra or {}))
+    return subprocess.run([sys.executable, "-m", "warpgs.pipelines.sparse", *args], cwd=tmp_path, env=env,
+                          capture_output=True, text=True, timeout=600)
+
+
+@pytest.mark.parametrize("flags", [["--svd-path", "/nonexistent/svd"], ["--pseudo-backend", "svd"]])
+def test_missing_weights_through_the_command_line(tmp_path, flags):
+    out = tmp_path / "run"
+    r = run_cli(["--method", "full", "--device", "cpu", "--out", str(out), *flags], tmp_path)
+    assert r.returncode == 2, r.stderr
+    errors = [ln for ln in r.stderr.splitlines() if ln.startswith("error:")]
+    assert len(errors) == 1 and "Traceback" not in r.stderr, r.stderr
+    assert "Stable Video Diffusion weights" in errors[0] and "run folder" not in errors[0]
+    assert not out.exists()  # checked before the run folder is made
+    # every flag the message names is one the command accepts
+    from warpgs.pipelines.sparse import build_parser
+
+    accepted = {s for a in build_parser()._actions for s in a.option_strings}
+    named = {w.strip("(),;.`") for w in errors[0].split() if w.startswith("--")}
+    assert named and named <= accepted, named - accepted
+
+
+def test_flags_reach_the_config():
+    from warpgs.pipelines.sparse import build_parser, make_config
+
+    for choice in ("svd", "default", "auto"):
+        cfg, _ = make_config(build_parser().parse_args(["--pseudo-backend", choice, "--svd-path", "/x/svd"]))
+        assert cfg.pseudo.backend == choice and cfg.pseudo.svd.path == "/x/svd"
+    cfg, _ = make_config(build_parser().parse_args([]))
+    assert cfg.pseudo.backend == "auto"
+
+
+def test_the_main_command_runs_the_full_method_with_svd_path(tiny_svd, tmp_path):
+    """--svd-path through the front door: the full method with the tiny model, its stage times recorded."""
+    import json
+
+    out = tmp_path / "run"
+    r = run_cli(["--method", "full", "--device", "cpu", "--iterations", "12", "--no-progress", "--out", str(out),
+                 "--svd-path", str(tiny_svd), "--set", "pseudo.svd.width=32", "--set", "pseudo.svd.height=32",
+                 "--set", "pseudo.trajectory.n_frames=4", "--set", "pseudo.sampler.steps=2",
+                 "--set", "model.init_num=300", "--set", "full.flythrough_frames=2", "--set", "eval.fps_repeats=1",
+                 "--set", "eval.save_images=false", "--set", f"eval.lpips_weights={tmp_path / 'none.pth'}"], tmp_path)
+    assert r.returncode == 0, r.stderr[-3000:]
+    assert "Loading" not in r.stderr and "it/s" not in r.stderr  # no third-party progress bars
+    m = json.loads((out / "metrics.json").read_text())
+    c = m["cycles"][1]
+    assert c["pseudo_trajectories"] == 2 and c["pseudo_frames_per_trajectory"] == 4
+    assert c["pseudo_denoise_s"] > 0 and c["pseudo_per_trajectory_s"] > 0
+    assert c["pseudo_per_trajectory_s"] * 2 <= c["pseudo_views_s"] + 1e-6
+
+
+def test_the_model_is_loaded_once_for_the_cycles(tiny_svd):
+    """generate_pseudo_views asks backend_from_config at every cycle: the loaded model is reused while the settings
+    and device are the same, and replaced (not kept beside) when they change."""
+    from warpgs.pseudo.views import PseudoConfig, backend_from_config
+
+    cfg = PseudoConfig.load(overrides=[f"svd.path={tiny_svd}", "svd.width=32", "svd.height=32"])
+    first = backend_from_config(cfg, "cpu")
+    assert first.name == "svd" and backend_from_config(cfg, "cpu") is first
+    assert cfg.backend == "auto"  # the caller's settings are not changed by the resolution
+    other = backend_from_config(PseudoConfig.load(overrides=[f"svd.path={tiny_svd}", "svd.width=64",
+                                                             "svd.height=64"]), "cpu")
+    assert other is not first and other.model_size(10, 10) == (64, 64)
+
+
+def test_one_line_says_which_prior_and_what_the_weight_free_one_costs_on_real_data(monkeypatch, capsys):
+    import warpgs.console as console
+    from warpgs.pseudo.views import PseudoConfig, resolve_backend
+
+    monkeypatch.setattr(console, "_said", set())
+    cfg = PseudoConfig()
+    assert resolve_backend(cfg, real_data=False) == "default" and cfg.backend == "default"
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "weight-free prior" in err[0] and "--svd-path" in err[0]
+    cfg = PseudoConfig()
+    resolve_backend(cfg, real_data=True)  # on a real capture: what that costs, with the measured figure, once
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "-0.09 dB" in err[0] and "2.5x the Gaussians" in err[0]
+    resolve_backend(PseudoConfig(), real_data=True)
+    assert capsys.readouterr().err == ""
