@@ -94,8 +94,8 @@ def assert_close(a, b, atol, rtol=0.0, what=""):
         dict(seed=6, sh_degree=2),
         dict(seed=7, sh_degree=3, width=35, height=33),
         # DropGaussian's survivors (opacity x 1 / (1 - p)) and opacity noise exceed 1: pairs past SIGMA_SKIP whose
-        # alpha is still >= 1/255 are skipped (a CUDA forward that composited them while its backward did not was wrong here:
-        # without the rule 673 pixels here differ by up to 0.008). alpha_max 0.999: at 0.99 many alphas hit the
+        # alpha is still >= 1/255 are skipped by both passes (a forward that composited them while its backward did
+        # not: without the rule 673 pixels here differ by up to 0.008). alpha_max 0.999: at 0.99 many alphas hit the
         # clamp, and T = 0.01 x 0.01 lands on T_MIN itself, where float32 and the float64 reference round apart
         dict(seed=8, n=30, opacity_range=(1.0, 1.6), scale_range=(0.1, 0.4), alpha_max=0.999),
     ],
