@@ -370,7 +370,12 @@ def test_distortion_is_removed_or_refused(tmp_path):
         g = pattern(x, y)
         return (np.repeat(g[..., None], 3, axis=2) * 255).round().astype(np.uint8)
 
-    root = write_capture(tmp_path / "cap", n=4, w=w, h=h, image_fn=distorted_image, extra={"fl_x": f, "fl_y": f, **dist})
+    def stamped(k):  # each frame its own file (a corner pixel outside the compared region differs)
+        img = distorted_image(k)
+        img[0, 0] = k
+        return img
+
+    root = write_capture(tmp_path / "cap", n=4, w=w, h=h, image_fn=stamped, extra={"fl_x": f, "fl_y": f, **dist})
     with pytest.raises(SceneError, match="distortion"):
         load_nerfstudio(root, views=1, undistort=False)
     s = load_nerfstudio(root, views=1, undistort=True)
@@ -525,7 +530,7 @@ def test_bad_llff_dtu_blender_inputs(tmp_path):
     (r / "images_8").mkdir(parents=True)
     rows = []
     for k in range(5):
-        Image.fromarray(np.zeros((6, 8, 3), np.uint8)).save(r / "images_8" / f"img{k}.png")
+        Image.fromarray(np.full((6, 8, 3), k, np.uint8)).save(r / "images_8" / f"img{k}.png")  # distinct frames
         R = np.array([[0, 1, 0], [1, 0, 0], [0, 0, -1.0]])  # [down, right, back] of a camera looking along +z
         rows.append(np.r_[np.c_[R, [0.1 * k, 0, 0], [48, 64, 50]].ravel(), 1.0, 10.0])
     np.save(r / "poses_bounds.npy", np.array(rows[:4]))

@@ -32,7 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from warpgs.console import filtered_stderr
-from warpgs.ply import keep_finite, read_elements, write_vertices
+from warpgs.ply import gaussian_fields, keep_finite, read_elements, require, write_vertices
 
 def save_image(path: str | Path, image) -> Path:
     """Saves [H, W, 3] or [H, W] values in [0, 1] (numpy or torch) as an 8-bit PNG; NaN is written as 0."""
@@ -71,7 +71,8 @@ def read_cloud(path: str | Path, drop_invalid: bool = False) -> dict:
         raise ValueError(f"{path}: PLY vertices have no x, y, z")
     points = np.stack([raw["x"], raw["y"], raw["z"]], 1).astype(np.float32)
     colors, kind = None, "mesh" if counts.get("face", 0) else "points"
-    if all(f"f_dc_{i}" in names for i in range(3)):
+    if any(k.startswith("f_dc_") for k in names):  # a 3D-GS file: every column a Gaussian needs
+        require(names, [k for k in gaussian_fields(0) if k not in ("nx", "ny", "nz")], path, "3D-GS PLY")
         kind = "gaussians"
         colors = np.clip(np.stack([raw[f"f_dc_{i}"] for i in range(3)], 1) * SH_C0 + 0.5, 0, 1).astype(np.float32)
     else:

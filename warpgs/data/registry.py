@@ -22,6 +22,7 @@ from typing import Any
 
 from warpgs.configio import CONFIG_DIR, REPO_ROOT
 
+from . import plausible
 from .blender import load_blender
 from .dtu import load_dtu
 from .llff import load_llff
@@ -180,9 +181,15 @@ def load_scene(
     ``downscale``: image pyramid level (None = the dataset's default); ``root``: dataset root
     (for ``synthetic``: the folder that holds generated scenes); ``device``: Warp device for
     generating the synthetic scene; ``options``: loader keyword arguments (e.g. ``white_background``,
-    ``seed``), overriding the config's ``options``.
+    ``seed``), overriding the config's ``options``, and the allowances of ``warpgs.data.plausible``
+    (``allow_implausible_camera``, ``allow_duplicate_frames``: True lets such data through).
     """
-    data = str(data)
+    allow = [k for k in plausible.OPTIONS if options.pop(k, False)]
+    with plausible.allowing(*allow):
+        return _load_scene(str(data), scene, views, downscale, root, device, options)
+
+
+def _load_scene(data: str, scene, views, downscale, root, device, options: dict) -> Scene:
     names = dataset_names()
     if data in names and os.sep not in data:  # a folder with such a name is reached as ./NAME
         cfg = read_data_config(data)

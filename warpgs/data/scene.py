@@ -231,6 +231,9 @@ def make_camera(
         if not np.all(np.isfinite(a)):
             raise SceneError(f"{image_path or name}: its camera's {what} are out of range (not finite as float32: "
                              f"{np.asarray(K if what == 'intrinsics' else c2w).ravel()[:4].tolist()}...)")
+    from .plausible import check_camera
+
+    check_camera(str(image_path or name), K, int(w), int(h))
     return Camera(
         name=name,
         viewmat=viewmat32,
