@@ -291,7 +291,8 @@ def render_png(cloud: dict, out: str | Path, width: int = 960, height: int = 720
     if (color == "origin" or (color == "auto" and cloud.get("origin") is not None)) and cloud.get("origin") is not None:
         img = _legend(img, [int((cloud["origin"] == k).sum()) for k in range(3)])
     out = Path(out)
-    out.parent.mkdir(parents=True, exist_ok=True)
+    if not out.parent.is_dir():
+        raise ValueError(f"{out}: the folder {out.parent} does not exist (create it first)")
     Image.fromarray(np.clip(np.round(img * 255), 0, 255).astype(np.uint8)).save(out)
     return used
 
@@ -313,8 +314,16 @@ def show(cloud: dict, width: int = 960, height: int = 720, point_size: float = 2
     vis.destroy_window()
 
 
+class OneLineParser(argparse.ArgumentParser):
+    """argparse whose refusals are one line, ``error: ...``, and exit code 2 (no usage block)."""
+
+    def error(self, message: str):
+        print(f"error: {message} (see {self.prog} --help)", file=sys.stderr)
+        sys.exit(2)
+
+
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m warpgs.viz", description="Show a point cloud or Gaussian centres (PLY).")
+    ap = OneLineParser(prog="python -m warpgs.viz", description="Show a point cloud or Gaussian centres (PLY).")
     ap.add_argument("ply", help="point cloud, 3D-GS PLY, or a densification cloud with an 'origin' property")
     ap.add_argument("--png", default=None, help="render to this PNG instead of opening a window (no display needed)")
     ap.add_argument("--color", default="auto", choices=["auto", "rgb", "origin"],
@@ -334,6 +343,10 @@ def main(argv=None) -> int:
     except ValueError:
         ap.error("--size is WIDTHxHEIGHT and --background is r,g,b")
     try:
+        if a.png and not Path(a.png).resolve().parent.is_dir():
+            raise ValueError(f"--png {a.png}: the folder {Path(a.png).resolve().parent} does not exist (create it first)")
+        if width < 1 or height < 1 or width * height > 1 << 26:
+            raise ValueError(f"--size {a.size}: width and height must be positive, at most 2^26 pixels in all")
         cloud = read_cloud(a.ply, drop_invalid=a.drop_invalid)
         counts = ""
         if cloud["origin"] is not None:
@@ -344,9 +357,9 @@ def main(argv=None) -> int:
             print(f"wrote {a.png} ({width}x{height}, renderer: {used})")
         else:
             show(cloud, width, height, a.point_size, a.color, bg)
-    except (OSError, ValueError, RuntimeError) as e:
-        print(f"warpgs.viz: {e}", file=sys.stderr)
-        return 1
+    except (OSError, ValueError, RuntimeError, MemoryError) as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 2
     return 0
 
 
