@@ -20,7 +20,7 @@ import os
 from pathlib import Path
 from typing import Any
 
-from warpgs.configio import CONFIG_DIR, REPO_ROOT
+from warpgs.configio import CONFIG_DIR, REPO_ROOT, UniqueKeyLoader
 
 from . import plausible
 from .blender import load_blender
@@ -58,7 +58,7 @@ def read_data_config(name: str) -> dict[str, Any]:
     if not p.is_file():
         raise SceneError(f"{p}: no such dataset config; known names: {', '.join(dataset_names()) or '(none)'}")
     try:
-        cfg = yaml.safe_load(p.read_text()) or {}
+        cfg = yaml.load(p.read_text(), Loader=UniqueKeyLoader) or {}
     except Exception as e:
         raise SceneError(f"{p}: cannot parse YAML ({e})") from e
     if "format" not in cfg:
