@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from . import colmap as colmap_io
-from .plausible import check_distortion, check_frames
+from .plausible import check_distortion, check_frames, check_listed
 from .scene import (
     Camera,
     ImageChannels,
@@ -214,6 +214,7 @@ def load_nerfstudio(
     if len(set(names)) != len(names):
         dup = sorted({n for n in names if names.count(n) > 1})
         raise SceneError(f"{tf}: frames listed more than once: {dup[:5]}")
+    check_listed(str(tf), [(n, root / n) for n in names])
 
     train_idx, test_idx = every_nth_split(len(frames), views, test_every, test_rest, str(tf))
 

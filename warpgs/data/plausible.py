@@ -104,40 +104,63 @@ def check_distortion(source: str, dist: dict[str, float], K: np.ndarray, width: 
                      f"{radial}) {what}; {_hint(ALLOW_CAMERA)}")
 
 
-def _digest(cam) -> tuple[str, str]:
-    """(what was hashed, the hash): the image file's bytes, or the pixels of a camera without a file."""
-    h = hashlib.blake2b(digest_size=16)
-    if cam.image_path:
-        with open(cam.image_path, "rb") as f:
-            for block in iter(lambda: f.read(1 << 20), b""):
-                h.update(block)
-        return "file", h.hexdigest()
-    a = np.ascontiguousarray(cam.image)
-    h.update(str((a.shape, a.dtype.str)).encode())
-    h.update(a.tobytes())
-    return "pixels", h.hexdigest()
+class _Distinct:
+    """Frames seen so far, by resolved file and by content; ``add`` refuses one seen before, naming both."""
+
+    def __init__(self, source: str | None = None):
+        self.prefix = f"{source}: " if source else ""
+        self.paths: dict[Path, str] = {}
+        self.digests: dict[tuple[str, str], str] = {}
+
+    def _refuse(self, label: str, first: str, what: str):
+        raise SceneError(f"{self.prefix}{label} and {first}: {what}; remove one, or load with the option "
+                         f"{ALLOW_DUPLICATES}=True")
+
+    def add(self, label: str, path: Path | None = None, pixels: np.ndarray | None = None) -> None:
+        h = hashlib.blake2b(digest_size=16)
+        if path is not None:
+            real = Path(path).resolve()
+            if real in self.paths:
+                self._refuse(label, self.paths[real], f"one image file listed twice (both are {real})")
+            self.paths[real] = label
+            if not real.is_file():  # a missing file is the loader's to report, if the frame is loaded
+                return
+            with open(real, "rb") as f:
+                for block in iter(lambda: f.read(1 << 20), b""):
+                    h.update(block)
+            key = ("byte-identical image files", h.hexdigest())
+        else:
+            a = np.ascontiguousarray(pixels)
+            h.update(str((a.shape, a.dtype.str)).encode())
+            h.update(a.tobytes())
+            key = ("identical pixels", h.hexdigest())
+        if key in self.digests:
+            self._refuse(label, self.digests[key], f"the same frame twice ({key[0]})")
+        self.digests[key] = label
+
+
+def check_listed(source: str, files: list[tuple[str, Path]]) -> None:
+    """Refuses a scene description that lists one frame twice (module docstring), before its split is chosen
+    (a second entry shifts which frames train and which test): ``files`` are (the frame as listed, its file)."""
+    if ALLOW_DUPLICATES in _allowed.get():
+        return
+    seen = _Distinct(source)
+    for label, path in files:
+        seen.add(repr(label), path)
 
 
 def check_frames(scene):
     """Refuses a scene that holds one frame twice (module docstring), naming both; returns ``scene``."""
     if ALLOW_DUPLICATES in _allowed.get():
         return scene
-    seen_path: dict[Path, str] = {}
-    seen_hash: dict[tuple[str, str], str] = {}
+    seen = _Distinct()
     for cam in scene.train + scene.test:
-        label = str(cam.image_path or cam.name)
         if cam.image_path:
-            real = Path(cam.image_path).resolve()
-            if real in seen_path:
-                raise SceneError(f"{label} and {seen_path[real]}: one image file listed twice (both are {real}); remove "
-                             f"one, or load with the option {ALLOW_DUPLICATES}=True")
-            seen_path[real] = label
-        key = _digest(cam)
-        if key in seen_hash:
-            raise SceneError(f"{label} and {seen_hash[key]}: the same frame twice ({'byte-identical image files' if key[0] == 'file' else 'identical pixels'}); "
-                         f"remove one, or load with the option {ALLOW_DUPLICATES}=True")
-        seen_hash[key] = label
+            seen.add(str(cam.image_path), Path(cam.image_path))
+        else:
+            seen.add(cam.name, pixels=cam.image)
     return scene
 
 
-__all__ = ["ALLOW_CAMERA", "ALLOW_DUPLICATES", "OPTIONS", "allowing", "check_camera", "check_distortion", "check_frames"]
+__all__ = ["ALLOW_CAMERA", "ALLOW_DUPLICATES", "OPTIONS", "allowing", "check_camera", "check_distortion", "check_frames",
+           "check_listed"]
