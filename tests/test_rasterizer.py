@@ -77,6 +77,15 @@ def assert_close(a, b, atol, rtol=0.0, what=""):
     assert bool((err <= bound).all()), f"{what}: max abs error {err.max().item():.3g} (worst excess {(err - bound).max().item():.3g})"
 
 
+def assert_grads_close(ins, rins, atol_of_max, rtol):
+    """Every input's gradient against the oracle's, within ``atol_of_max`` times the largest reference value."""
+    for name in ins:
+        g, gr = ins[name].grad, rins[name].grad
+        scale = float(gr.abs().max())
+        assert scale > 0, f"reference gradient of {name} is zero: the case tests nothing"
+        assert_close(g, gr, atol_of_max * scale, rtol=rtol, what=f"d/d{name}")
+
+
 # ----------------------------------------------------------------------------------------------------
 # forward
 
@@ -156,11 +165,7 @@ def test_gradients_match_reference_autograd(device, case):
     (img, depth, alpha, m2), rins = run_ref(scene, grad=True, **kw)
     m2.retain_grad()
     weighted_loss(img, depth, alpha).backward()
-    for name in ins:
-        g, gr = ins[name].grad, rins[name].grad
-        scale = float(gr.abs().max())
-        assert scale > 0, f"reference gradient of {name} is zero: the case tests nothing"
-        assert_close(g, gr, 2e-4 * scale, rtol=1e-3, what=f"d/d{name}")
+    assert_grads_close(ins, rins, 2e-4, 1e-3)
     assert_close(out.means2d.grad, m2.grad, 2e-4 * float(m2.grad.abs().max()), rtol=1e-3, what="d/dmeans2d")
     norm = means2d_grad_norm(out, scene["width"], scene["height"])
     expect = (m2.grad * torch.tensor([scene["width"] / 2, scene["height"] / 2], dtype=torch.float64)).norm(dim=-1)
