@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .scene import SceneError
+from .errors import SceneError
 
 FOCAL_RANGE = (0.05, 100.0)  # focal length in pixels / the image's larger side
 PRINCIPAL_RANGE = (-1.0, 2.0)  # principal point / image size
