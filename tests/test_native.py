@@ -140,3 +140,46 @@ def test_implausible_focal_length_is_refused_before_pycolmap(room):
     bad[0] = type(bad[0])(bad[0].name, bad[0].viewmat, K, bad[0].width, bad[0].height, bad[0].image)
     with pytest.raises(SfmInputError, match=r"focal lengths fx=-[0-9.]+, fy=[0-9.]+ must be positive"):
         triangulate(bad, log=lambda line: None)
+
+
+def test_a_child_dies_with_its_parent(tmp_path):
+    """A run killed outright (SIGKILL: no finally runs) leaves no native step running behind it."""
+    import signal
+    import time
+
+    code = ("import os, sys\n"
+            f"os.environ['{FAULT_ENV}'] = 'maths:hang'\n"
+            "from warpgs.densify.native import run_native\n"
+            "from operator import add\n"
+            "run_native('maths', add, 1, 2, timeout_s=600)\n")
+    parent = subprocess.Popen([sys.executable, "-c", code], cwd=os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+    try:
+        children: list[int] = []
+        t0 = time.monotonic()
+        while not children and time.monotonic() - t0 < 120:
+            time.sleep(0.2)
+            try:
+                with open(f"/proc/{parent.pid}/task/{parent.pid}/children") as f:
+                    children = [int(p) for p in f.read().split()]
+            except OSError:
+                break
+        assert children, "the native step's child never started"
+        parent.send_signal(signal.SIGKILL)
+        parent.wait()
+        t0 = time.monotonic()
+        while os.path.exists(f"/proc/{children[0]}") and time.monotonic() - t0 < 30:
+            try:
+                with open(f"/proc/{children[0]}/stat") as f:
+                    if f.read().split()[2] == "Z":  # a zombie is dead (its new parent reaps it)
+                        break
+            except OSError:
+                break
+            time.sleep(0.1)
+        alive = os.path.exists(f"/proc/{children[0]}")
+        if alive:
+            with open(f"/proc/{children[0]}/stat") as f:
+                alive = f.read().split()[2] != "Z"
+        assert not alive, "the child outlived its killed parent"
+    finally:
+        if parent.poll() is None:
+            parent.kill()

@@ -31,6 +31,11 @@ FAULT_ENV = "WARPGS_NATIVE_FAULT"
 
 _CHILD = r"""
 import os, pickle, sys
+try:  # Linux: the child is killed with its parent (a run stopped by SIGTERM or SIGKILL leaves no SfM running)
+    import ctypes, signal
+    ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGKILL)  # PR_SET_PDEATHSIG
+except Exception:
+    pass
 src, dst = sys.argv[1], sys.argv[2]
 with open(src, "rb") as f:
     what, fn, args, kwargs = pickle.load(f)
