@@ -36,6 +36,22 @@ if [ ! -x "$WARPGS_VENV/bin/python" ] || [ "$(cat "$_stamp" 2>/dev/null)" != "$_
   _say "creating the environment in $WARPGS_VENV (first run takes a few minutes)"
   [ -x "$WARPGS_VENV/bin/python" ] || "$_py" -m venv "$WARPGS_VENV"
   _pip=("$WARPGS_VENV/bin/python" -m pip install -q --disable-pip-version-check)
+  # _install NAME PIP-ARGS...: pip's messages less its harmless warnings; a failed install stops the set-up naming
+  # NAME (the tests need every one: a package that is not there must not turn into skipped tests)
+  _install() {
+    local name=$1 log rc=0
+    shift
+    log=$(mktemp)
+    "${_pip[@]}" "$@" >"$log" 2>&1 || rc=$?
+    # (grep's own status is 1 when every line was filtered out: not a failure of the install)
+    grep -v -e '^WARNING: Location' -e '^WARNING: Retrying' -e 'dependency resolver' -e 'requires torchvision' \
+      "$log" >&2 || [ $? -eq 1 ]
+    rm -f "$log"
+    if [ "$rc" -ne 0 ]; then
+      _say "installing $name failed (pip's messages above); the tests need it, so the set-up stops here"
+      exit 1
+    fi
+  }
   if ! "$WARPGS_VENV/bin/python" -c 'import torch' >/dev/null 2>&1; then
     if [ -n "${WARPGS_TORCH:-}" ]; then
       "${_pip[@]}" "$WARPGS_TORCH"
@@ -47,30 +63,42 @@ if [ ! -x "$WARPGS_VENV/bin/python" ] || [ "$(cat "$_stamp" 2>/dev/null)" != "$_
       # an unpinned 'torch' from PyPI would pull several GB of CUDA libraries for nothing.
       _say "no NVIDIA GPU: installing the CPU build of torch"
       "${_pip[@]}" "torch==2.13.0" --extra-index-url https://download.pytorch.org/whl/cpu 2>&1 \
-        | grep -v -e '^WARNING: Location' -e '^WARNING: Retrying' >&2 || true
+        | grep -v -e '^WARNING: Location' -e '^WARNING: Retrying' >&2 || true  # tried again below, where a failure stops
       "$WARPGS_VENV/bin/python" -c 'import torch' 2>/dev/null || "${_pip[@]}" torch --index-url https://download.pytorch.org/whl/cpu
     fi
   fi
-  "${_pip[@]}" -e "$WARPGS_ROOT[test]" 2>&1 | grep -v -e '^WARNING: Location' >&2 || true
+  _install "warpgs with its test dependencies (pycolmap, open3d, diffusers, transformers, ray, viser, playwright)" \
+    -e "$WARPGS_ROOT[test]"
   # The viewer's browser test (tests/test_view.py) drives a real Chromium through playwright's pip package
-  # (no `playwright install`): Debian's chromium-headless-shell. Optional: without one that test skips.
-  if ! command -v chromium-headless-shell >/dev/null 2>&1 && ! command -v chromium >/dev/null 2>&1; then
+  # (no `playwright install`): Debian's chromium-headless-shell. An install that fails stops the set-up; where it
+  # cannot be tried (not root), the set-up says so and CI's run fails on that test's skip (.ci/run).
+  if [ -z "${WARPGS_CHROMIUM:-}" ] && ! command -v chromium-headless-shell >/dev/null 2>&1 \
+      && ! command -v chromium >/dev/null 2>&1; then
     if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then
       _say "installing chromium-headless-shell (the viewer's browser test)"
-      { DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium-headless-shell >/dev/null 2>&1 || {
-          apt-get update -qq >/dev/null 2>&1 && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium-headless-shell >/dev/null 2>&1; }; } \
-        || _say "note: chromium-headless-shell could not be installed; the viewer's browser test will skip"
+      DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium-headless-shell >/dev/null 2>&1 || {
+          apt-get update -qq >/dev/null 2>&1 \
+          && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium-headless-shell >/dev/null 2>&1; } \
+        || { _say "installing chromium-headless-shell failed (apt-get); the viewer's browser test needs it"; exit 1; }
     else
-      _say "note: no headless Chromium for the viewer's browser test (it will skip); to run it:"
+      _say "warning: no headless Chromium for the viewer's browser test, which then skips (and CI fails); install:"
       _say "    sudo apt-get install -y chromium-headless-shell   (or set WARPGS_CHROMIUM=/path/to/chromium)"
     fi
   fi
   # LPIPS: the lpips package declares torchvision, whose PyPI build would replace the CPU torch; warpgs
   # needs only lpips's code (it supplies AlexNet's layout itself), so install it without dependencies.
-  "${_pip[@]}" --no-deps "lpips>=0.1.4" 2>&1 | grep -v -e '^WARNING: Location' >&2 || true
-  "${_pip[@]}" "scipy>=1.8" 2>&1 | grep -v -e '^WARNING: Location' -e "dependency resolver" -e 'requires torchvision' >&2 || true
-  "$WARPGS_VENV/bin/python" -c 'import warpgs, warp, torch, open3d, kornia, trimesh' \
-    || { _say "installation incomplete (see the messages above)"; exit 1; }
+  _install lpips --no-deps "lpips>=0.1.4"
+  _install scipy "scipy>=1.8"
+  # every module the tests import, by name: the first missing one is named
+  "$WARPGS_VENV/bin/python" - <<'PY' || { _say "installation incomplete (see the line above)"; exit 1; }
+import importlib, sys
+for name in ("warpgs", "warp", "torch", "open3d", "kornia", "trimesh", "pycolmap", "plyfile", "cv2", "lpips", "scipy",
+             "diffusers", "transformers", "ray", "viser", "playwright.sync_api"):
+    try:
+        importlib.import_module(name)
+    except Exception as e:
+        sys.exit(f"warpgs setup: {name} does not import ({type(e).__name__}: {e})")
+PY
   echo "$_want" > "$_stamp"
 fi
 export WARPGS_ROOT WARPGS_VENV

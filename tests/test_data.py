@@ -370,7 +370,12 @@ def test_distortion_is_removed_or_refused(tmp_path):
         g = pattern(x, y)
         return (np.repeat(g[..., None], 3, axis=2) * 255).round().astype(np.uint8)
 
-    root = write_capture(tmp_path / "cap", n=4, w=w, h=h, image_fn=distorted_image, extra={"fl_x": f, "fl_y": f, **dist})
+    def stamped(k):  # each frame its own file (a corner pixel outside the compared region differs)
+        img = distorted_image(k)
+        img[0, 0] = k
+        return img
+
+    root = write_capture(tmp_path / "cap", n=4, w=w, h=h, image_fn=stamped, extra={"fl_x": f, "fl_y": f, **dist})
     with pytest.raises(SceneError, match="distortion"):
         load_nerfstudio(root, views=1, undistort=False)
     s = load_nerfstudio(root, views=1, undistort=True)
@@ -525,7 +530,7 @@ def test_bad_llff_dtu_blender_inputs(tmp_path):
     (r / "images_8").mkdir(parents=True)
     rows = []
     for k in range(5):
-        Image.fromarray(np.zeros((6, 8, 3), np.uint8)).save(r / "images_8" / f"img{k}.png")
+        Image.fromarray(np.full((6, 8, 3), k, np.uint8)).save(r / "images_8" / f"img{k}.png")  # distinct frames
         R = np.array([[0, 1, 0], [1, 0, 0], [0, 0, -1.0]])  # [down, right, back] of a camera looking along +z
         rows.append(np.r_[np.c_[R, [0.1 * k, 0, 0], [48, 64, 50]].ravel(), 1.0, 10.0])
     np.save(r / "poses_bounds.npy", np.array(rows[:4]))
@@ -552,3 +557,43 @@ def test_bad_llff_dtu_blender_inputs(tmp_path):
     for name in ("train", "test"):
         (r / f"transforms_{name}.json").write_text(json.dumps({"camera_angle_x": 0.69, "frames": frames}))
     _err(lambda: load_blender(r), "r_26.png", "missing")
+
+
+# ----------------------------------------------------------------------------------------------
+# plausibility (warpgs/data/plausible.py)
+
+
+def test_impossible_cameras_are_refused_naming_frame_and_field_unless_allowed(tmp_path):
+    from warpgs.data import load_scene
+
+    r = write_capture(tmp_path / "far_cx", extra={"cx": 1e6})  # the principal point 60,000 images to the right
+    _err(lambda: load_scene(str(r), views=3), "frame_0000", "cx = 1e+06", "allow_implausible_camera")
+    s = load_scene(str(r), views=3, allow_implausible_camera=True)  # a user who means it
+    assert s.train[0].K[0, 2] == pytest.approx(1e6)
+    r = write_capture(tmp_path / "tele", extra={"fl_x": 1e30, "fl_y": 1e30})
+    _err(lambda: load_scene(str(r), views=3), "fx = 1e+30", "implausible intrinsics")
+    r = write_capture(tmp_path / "k1", extra={"k1": 40.0})  # the corner's radius x 1+ 40 r^2: no lens
+    _err(lambda: load_scene(str(r), views=3), "k1 = 40", "lens distortion")
+    # the edges of what real cameras do load: a wide lens, a long one, an off-centre crop, a barrel distortion
+    for k, extra in enumerate(({"fl_x": 1.0, "fl_y": 1.0}, {"fl_x": 1500.0, "fl_y": 1500.0}, {"cx": -10.0, "cy": 20.0},
+                               {"k1": -0.2, "k2": 0.03})):
+        assert len(load_scene(str(write_capture(tmp_path / f"ok{k}", extra=extra)), views=3).train) == 3
+
+
+@pytest.mark.parametrize("how", ["spelling", "symlink", "copy"])
+def test_one_frame_twice_is_refused_naming_both_unless_allowed(tmp_path, how):
+    from warpgs.data import load_scene
+
+    def edit(k, fr):
+        if k == 4:
+            fr["file_path"] = {"spelling": "images/./frame_00002.png", "symlink": "images/alias.png",
+                               "copy": "images/copy.png"}[how]
+
+    r = write_capture(tmp_path / "cap", frame_edit=edit)
+    if how == "symlink":
+        (r / "images" / "alias.png").symlink_to("frame_00002.png")
+    elif how == "copy":
+        (r / "images" / "copy.png").write_bytes((r / "images" / "frame_00002.png").read_bytes())
+    _err(lambda: load_scene(str(r), views=3), "frame_00002.png", "allow_duplicate_frames",
+         "listed twice" if how != "copy" else "byte-identical")
+    assert len(load_scene(str(r), views=3, allow_duplicate_frames=True).train) == 3

@@ -17,6 +17,8 @@ import json
 import os
 import random
 import shutil
+import subprocess
+import sys
 import traceback
 import warnings
 from collections import Counter
@@ -428,3 +430,293 @@ def test_fuzzed_loaders_and_config_parser(bases, tmp_path, record_property, caps
     for kind in kinds:
         if not kind.startswith("config"):
             assert outcomes[(kind, "loaded")] > 0 and outcomes[(kind, "SceneError")] > 0, (kind, outcomes)
+
+
+# ----------------------------------------------------------------------------------------------
+# what a person does: data no camera could have taken, one frame listed twice, lying headers, odd images, a config
+# that sets a key twice. Each case says whether it must be refused (impossible data), must load (data a user may
+# really mean) or either; the outcome is counted, and a traceback, a refusal that names nothing, a silent acceptance
+# of impossible data or a refusal of meant data fails the test.
+
+REFUSE, ACCEPT, EITHER = "refuse", "accept", "either"
+
+
+def _person_base(root: Path) -> Path:
+    from tiny_scene import write_nerfstudio
+
+    return write_nerfstudio(root, n_frames=6)  # 48x48, fl 52.8, cx = cy = 24
+
+
+def _edit_meta(work: Path, fn) -> None:
+    meta = json.loads((work / "transforms.json").read_text())
+    fn(meta)
+    (work / "transforms.json").write_text(json.dumps(meta))
+
+
+# (field, value in units of the image side (focal, principal point) or as is (distortion), expected)
+_CAMERA_CASES = (
+    [("fl_x", f, REFUSE) for f in (1e-6, 1e-3, 0.03, 0.049, 100.5, 300.0, 1e4, 1e28, 0.0, -1.1)]
+    + [("fl_y", f, REFUSE) for f in (0.01, 150.0, 1e30)]
+    + [("fl_x", f, ACCEPT) for f in (0.051, 0.2, 1.1, 10.0, 99.0)]
+    + [(c, v, REFUSE) for c in ("cx", "cy") for v in (-1.01, -5.0, 2.01, 10.0, 1e9, -1e9)]
+    + [(c, v, ACCEPT) for c in ("cx", "cy") for v in (-0.99, -0.3, 0.5, 1.4, 1.99)]
+    + [("k1", v, REFUSE) for v in (10.0, 1e3, -3.0, -1.0, -1e6)] + [("k2", v, REFUSE) for v in (100.0, -40.0)]
+    + [("k3", 1e4, REFUSE), ("p1", 0.6, REFUSE), ("p2", -5.0, REFUSE)]
+    + [("k1", v, ACCEPT) for v in (-0.3, -0.1, 0.05, 0.3, 1.0)] + [("k2", v, ACCEPT) for v in (0.05, -0.02)]
+    + [("p1", 0.001, ACCEPT), ("p2", -0.002, ACCEPT)]
+)
+
+
+def _camera_case(rng: random.Random, work: Path):
+    field, v, expect = rng.choice(_CAMERA_CASES)
+    value = v * 48 if field in ("fl_x", "fl_y", "cx", "cy") else v
+    per_frame = rng.random() < 0.5
+
+    def edit(meta):
+        target = rng.choice(meta["frames"]) if per_frame else meta
+        target[field] = value
+        if field in ("cx", "cy") and per_frame:  # a frame with its own intrinsics states all of them
+            for k in ("fl_x", "fl_y", "cx", "cy"):
+                target.setdefault(k, meta[k])
+
+    _edit_meta(work, edit)
+    return f"{field} = {value:g} ({'one frame' if per_frame else 'every frame'})", expect
+
+
+def _path_case(rng: random.Random, work: Path):
+    meta = json.loads((work / "transforms.json").read_text())
+    frames = meta["frames"]
+    i, j = rng.sample(range(len(frames)), 2)
+    name_i = Path(frames[i]["file_path"]).name
+    name_j = Path(frames[j]["file_path"]).name
+    op = rng.choice(["spelling", "spelling", "absolute", "symlink", "copy", "folder_link", "own_spelling", "moved_link"])
+    if op == "spelling":
+        spelling = rng.choice(["images/./{n}", "./images/{n}", "images//{n}", "images/../images/{n}"]).format(n=name_i)
+        frames[j]["file_path"], expect, what = spelling, REFUSE, f"frame {j} is {spelling}"
+    elif op == "absolute":
+        frames[j]["file_path"], expect, what = str(work / "images" / name_i), REFUSE, f"frame {j} by absolute path"
+    elif op == "symlink":
+        (work / "images" / "alias.png").symlink_to(name_i)
+        frames[j]["file_path"], expect, what = "images/alias.png", REFUSE, f"frame {j} a symlink to frame {i}'s file"
+    elif op == "copy":
+        shutil.copy(work / "images" / name_i, work / "images" / "copy.png")
+        frames[j]["file_path"], expect, what = "images/copy.png", REFUSE, f"frame {j} a byte-identical copy"
+    elif op == "folder_link":
+        (work / "imgs").symlink_to("images")
+        frames[j]["file_path"], expect, what = f"imgs/{name_j}", ACCEPT, f"frame {j} through a symlinked folder"
+    elif op == "own_spelling":
+        frames[j]["file_path"], expect, what = f"./images/./{name_j}", ACCEPT, f"frame {j} spelled ./images/./"
+    else:
+        (work / "elsewhere").mkdir()
+        shutil.move(work / "images" / name_j, work / "elsewhere" / name_j)
+        (work / "images" / name_j).symlink_to(Path("..") / "elsewhere" / name_j)
+        expect, what = ACCEPT, f"frame {j}'s file a symlink to its own moved file"
+    (work / "transforms.json").write_text(json.dumps(meta))
+    return what, expect
+
+
+def _image_case(rng: random.Random, work: Path):
+    meta = json.loads((work / "transforms.json").read_text())
+    j = rng.randrange(len(meta["frames"]))
+    p = work / meta["frames"][j]["file_path"]
+    op = rng.choice(["constant", "noise", "one_bit", "sixteen_bit", "transparent", "all_black"])
+    g = np.random.default_rng(rng.randrange(1 << 30))
+    if op == "constant":
+        Image.fromarray(np.full((48, 48, 3), rng.choice([0, 1, 128, 255]), np.uint8)).save(p)
+    elif op == "noise":
+        Image.fromarray(g.integers(0, 256, (48, 48, 3), dtype=np.uint8)).save(p)
+    elif op == "one_bit":
+        Image.fromarray(g.integers(0, 2, (48, 48), dtype=np.uint8) * 255).convert("1").save(p)
+    elif op == "sixteen_bit":
+        Image.fromarray(np.full((48, 48), rng.choice([0, 65535, 1]), np.uint16)).save(p)
+    elif op == "transparent":  # alpha 0 everywhere: the colour under it is 0 / 0 without care
+        Image.fromarray(np.zeros((48, 48, 4), np.uint8)).save(p)
+    else:  # every frame the same black image: byte-identical files
+        for fr in meta["frames"]:
+            Image.fromarray(np.zeros((48, 48, 3), np.uint8)).save(work / fr["file_path"])
+        return "every frame black", REFUSE
+    return f"frame {j}: {op}", ACCEPT
+
+
+def _ply_case(rng: random.Random, work: Path):
+    """A Gaussian or point PLY with a lying or incomplete header; read as viz reads it."""
+    from warpgs.model import GaussianModel
+    from warpgs.ply import read_vertices, write_vertices
+    from warpgs.viz import save_origin_ply
+
+    g = np.random.default_rng(rng.randrange(1 << 30))
+    n = rng.choice([1, 7, 50])
+    if rng.random() < 0.5:
+        path = GaussianModel.from_points(g.uniform(-1, 1, (n, 3)).astype(np.float32),
+                                         g.random((n, 3)).astype(np.float32), sh_degree=rng.choice([0, 1])).save_ply(work / "g.ply")
+    else:
+        path = save_origin_ply(work / "p.ply", g.normal(size=(n, 3)), g.random((n, 3)))
+    data = path.read_bytes()
+    head_end = data.index(b"end_header\n") + len(b"end_header\n")
+    head, body = data[:head_end], data[head_end:]
+    op = rng.choice(["count", "count", "negative", "truncate", "drop", "comment", "extra_element", "ascii_claim"])
+    if op == "count":
+        k = rng.choice([2, 10, 10**6, 2**31, 2**40, 10**14])
+        head, expect, what = head.replace(f"element vertex {n}".encode(), f"element vertex {n * k}".encode()), REFUSE, f"count x{k}"
+    elif op == "negative":
+        head, expect, what = head.replace(f"element vertex {n}".encode(), b"element vertex -5"), REFUSE, "count -5"
+    elif op == "truncate":
+        body, expect, what = body[: rng.randrange(len(body))], REFUSE, "body truncated"
+    elif op == "drop" and path.name == "g.ply":
+        v = read_vertices(path)
+        drop = rng.choice([["opacity"], ["scale_0"], ["rot_0", "rot_1", "rot_2", "rot_3"], ["scale_2", "rot_3"]])
+        keep = [k for k in v if k not in drop]
+        rec = np.zeros(n, dtype=[(k, "<f4") for k in keep])
+        for k in keep:
+            rec[k] = v[k]
+        write_vertices(path, rec)
+        return path, f"Gaussian PLY without {drop}", REFUSE
+    elif op == "ascii_claim":
+        head, expect, what = head.replace(b"binary_little_endian", b"ascii"), EITHER, "binary body under an ascii header"
+    elif op == "extra_element":
+        head, expect, what = head.replace(b"end_header", b"element face 0\nproperty list uchar int vertex_indices\nend_header"), ACCEPT, "an empty face element"
+    else:
+        head, expect, what = head.replace(b"end_header", b"comment written by hand\ncomment another\nend_header"), ACCEPT, "comments"
+    path.write_bytes(head + body)
+    return path, what, expect
+
+
+def _yaml_case(rng: random.Random, work: Path, k: int):
+    src = rng.choice(sorted(CONFIG_DIR.glob("*.yaml")))
+    lines = src.read_text().splitlines()
+    keyed = [i for i, ln in enumerate(lines) if ":" in ln and not ln.lstrip().startswith(("#", "-"))
+             and ln.split(":", 1)[0].strip() and ln.split(":", 1)[1].strip() and ln.split(":", 1)[0].strip() != "base"]
+    p = work / f"y{k}.yaml"
+    if not keyed or rng.random() < 0.25:  # the same leaf name under two parents: an ordinary config
+        p.write_text("train:\n  iterations: 10\nmodel:\n  iterations_note: 1\neval:\n  iterations: 3\n")
+        return p, "one name under two parents", ACCEPT, None
+    i = rng.choice(keyed)
+    key = lines[i].split(":", 1)[0].strip()
+    indent = lines[i][: len(lines[i]) - len(lines[i].lstrip())]
+    lines.insert(i + 1, f"{indent}{key}: {rng.choice(['1', '0.5', 'true', 'x'])}")
+    p.write_text("\n".join(lines) + "\n")
+    return p, f"{src.name}: {key} set twice", REFUSE, key
+
+
+@needs_shared
+def test_fuzzed_person_inputs(tmp_path, capsys):
+    """Implausible cameras, aliased and symlinked paths, degenerate images, lying PLY headers, YAML keys set twice:
+    each refused with a message naming the file, frame, field or key, or loaded when a user may mean it."""
+    from warpgs.viz import read_cloud
+
+    base = _person_base(tmp_path / "base")
+    rng = random.Random(f"{SEED}-person")
+    failures: list[str] = []
+    counts: Counter = Counter()
+    work = tmp_path / "work"
+
+    def judge(kind, k, what, expect, call, must_name):
+        try:
+            result = call()
+        except (SceneError, ConfigError, ValueError) as e:
+            counts[(kind, "refused")] += 1
+            if expect == ACCEPT:
+                failures.append(f"{kind} #{k} ({what}): refused data a user may mean: {e}")
+            elif must_name and must_name not in str(e):
+                failures.append(f"{kind} #{k} ({what}): the refusal names neither file nor key: {e}")
+            elif "\n" in str(e):
+                failures.append(f"{kind} #{k} ({what}): the refusal is not one line: {e}")
+        except Exception as e:
+            counts[(kind, "traceback")] += 1
+            failures.append(f"{kind} #{k} ({what}): {type(e).__name__}: {e}\n" + "".join(traceback.format_exception(e)[-4:]))
+        else:
+            counts[(kind, "loaded")] += 1
+            if expect == REFUSE:
+                counts[(kind, "silent")] += 1
+                failures.append(f"{kind} #{k} ({what}): impossible data accepted without a word")
+            elif kind != "yaml" and kind != "ply" and _scene_is_sane(result):
+                failures.append(f"{kind} #{k} ({what}): loaded, but {_scene_is_sane(result)}")
+
+    for kind, make, n in (("camera", _camera_case, 140), ("path", _path_case, 100), ("image", _image_case, 60)):
+        for k in range(int(n * SCALE)):
+            if work.exists():
+                shutil.rmtree(work)
+            shutil.copytree(base, work, symlinks=True)
+            what, expect = make(rng, work)
+            judge(kind, k, what, expect, lambda: load_scene(str(work), views="all"), str(work))  # every frame read
+    for k in range(int(100 * SCALE)):
+        if work.exists():
+            shutil.rmtree(work)
+        work.mkdir()
+        path, what, expect = _ply_case(rng, work)
+        judge("ply", k, what, expect, lambda: read_cloud(path), str(path))
+    (tmp_path / "yaml").mkdir()
+    for k in range(int(60 * SCALE)):
+        path, what, expect, key = _yaml_case(rng, tmp_path / "yaml", k)
+        judge("yaml", k, what, expect, lambda: read_yaml(path), key and f"{key!r}")
+
+    tried = sum(n for (_, o), n in counts.items() if o in ("refused", "loaded", "traceback"))
+    refused = sum(n for (_, o), n in counts.items() if o == "refused")
+    tracebacks = sum(n for (_, o), n in counts.items() if o == "traceback")
+    silent = sum(n for (_, o), n in counts.items() if o == "silent")
+    with capsys.disabled():
+        print(f"\nfuzz person (seed {SEED}): {tried} cases, {refused} refused, {tried - refused - tracebacks} loaded; "
+              f"{tracebacks} tracebacks, 0 native crashes, {silent} silent acceptances of impossible data")
+    assert not failures, f"{len(failures)} of {tried} cases:\n" + "\n\n".join(failures[:15])
+    assert tried >= 400 * SCALE
+    for kind in ("camera", "path", "ply", "yaml"):  # every generator reaches both outcomes
+        assert counts[(kind, "refused")] > 0 and counts[(kind, "loaded")] > 0, (kind, counts)
+
+
+def _sparse(data: Path, out: Path, *extra: str, env: dict | None = None) -> subprocess.CompletedProcess:
+    argv = ["--data", str(data), "--views", "3", "--device", "cpu", "--no-progress", "--method", "baseline",
+            "--set", "model.init=box", "--set", "model.init_box=[-1.2,-1.2,-1.2,1.2,1.2,1.2]", "--set", "model.init_num=200",
+            "--set", "eval.lpips_weights=/nonexistent/alexnet.pth", "--set", "eval.fps_repeats=1",
+            "--set", "eval.save_images=false", "--iterations", "5", "--out", str(out), *extra]
+    return subprocess.run([sys.executable, "-m", "warpgs.pipelines.sparse", *argv], capture_output=True, text=True,
+                          timeout=900, cwd=Path(__file__).resolve().parents[1], env={**os.environ, **(env or {})})
+
+
+def test_fuzzed_person_inputs_through_the_main_job(tmp_path, capsys):
+    """A few of the cases above through ``python -m warpgs.pipelines.sparse``, pycolmap included: impossible data
+    ends with exit code 2 and one ``error:`` line naming the field; data a user may mean (a degenerate image), and an
+    SfM whose native child dies (a real SIGSEGV, injected through the test hook), train to the end (exit 0), the
+    fallback recorded in metrics.json."""
+    from warpgs.densify.native import FAULT_ENV
+
+    base = _person_base(tmp_path / "base")
+
+    def variant(name, edit=None, image=None):
+        work = tmp_path / name
+        shutil.copytree(base, work)
+        if edit:
+            _edit_meta(work, edit)
+        if image is not None:
+            Image.fromarray(image).save(work / "images" / "f002.png")
+        return work
+
+    def set_all(field, value):
+        return lambda meta: meta.__setitem__(field, value)
+
+    def alias(meta):
+        meta["frames"][3]["file_path"] = "images/./" + Path(meta["frames"][1]["file_path"]).name
+
+    refused = [("cx far outside", variant("cx", set_all("cx", 1e6)), ["cx", "principal point"]),
+               ("fl_x 1e30", variant("fl", set_all("fl_x", 1e30)), ["fx", "implausible intrinsics"]),
+               ("k1 1000", variant("k1", set_all("k1", 1e3)), ["k1", "distortion"]),
+               ("one image twice", variant("alias", alias), ["'images/f001.png'", "'images/./f001.png'", "listed twice"])]
+    counts = Counter()
+    for what, data, words in refused:
+        r = _sparse(data, tmp_path / f"out_{data.name}")
+        errors = [ln for ln in r.stderr.splitlines() if ln.startswith("error: ")]
+        counts["native crashes"] += r.returncode < 0
+        counts["tracebacks"] += "Traceback" in r.stderr
+        assert r.returncode == 2 and len(errors) == 1 and "Traceback" not in r.stderr, (what, r.returncode, r.stderr[-3000:])
+        for w in words:
+            assert w in errors[0], (what, errors[0])
+    flat = variant("flat", image=np.full((48, 48, 3), 128, np.uint8))
+    r = _sparse(flat, tmp_path / "out_flat")
+    assert r.returncode == 0 and "Traceback" not in r.stderr, r.stderr[-3000:]
+    r = _sparse(base, tmp_path / "out_sfm", "--set", "model.init=sfm", env={FAULT_ENV: "sfm:segv"})
+    assert r.returncode == 0 and "Traceback" not in r.stderr, r.stderr[-3000:]
+    init = json.loads((tmp_path / "out_sfm" / "metrics.json").read_text())["init"]
+    assert any("SIGSEGV" in line for line in init["native_failures"]), init
+    assert init["method"] != "sfm" and sum(1 for ln in r.stderr.splitlines() if "SIGSEGV" in ln) == 1, r.stderr[-3000:]
+    with capsys.disabled():
+        print(f"\nfuzz person end to end: 6 runs, 4 refused with exit 2, 2 trained; {counts['tracebacks']} tracebacks, "
+              f"{counts['native crashes']} native crashes")

@@ -415,9 +415,9 @@ def test_nonfinite_gaussians_are_refused_with_their_count_or_dropped(tmp_path, c
     every = _model_with_nonfinite(tmp_path / "nan.ply", [("means", slice(None), float("nan"))])
     png = tmp_path / "view.png"
     for extra in ([], ["--drop-invalid"]):  # all-NaN: nothing to show either way, and no blank PNG
-        assert viz.main([str(every), "--png", str(png), "--renderer", "numpy", *extra]) == 1
+        assert viz.main([str(every), "--png", str(png), "--renderer", "numpy", *extra]) == 2
         assert "all 50 Gaussians have non-finite values" in capsys.readouterr().err and not png.exists()
-    assert viz.main([str(part), "--png", str(png), "--renderer", "numpy"]) == 1
+    assert viz.main([str(part), "--png", str(png), "--renderer", "numpy"]) == 2
     assert "4 of 50 Gaussians" in capsys.readouterr().err and not png.exists()
     assert viz.main([str(part), "--png", str(png), "--renderer", "numpy", "--drop-invalid", "--size", "64x48"]) == 0
     assert "46 gaussians" in capsys.readouterr().out and png.is_file()

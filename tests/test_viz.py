@@ -139,9 +139,11 @@ def test_read_gaussian_ply_and_cli_errors(tmp_path, capsys):
     assert np.allclose(cloud["colors"], [0.9, 0.2, 0.1], atol=1e-5)
     assert main([str(path), "--png", str(tmp_path / "g.png"), "--renderer", "numpy", "--size", "64x48"]) == 0
     assert Image.open(tmp_path / "g.png").size == (64, 48)
-    assert main([str(tmp_path / "missing.ply"), "--png", str(tmp_path / "x.png")]) == 1
-    assert "no such file" in capsys.readouterr().err
-    assert main([str(path), "--png", str(tmp_path / "x.png"), "--color", "origin"]) == 1
+    capsys.readouterr()
+    assert main([str(tmp_path / "missing.ply"), "--png", str(tmp_path / "x.png")]) == 2
+    err = capsys.readouterr().err
+    assert "no such file" in err and err.startswith("error: ") and err.count("\n") == 1
+    assert main([str(path), "--png", str(tmp_path / "x.png"), "--color", "origin"]) == 2
     # a round trip of an origin cloud keeps points, 8-bit colours and origins
     pts = np.random.default_rng(3).normal(size=(20, 3)).astype(np.float32)
     origin = np.arange(20) % 3
@@ -157,5 +159,47 @@ def test_window_without_display_says_use_png(tmp_path, monkeypatch, capsys):
     monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
     path = save_origin_ply(tmp_path / "p.ply", np.zeros((3, 3)))
     if sys.platform.startswith("linux"):
-        assert main([str(path)]) == 1
+        assert main([str(path)]) == 2
         assert "--png" in capsys.readouterr().err
+
+
+def _one_error(capsys, *words):
+    err = capsys.readouterr().err
+    assert err.startswith("error: ") and err.count("\n") == 1, err
+    for w in words:
+        assert w in err, err
+
+
+def test_png_into_a_missing_folder_is_refused_and_creates_nothing(tmp_path, capsys):
+    path = save_origin_ply(tmp_path / "p.ply", np.random.default_rng(0).normal(size=(10, 3)))
+    target = tmp_path / "no" / "such" / "dir" / "x.png"
+    assert main([str(path), "--png", str(target), "--renderer", "numpy"]) == 2
+    _one_error(capsys, "does not exist")
+    assert not (tmp_path / "no").exists()
+
+
+def test_a_header_claiming_more_vertices_than_the_file_holds_is_refused_before_reading(tmp_path, capsys):
+    path = save_origin_ply(tmp_path / "p.ply", np.random.default_rng(0).normal(size=(10, 3)))
+    data = path.read_bytes()
+    lying = tmp_path / "lying.ply"
+    lying.write_bytes(data.replace(b"element vertex 10", b"element vertex 99999999999999"))
+    assert main([str(lying), "--png", str(tmp_path / "x.png"), "--renderer", "numpy"]) == 2
+    _one_error(capsys, "99999999999999", "bytes after the header")
+
+
+def test_a_gaussian_ply_without_opacity_scales_or_rotations_is_refused(tmp_path, capsys):
+    from warpgs.model import GaussianModel
+    from warpgs.ply import read_vertices, write_vertices
+
+    m = GaussianModel.from_points(np.random.default_rng(2).uniform(-1, 1, (20, 3)).astype(np.float32),
+                                  np.full((20, 3), 0.5, np.float32), sh_degree=0)
+    v = read_vertices(m.save_ply(tmp_path / "g.ply"))
+    for drop in (["opacity"], ["scale_0", "scale_1", "scale_2"], ["rot_3"]):
+        keep = [k for k in v if k not in drop]
+        rec = np.zeros(20, dtype=[(k, "<f4") for k in keep])
+        for k in keep:
+            rec[k] = v[k]
+        write_vertices(tmp_path / "part.ply", rec)
+        assert main([str(tmp_path / "part.ply"), "--png", str(tmp_path / "x.png"), "--renderer", "numpy"]) == 2
+        _one_error(capsys, *drop)
+        assert not (tmp_path / "x.png").exists()

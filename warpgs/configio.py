@@ -193,9 +193,39 @@ def apply_values(obj, values: dict, where: str, prefix: str = "") -> None:
         setattr(obj, key, v)
 
 
+class DuplicateKeyError(yaml.YAMLError):
+    """A mapping of a YAML file sets one key twice; the message names the key and both lines."""
+
+
+class UniqueKeyLoader(yaml.SafeLoader):
+    """yaml's SafeLoader, except that a mapping that sets one key twice is a ``DuplicateKeyError`` (SafeLoader
+    keeps the last value without a word)."""
+
+    def construct_mapping(self, node, deep=False):
+        if isinstance(node, yaml.MappingNode):
+            lines: dict = {}
+            for key_node, _ in node.value:
+                if key_node.tag == "tag:yaml.org,2002:merge":
+                    continue
+                key = self.construct_object(key_node, deep=True)
+                try:
+                    first = lines.setdefault(key, key_node.start_mark.line + 1)
+                except TypeError:  # an unhashable key: SafeLoader's own error
+                    continue
+                if first != key_node.start_mark.line + 1:
+                    raise DuplicateKeyError(f"line {key_node.start_mark.line + 1}: key {key!r} is set twice "
+                                            f"(first at line {first})")
+        return super().construct_mapping(node, deep=deep)
+
+
 def read_yaml(path: str | Path, _seen=None) -> dict:
-    """A config file as a dict, with its ``base:`` file (relative to it) merged underneath."""
+    """A config file as a dict, with its ``base:`` file (relative to it) merged underneath. A key set twice in one
+    mapping is an error (``UniqueKeyLoader``)."""
     path = Path(path)
+    if path.is_dir():
+        raise ConfigError(f"{path}: is a folder, not a config file")
+    if path.exists() and not path.is_file():
+        raise ConfigError(f"{path}: is not a regular file (a config is a YAML file)")
     if not path.is_file():
         raise ConfigError(f"{path}: config file not found")
     seen = set() if _seen is None else _seen
@@ -203,7 +233,9 @@ def read_yaml(path: str | Path, _seen=None) -> dict:
         raise ConfigError(f"{path}: 'base' chain loops")
     seen.add(path.resolve())
     try:
-        data = yaml.safe_load(path.read_text(encoding="utf-8")) or {}
+        data = yaml.load(path.read_text(encoding="utf-8"), Loader=UniqueKeyLoader) or {}
+    except DuplicateKeyError as e:
+        raise ConfigError(f"{path}: {e}") from None
     except yaml.YAMLError as e:
         raise ConfigError(f"{path}: cannot parse YAML ({' '.join(str(e).split())})") from None
     except UnicodeDecodeError as e:
@@ -245,5 +277,5 @@ def parse_override(text: str) -> dict:
     return out
 
 
-__all__ = ["CONFIG_DIR", "REPO_ROOT", "ConfigError", "apply_values", "check_limits", "limit_error", "limits_of", "merge",
+__all__ = ["CONFIG_DIR", "REPO_ROOT", "ConfigError", "DuplicateKeyError", "UniqueKeyLoader", "apply_values", "check_limits", "limit_error", "limits_of", "merge",
            "parse_override", "read_yaml", "type_name"]

@@ -64,13 +64,68 @@ def write_vertices(path: str | Path, rec: np.ndarray) -> Path:
     return path
 
 
+_TYPE_SIZES = {"char": 1, "uchar": 1, "int8": 1, "uint8": 1, "short": 2, "ushort": 2, "int16": 2, "uint16": 2,
+               "int": 4, "uint": 4, "int32": 4, "uint32": 4, "float": 4, "float32": 4, "double": 8, "float64": 8}
+MAX_HEADER = 1 << 20  # bytes: a longer "header" is not one
+
+
+def check_header(path: str | Path) -> dict[str, int]:
+    """Every element's name -> count, after checking the header against the file's size, before anything is
+    allocated for the data: a header that claims more rows than the bytes after it can hold (a binary file holds
+    each row's exact size, at least its list counts; an ascii one at least two characters per value) is a
+    ``ValueError`` naming the file, the element, its claimed count and the bytes there are. A header that cannot
+    be parsed is left to plyfile's messages (an empty dict)."""
+    path = Path(path)
+    with open(path, "rb") as f:
+        head = f.read(MAX_HEADER)
+    end = head.find(b"end_header")
+    if not head.startswith(b"ply") or end < 0:
+        return {}
+    nl = head.find(b"\n", end)
+    body = path.stat().st_size - (nl + 1 if nl >= 0 else len(head))
+    fmt, elements = None, []  # [name, count, fixed bytes per row, values per row]
+    for line in head[:end].decode("ascii", "replace").splitlines():
+        w = line.split()
+        if len(w) >= 2 and w[0] == "format":
+            fmt = w[1]
+        elif len(w) >= 3 and w[0] == "element":
+            try:
+                elements.append([w[1], int(w[2]), 0, 0])
+            except ValueError:
+                return {}
+        elif len(w) >= 3 and w[0] == "property" and elements:
+            if w[1] == "list" and len(w) >= 5:
+                elements[-1][2] += _TYPE_SIZES.get(w[2], 1)  # the count; the items may be none
+            else:
+                elements[-1][2] += _TYPE_SIZES.get(w[1], 1)
+            elements[-1][3] += 1
+    need = 0
+    for name, count, row_bytes, values in elements:
+        if count < 0:
+            raise ValueError(f"{path}: PLY header gives element {name!r} a negative count ({count})")
+        need += count * (max(2 * values, 1) if fmt == "ascii" else row_bytes)
+        if need > body:
+            raise ValueError(f"{path}: PLY header claims {count} {name} rows, more than the {body} bytes after the "
+                             "header can hold (truncated file or lying header)")
+    return {name: count for name, count, _, _ in elements}
+
+
+def require(names, wanted: list[str], path, what: str) -> None:
+    """``ValueError`` naming the file and the columns of ``wanted`` that ``names`` lacks."""
+    missing = [k for k in wanted if k not in names]
+    if missing:
+        raise ValueError(f"{path}: {what} without {', '.join(missing)}: not a complete file")
+
+
 def read_elements(path: str | Path) -> tuple[dict[str, np.ndarray], dict[str, int]]:
     """(the ``vertex`` element as name -> array in native byte order, every element's name -> count) of a
     PLY file (ascii or binary, either endianness, any other elements). Unreadable files are a ``ValueError``
-    naming the file (``truncated`` where the data ends early), a missing one ``FileNotFoundError``."""
+    naming the file (``truncated`` where the data ends early, or the header claims more than the file holds:
+    ``check_header``, before anything is allocated), a missing one ``FileNotFoundError``."""
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"{path}: PLY file is missing")
+    check_header(path)
     try:
         data = plyfile.PlyData.read(str(path), mmap=False)
     except plyfile.PlyHeaderParseError as e:
@@ -80,7 +135,7 @@ def read_elements(path: str | Path) -> tuple[dict[str, np.ndarray], dict[str, in
     except plyfile.PlyElementParseError as e:
         what = "file is truncated" if "end-of-file" in str(e) or "early end" in str(e) else "cannot read the data"
         raise ValueError(f"{path}: {what} ({e})") from e
-    except (ValueError, TypeError, UnicodeDecodeError) as e:  # malformed numbers in an ascii body, odd types
+    except (ValueError, TypeError, UnicodeDecodeError, MemoryError) as e:  # malformed numbers, odd types
         raise ValueError(f"{path}: cannot read it as PLY ({e})") from e
     counts = {el.name: el.count for el in data.elements}
     if "vertex" not in counts:
@@ -123,4 +178,5 @@ def keep_finite(v: dict[str, np.ndarray], names: list[str], path, drop: bool = F
     return {k: np.asarray(a)[~bad] for k, a in v.items()}
 
 
-__all__ = ["float_fields", "gaussian_fields", "header", "keep_finite", "read_elements", "read_vertices", "write_vertices"]
+__all__ = ["check_header", "float_fields", "gaussian_fields", "header", "keep_finite", "read_elements", "read_vertices",
+           "require", "write_vertices"]

@@ -51,7 +51,7 @@ import torch
 
 from warpgs.geometry import camera_centres, pose, quat_to_rotmat, rotmat_to_quat
 from warpgs.model import GaussianModel
-from warpgs.viz import ORIGIN_COLORS, ORIGIN_NAMES, default_camera, read_cloud
+from warpgs.viz import ORIGIN_COLORS, ORIGIN_NAMES, OneLineParser, default_camera, read_cloud
 
 MODES = ("rgb", "depth", "alpha")
 CLOSE_WAIT_S = 10.0  # seconds Ctrl-C waits for the server to stop before the command ends anyway
@@ -559,7 +559,7 @@ class Viewer:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    ap = argparse.ArgumentParser(prog="python -m warpgs.view", description=__doc__.split("\n\n")[0],
+    ap = OneLineParser(prog="python -m warpgs.view", description=__doc__.split("\n\n")[0],
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("run", help="a run folder (point_cloud.ply, config.yaml, cycle_N/) or a 3D-GS PLY")
     ap.add_argument("--host", default="0.0.0.0", help="address to listen on (default 0.0.0.0: every interface)")
@@ -595,11 +595,13 @@ def main(argv=None) -> int:
         return 2
     for note in run.notes:
         print(f"warpgs.view: note: {note}", file=sys.stderr)
+    if a.port and viewer.port != a.port:
+        print(f"warpgs.view: note: port {a.port} is taken; serving on port {viewer.port} instead", file=sys.stderr)
     print(f"warpgs.view: open {viewer.url} ({len(run.model):,} Gaussians on {device.type}, {run.summary()}; "
           "Ctrl-C stops)", flush=True)
     # Ctrl-C (and SIGTERM) by a handler of our own, installed after the libraries are loaded: one of them can
-    # leave SIGINT without Python's KeyboardInterrupt (session 27: in a fresh environment's first CI run the viewer
-    # did not stop within 120 s of Ctrl-C, printing nothing)
+    # leave SIGINT without Python's KeyboardInterrupt (in a fresh environment's first CI run the viewer once did not
+    # stop within 120 s of Ctrl-C, printing nothing)
     stop = threading.Event()
     previous = {sig: signal.signal(sig, lambda *_: stop.set()) for sig in (signal.SIGINT, signal.SIGTERM)}
     try:

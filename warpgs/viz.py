@@ -32,7 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from warpgs.console import filtered_stderr
-from warpgs.ply import keep_finite, read_elements, write_vertices
+from warpgs.ply import gaussian_fields, keep_finite, read_elements, require, write_vertices
 
 def save_image(path: str | Path, image) -> Path:
     """Saves [H, W, 3] or [H, W] values in [0, 1] (numpy or torch) as an 8-bit PNG; NaN is written as 0."""
@@ -71,7 +71,8 @@ def read_cloud(path: str | Path, drop_invalid: bool = False) -> dict:
         raise ValueError(f"{path}: PLY vertices have no x, y, z")
     points = np.stack([raw["x"], raw["y"], raw["z"]], 1).astype(np.float32)
     colors, kind = None, "mesh" if counts.get("face", 0) else "points"
-    if all(f"f_dc_{i}" in names for i in range(3)):
+    if any(k.startswith("f_dc_") for k in names):  # a 3D-GS file: every column a Gaussian needs
+        require(names, [k for k in gaussian_fields(0) if k not in ("nx", "ny", "nz")], path, "3D-GS PLY")
         kind = "gaussians"
         colors = np.clip(np.stack([raw[f"f_dc_{i}"] for i in range(3)], 1) * SH_C0 + 0.5, 0, 1).astype(np.float32)
     else:
@@ -290,7 +291,8 @@ def render_png(cloud: dict, out: str | Path, width: int = 960, height: int = 720
     if (color == "origin" or (color == "auto" and cloud.get("origin") is not None)) and cloud.get("origin") is not None:
         img = _legend(img, [int((cloud["origin"] == k).sum()) for k in range(3)])
     out = Path(out)
-    out.parent.mkdir(parents=True, exist_ok=True)
+    if not out.parent.is_dir():
+        raise ValueError(f"{out}: the folder {out.parent} does not exist (create it first)")
     Image.fromarray(np.clip(np.round(img * 255), 0, 255).astype(np.uint8)).save(out)
     return used
 
@@ -312,8 +314,16 @@ def show(cloud: dict, width: int = 960, height: int = 720, point_size: float = 2
     vis.destroy_window()
 
 
+class OneLineParser(argparse.ArgumentParser):
+    """argparse whose refusals are one line, ``error: ...``, and exit code 2 (no usage block)."""
+
+    def error(self, message: str):
+        print(f"error: {message} (see {self.prog} --help)", file=sys.stderr)
+        sys.exit(2)
+
+
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m warpgs.viz", description="Show a point cloud or Gaussian centres (PLY).")
+    ap = OneLineParser(prog="python -m warpgs.viz", description="Show a point cloud or Gaussian centres (PLY).")
     ap.add_argument("ply", help="point cloud, 3D-GS PLY, or a densification cloud with an 'origin' property")
     ap.add_argument("--png", default=None, help="render to this PNG instead of opening a window (no display needed)")
     ap.add_argument("--color", default="auto", choices=["auto", "rgb", "origin"],
@@ -333,6 +343,10 @@ def main(argv=None) -> int:
     except ValueError:
         ap.error("--size is WIDTHxHEIGHT and --background is r,g,b")
     try:
+        if a.png and not Path(a.png).resolve().parent.is_dir():
+            raise ValueError(f"--png {a.png}: the folder {Path(a.png).resolve().parent} does not exist (create it first)")
+        if width < 1 or height < 1 or width * height > 1 << 26:
+            raise ValueError(f"--size {a.size}: width and height must be positive, at most 2^26 pixels in all")
         cloud = read_cloud(a.ply, drop_invalid=a.drop_invalid)
         counts = ""
         if cloud["origin"] is not None:
@@ -343,9 +357,9 @@ def main(argv=None) -> int:
             print(f"wrote {a.png} ({width}x{height}, renderer: {used})")
         else:
             show(cloud, width, height, a.point_size, a.color, bg)
-    except (OSError, ValueError, RuntimeError) as e:
-        print(f"warpgs.viz: {e}", file=sys.stderr)
-        return 1
+    except (OSError, ValueError, RuntimeError, MemoryError) as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 2
     return 0
 
 

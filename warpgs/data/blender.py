@@ -18,6 +18,7 @@ import math
 import re
 from pathlib import Path
 
+from .plausible import check_frames
 from .scene import (ImageChannels, Scene, SceneError, check_pose, downsample, intrinsics, make_camera, number,
                     opengl_to_opencv_c2w, read_image)
 from .splits import blender_train_ids
@@ -107,7 +108,7 @@ def load_blender(
     sizes = {(c.width, c.height) for c in train}
     if len(sizes) > 1:
         raise SceneError(f"{root}: mixed image sizes among training views {sorted(sizes)}")
-    return Scene(
+    return check_frames(Scene(
         name=name or root.name,
         train=train,
         test=test,
@@ -121,4 +122,4 @@ def load_blender(
             "downscale": downscale,
             "test_downscale": test_downscale,
         },
-    )
+    ))

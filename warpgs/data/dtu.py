@@ -17,6 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .plausible import check_frames
 from .scene import ImageChannels, Scene, SceneError, downsample, list_images, make_camera, read_image, read_mask
 from .splits import dtu_split
 
@@ -128,7 +129,7 @@ def load_dtu(
     # the object lies inside the unit sphere of the normalised world
     dist = np.array([np.linalg.norm(c.center) for c in train + test])
     bounds = (float(max(dist.min() - 1.0, 0.05)), float(dist.max() + 1.0))
-    return Scene(
+    return check_frames(Scene(
         name=name or root.name,
         train=train,
         test=test,
@@ -143,4 +144,4 @@ def load_dtu(
             "frame_names": [f.name for f in files],
             "scale_mat": scale_mat,
         },
-    )
+    ))

@@ -21,6 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from . import colmap as colmap_io
+from .plausible import check_frames
 from .scene import (
     ImageChannels,
     Scene,
@@ -148,7 +149,7 @@ def load_llff(
         points = transform_points(W, pts.xyz).astype(np.float32)
         rgbs = (pts.rgb / 255.0).astype(np.float32)
     nb = bds * scale
-    return Scene(
+    return check_frames(Scene(
         name=name or root.name,
         train=train,
         test=test,
@@ -165,4 +166,4 @@ def load_llff(
             "view_bounds": {files[k].stem: tuple(map(float, nb[k])) for k in range(len(files))},
             "downscale": d,
         },
-    )
+    ))

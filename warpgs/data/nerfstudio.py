@@ -23,6 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from . import colmap as colmap_io
+from .plausible import check_distortion, check_frames, check_listed
 from .scene import (
     Camera,
     ImageChannels,
@@ -213,6 +214,7 @@ def load_nerfstudio(
     if len(set(names)) != len(names):
         dup = sorted({n for n in names if names.count(n) > 1})
         raise SceneError(f"{tf}: frames listed more than once: {dup[:5]}")
+    check_listed(str(tf), [(n, root / n) for n in names])
 
     train_idx, test_idx = every_nth_split(len(frames), views, test_every, test_rest, str(tf))
 
@@ -284,6 +286,7 @@ def load_nerfstudio(
         dist = {key: number(get(fr, key, 0.0), key, src) for key in DISTORTION_KEYS}
         if not all(np.isfinite(v) for v in dist.values()):
             raise SceneError(f"{src}: distortion {({k: v for k, v in dist.items() if not np.isfinite(v)})} is not finite")
+        check_distortion(src, dist, K, rgb.shape[1], rgb.shape[0])
         if _has_distortion(dist):
             if not undistort:
                 raise SceneError(
@@ -318,7 +321,7 @@ def load_nerfstudio(
         raise SceneError(f"{tf}: load_points asked but no COLMAP model found near it (looked in {', '.join(COLMAP_MODEL_DIRS)})")
 
     bounds = _bounds(train, pts_world)
-    return Scene(
+    return check_frames(Scene(
         bounds_guessed=_bounds_guessed(train, pts_world),
         name=name or _scene_name(root),
         train=train,
@@ -337,7 +340,7 @@ def load_nerfstudio(
             "downscale": downscale,
             "world_transform_from": "COLMAP world (applied_transform)" if "applied_transform" in meta else "identity",
         },
-    )
+    ))
 
 
 def _scene_name(root: Path) -> str:
@@ -484,6 +487,7 @@ def load_colmap(
         K = intrinsics(fx * sx, fy * sy, cx * sx, cy * sy)
         rgb, _ = read_image(p, bg, channels)
         rgb = downsample(rgb, extra)
+        check_distortion(src, dist, K, rgb.shape[1], rgb.shape[0])
         if _has_distortion(dist):
             if not undistort:
                 raise SceneError(f"{src}: camera {cam.id} ({cam.model}) has lens distortion {dist}; "
@@ -495,7 +499,7 @@ def load_colmap(
     test = [load_frame(k) for k in test_idx]
     channels.warn(model)
     pts_xyz = pts.xyz if pts is not None and len(pts.ids) else None
-    return Scene(
+    return check_frames(Scene(
         name=name or (root.name if root.name not in ("0", "sparse") else root.parent.name),
         train=train,
         test=test,
@@ -514,4 +518,4 @@ def load_colmap(
             "test_ids": test_idx,
             "downscale": downscale,
         },
-    )
+    ))

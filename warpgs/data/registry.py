@@ -20,8 +20,9 @@ import os
 from pathlib import Path
 from typing import Any
 
-from warpgs.configio import CONFIG_DIR, REPO_ROOT
+from warpgs.configio import CONFIG_DIR, REPO_ROOT, UniqueKeyLoader
 
+from . import plausible
 from .blender import load_blender
 from .dtu import load_dtu
 from .llff import load_llff
@@ -57,7 +58,7 @@ def read_data_config(name: str) -> dict[str, Any]:
     if not p.is_file():
         raise SceneError(f"{p}: no such dataset config; known names: {', '.join(dataset_names()) or '(none)'}")
     try:
-        cfg = yaml.safe_load(p.read_text()) or {}
+        cfg = yaml.load(p.read_text(), Loader=UniqueKeyLoader) or {}
     except Exception as e:
         raise SceneError(f"{p}: cannot parse YAML ({e})") from e
     if "format" not in cfg:
@@ -180,9 +181,15 @@ def load_scene(
     ``downscale``: image pyramid level (None = the dataset's default); ``root``: dataset root
     (for ``synthetic``: the folder that holds generated scenes); ``device``: Warp device for
     generating the synthetic scene; ``options``: loader keyword arguments (e.g. ``white_background``,
-    ``seed``), overriding the config's ``options``.
+    ``seed``), overriding the config's ``options``, and the allowances of ``warpgs.data.plausible``
+    (``allow_implausible_camera``, ``allow_duplicate_frames``: True lets such data through).
     """
-    data = str(data)
+    allow = [k for k in plausible.OPTIONS if options.pop(k, False)]
+    with plausible.allowing(*allow):
+        return _load_scene(str(data), scene, views, downscale, root, device, options)
+
+
+def _load_scene(data: str, scene, views, downscale, root, device, options: dict) -> Scene:
     names = dataset_names()
     if data in names and os.sep not in data:  # a folder with such a name is reached as ./NAME
         cfg = read_data_config(data)

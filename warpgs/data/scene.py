@@ -14,13 +14,10 @@ from typing import Any
 
 import numpy as np
 
+from .errors import DatasetNotFoundError, SceneError  # noqa: F401 (they belong to the scene's interface)
+from .plausible import check_camera
 
-class SceneError(ValueError):
-    """A scene could not be loaded; the message names the file and the problem."""
 
-
-class DatasetNotFoundError(SceneError, FileNotFoundError):
-    """A named dataset is not where warpgs looked; the message says where it looked and how to get it."""
 
 
 @dataclass
@@ -231,6 +228,7 @@ def make_camera(
         if not np.all(np.isfinite(a)):
             raise SceneError(f"{image_path or name}: its camera's {what} are out of range (not finite as float32: "
                              f"{np.asarray(K if what == 'intrinsics' else c2w).ravel()[:4].tolist()}...)")
+    check_camera(str(image_path or name), K, int(w), int(h))
     return Camera(
         name=name,
         viewmat=viewmat32,

@@ -12,14 +12,24 @@ more than ``std_ratio`` standard deviations. Voxel downsampling (``voxel_down_sa
 averages the points and colours of each cubic cell ``voxel`` wide, which evens out the density before
 the statistics (SYN3R downsamples first, too). Torch inputs give torch outputs on their device;
 numpy gives numpy. open3d is imported only when a filter runs.
+
+``filter_cloud`` runs open3d in a child process (``warpgs.densify.native``) on the finite points only: a child
+that dies (open3d aborts on inputs its C++ did not expect), hangs past ``FILTER_TIMEOUT_S`` or leaves no result
+costs one warning line, and the cloud is kept unfiltered (every finite point kept); ``out.failure`` holds the line
+(None when the filter ran).
 """
 
 from __future__ import annotations
 
+import sys
 from dataclasses import dataclass
-from typing import Any, NamedTuple
+from typing import Any, Callable, NamedTuple
 
 import numpy as np
+
+from .native import NativeStepFailed, run_native
+
+FILTER_TIMEOUT_S = 600.0  # the child process of a filter is stopped after this long
 
 
 @dataclass
@@ -37,6 +47,7 @@ class FilterResult(NamedTuple):
     kept: Any  # [N] bool over the input
     removed: Any  # [N] bool over the input (= ~kept)
     index: Any  # [N] int64 output row of each input point, -1 where removed
+    failure: str | None = None  # the line of a filter whose child process failed (the cloud is then unfiltered)
 
 
 def _to_numpy(a):
@@ -92,9 +103,27 @@ def voxel_downsample(points, colors=None, voxel: float = 0.01) -> tuple[np.ndarr
     return np.asarray(down.points, dtype=np.float32), out_c, index
 
 
-def filter_cloud(points, colors=None, config: FilterConfig | None = None) -> FilterResult:
-    """Voxel downsampling (if ``config.voxel``), then statistical outlier removal; see the module doc."""
+def _downsample_and_filter(p: np.ndarray, c, voxel: float | None, nb_neighbors: int, std_ratio: float):
+    """(voxel points, their colours, each point's voxel row, [M] bool kept): the open3d part of ``filter_cloud``."""
+    if voxel:
+        vp, vc, vindex = voxel_downsample(p, c, float(voxel))
+    else:
+        vp, vc, vindex = p, c, np.arange(len(p))
+    return vp, vc, vindex, statistical_outliers(vp, nb_neighbors, std_ratio)
+
+
+def _warn(line: str) -> None:
+    print(line, file=sys.stderr, flush=True)
+
+
+def filter_cloud(points, colors=None, config: FilterConfig | None = None, *, isolate: bool = True,
+                 timeout_s: float = FILTER_TIMEOUT_S, log: Callable[[str], Any] = _warn) -> FilterResult:
+    """Voxel downsampling (if ``config.voxel``), then statistical outlier removal; see the module doc.
+    ``isolate``: open3d in a child process (False: in this one); ``log`` gets the one line of a failed child."""
     cfg = config or FilterConfig()
+    if not (int(cfg.nb_neighbors) >= 1 and float(cfg.std_ratio) > 0 and (cfg.voxel is None or cfg.voxel >= 0)):
+        raise ValueError(f"filter: nb_neighbors must be >= 1, std_ratio > 0 and voxel >= 0, got {cfg.nb_neighbors}, "
+                         f"{cfg.std_ratio}, {cfg.voxel}")
     torch_in = hasattr(points, "detach")
     device = points.device if torch_in else None
     p = np.ascontiguousarray(_to_numpy(points), dtype=np.float32).reshape(-1, 3)
@@ -103,11 +132,17 @@ def filter_cloud(points, colors=None, config: FilterConfig | None = None) -> Fil
         raise ValueError(f"colors has {len(c)} rows, points {len(p)}")
     finite = np.isfinite(p).all(1)
     src = np.nonzero(finite)[0]
-    if cfg.voxel:
-        vp, vc, vindex = voxel_downsample(p[src], None if c is None else c[src], float(cfg.voxel))
+    args = (p[src], None if c is None else c[src], cfg.voxel, int(cfg.nb_neighbors), float(cfg.std_ratio))
+    failure = None
+    if not isolate or len(src) == 0:
+        vp, vc, vindex, keep_v = _downsample_and_filter(*args)
     else:
-        vp, vc, vindex = p[src], (None if c is None else c[src]), np.arange(len(src))
-    keep_v = statistical_outliers(vp, cfg.nb_neighbors, cfg.std_ratio)
+        try:
+            vp, vc, vindex, keep_v = run_native("open3d", _downsample_and_filter, *args, timeout_s=timeout_s)
+        except NativeStepFailed as e:  # the documented fallback: the cloud unfiltered
+            failure = f"outlier filter: {e}; the cloud is kept unfiltered"
+            log(f"warpgs: {failure}")
+            vp, vc, vindex, keep_v = args[0], args[1], np.arange(len(src)), np.ones(len(src), dtype=bool)
     new_row = np.cumsum(keep_v) - 1
     index = np.full(len(p), -1, dtype=np.int64)
     index[src] = np.where(keep_v[vindex], new_row[vindex], -1)
@@ -118,5 +153,5 @@ def filter_cloud(points, colors=None, config: FilterConfig | None = None) -> Fil
         import torch
 
         t = lambda a, dt=None: None if a is None else torch.as_tensor(np.ascontiguousarray(a), device=device, dtype=dt)  # noqa: E731
-        return FilterResult(t(out_p), t(out_c, torch.float32), t(kept), t(~kept), t(index))
-    return FilterResult(out_p, out_c, kept, ~kept, index)
+        return FilterResult(t(out_p), t(out_c, torch.float32), t(kept), t(~kept), t(index), failure)
+    return FilterResult(out_p, out_c, kept, ~kept, index, failure)

@@ -6,6 +6,13 @@ dilation, optional antialiasing compensation sqrt(det S2 / det(S2 + eps I)), con
 covariance, and an opacity-aware screen box: extent = min(3.33, sqrt(2 ln(255 o))) sigmas per axis
 (gsplat 1.5's tight box; a pixel outside it has alpha < 1/255, the compositing cut-off).
 
+Culling is the one guard of every later index: a Gaussian whose depth, 2D covariance, opacity, screen mean or
+radius is NaN or infinite, whose mean lies beyond ``binning.MAX_COORD`` pixels, or whose tile rectangle is empty
+gets radius 0 and zero outputs, and the binning, the colours and the compositing read only Gaussians of radius > 0
+(their gradients are 0). The radius is clamped to ``binning.MAX_RADIUS`` and the tile rectangle to the grid while
+still float (``binning.tile_rect``), so no float-to-int conversion leaves its range. Every test is written so that
+NaN fails it (``not (x >= lo)``), and none of it changes a Gaussian of an ordinary scene.
+
 Both kernels take the Gaussians and the camera as structs (``Gaussians``, ``Camera``), so the forward and
 the backward read one definition of what they share; the backward writes its gradients into a second
 ``Gaussians`` laid out like the first. Only Warp code lives here; the launches, which build the structs
@@ -13,6 +20,8 @@ from torch tensors without copies, are in ``warpgs/render.py``.
 """
 
 import warp as wp
+
+from warpgs.kernels.binning import MAX_RADIUS, on_screen, tile_rect
 
 wp.set_module_options({"enable_backward": False, "fast_math": True})
 
@@ -199,7 +208,7 @@ def project_gaussians_fwd(
     V = cam.viewmat[0]
     R = view_rotation(V)
     p = R * gs.means[i] + wp.vec3(V[0, 3], V[1, 3], V[2, 3])
-    if p[2] < near or p[2] > far:
+    if not (p[2] >= near and p[2] <= far):  # NaN fails too
         return
 
     Kc = cam.intrinsics[0]
@@ -216,12 +225,14 @@ def project_gaussians_fwd(
     c = cv[1]
     det_orig = cv[2]
     det = cv[3]
-    if det <= 0.0:
+    if not (det > 0.0):
+        return
+    if not (wp.isfinite(cv[4]) and wp.isfinite(cv[5]) and wp.isfinite(cv[6])):
         return
     o = gs.opacities[i]
     if cam.antialiased != 0:
         o = o * wp.sqrt(wp.max(0.0, det_orig / det))
-    if o < ALPHA_MIN:
+    if not (o >= ALPHA_MIN and wp.isfinite(o)):
         return
     extent = wp.min(MAX_EXTENT, wp.sqrt(2.0 * wp.log(o / ALPHA_MIN)))
     rx = wp.ceil(extent * wp.sqrt(a))
@@ -231,15 +242,17 @@ def project_gaussians_fwd(
 
     rz = 1.0 / p[2]
     m2 = wp.vec2(fx * p[0] * rz + cx, fy * p[1] * rz + cy)
+    if not on_screen(m2, rx, ry, p[2]):
+        return
     if m2[0] + rx <= 0.0 or m2[0] - rx >= W or m2[1] + ry <= 0.0 or m2[1] - ry >= H:
         return
+    rx = wp.min(rx, MAX_RADIUS)
+    ry = wp.min(ry, MAX_RADIUS)
 
     # Tile rectangle [tx0, tx1) x [ty0, ty1), as gsplat's intersect_tile.
-    ts = float(tile_size)
-    tx0 = wp.clamp(int(wp.floor((m2[0] - rx) / ts)), 0, tiles_x)
-    ty0 = wp.clamp(int(wp.floor((m2[1] - ry) / ts)), 0, tiles_y)
-    tx1 = wp.clamp(int(wp.ceil((m2[0] + rx) / ts)), 0, tiles_x)
-    ty1 = wp.clamp(int(wp.ceil((m2[1] + ry) / ts)), 0, tiles_y)
+    tx0, ty0, tx1, ty1 = tile_rect(m2, rx, ry, tile_size, tiles_x, tiles_y)
+    if tx1 <= tx0 or ty1 <= ty0:
+        return
 
     means2d[i] = m2
     conics[i] = wp.vec3(cv[4], cv[5], cv[6])

@@ -218,7 +218,7 @@ def accumulate_grad(valid: int, gid: int, g: grad10, fixed: int, with_depth: int
 
 # The CUDA backward's accumulation, as one native function: the warp's ten sums by a reduce-scatter instead of
 # ten all-reduces. An all-reduce sums each value over the warp with five xor shuffles (50 shuffles a Gaussian,
-# and the shuffle unit, a quarter of the FP32 rate, was what the backward waited on until session 17); here the first
+# and the shuffle unit, a quarter of the FP32 rate, was what the backward waited on with them); here the first
 # xor round swaps halves of a 16-slot vector (8 shuffles), the next a quarter (4), then 2, 1 and 1: 16 shuffles,
 # after which lane l holds the warp's sum of value l / 2. Each value goes through the same pairs in the same
 # order as in that all-reduce (own partial + partner's, partners lane ^ 16, ^ 8, ^ 4, ^ 2, ^ 1), so the sums
@@ -550,18 +550,18 @@ rasterize_bwd_cuda = [[_compositing_kernels(True, f, d)[1] for d in (0, 1)] for 
 
 
 # ----------------------------------------------------------------------------------------------------
-# The CUDA forward (since session 24; before it, the CUDA variant of ``rasterize_fwd`` above, over ``batch_splat``):
+# The CUDA forward (it replaced the CUDA variant of ``rasterize_fwd`` above, over ``batch_splat``):
 # a batch of a tile's Gaussians is composited by one native function, laid out for the forward alone. A slot is
 # two shared-memory loads, (x, y, conic a, b) and (conic c, opacity), before the pixel knows whether the Gaussian
 # reaches it; the colour and depth, (r, g, b, z), are a third load made only where it does (most pairs of a
 # tile do not), as gsplat reads its colours only there. alpha = min(alpha_max, opacity exp(-sigma)) is evaluated
 # for every pair, and a pair with sigma < 0, sigma > SIGMA_SKIP or alpha < 1/255 is skipped: the Warp loops' test
-# (the backward's too), so the sums are the same floats in the same order (session 24 on an H100: the forward took
-# 170 us instead of 263 us at 138,766 Gaussians, 648x420, where gsplat's takes 207 us: bench/results/s24).
-# Session 24's version left out the SIGMA_SKIP test (gsplat's, where alpha < 1/255 decides alone): that is the same
+# (the backward's too), so the sums are the same floats in the same order (on an H100 the forward took 170 us
+# instead of 263 us at 138,766 Gaussians, 648x420, where gsplat's takes 207 us: bench/results/s24).
+# Its first version left out the SIGMA_SKIP test (gsplat's, where alpha < 1/255 decides alone): that is the same
 # only for opacities up to 1, and DropGaussian's survivors (opacity x 1 / (1 - p)) and opacity noise exceed 1. Such
 # a pair past SIGMA_SKIP was composited by this forward and skipped by the backward, so their transmittances
-# disagreed; a few pixels per training render differed from the Warp forward's (session 27:
+# disagreed; a few pixels per training render differed from the Warp forward's (found with
 # bench/rasterizer_commits.py on DTU scan65's training renders, steps 71-75).
 # state: (T, colour r, g, b, depth sum, count as int bits, done, 0) in and out.
 fwd_state = wp.types.vector(length=8, dtype=wp.float32)

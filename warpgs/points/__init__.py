@@ -28,7 +28,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .sfm import SfmError, SfmInputError, SfmOptions, triangulate
+from .sfm import SfmError, SfmInputError, SfmNativeError, SfmOptions, triangulate
 from .stereo import StereoInitOptions, StereoPoints, resolvable_depth_range, stereo_points
 
 METHODS = ("sfm", "stereo", "sfm+stereo")
@@ -67,12 +67,16 @@ class Geometry:
     stats: dict = field(default_factory=dict)
     times: dict = field(default_factory=dict)  # seconds per stage: sfm_s, stereo_s
     notes: list = field(default_factory=list)  # the one-line fallback messages
+    # one line per native step (pycolmap, open3d) whose child process died, hung or left no result: the run went on
+    # with that step's fallback (``warpgs.densify.native``); ``summary()`` puts them in metrics.json's init
+    native_failures: list = field(default_factory=list)
     key: tuple | None = None  # the settings it was found with (warpgs.train.prepare_geometry's cache key)
 
     def summary(self) -> dict:
         return {"asked": self.asked, "method": self.method, "points": int(len(self.xyz)),
                 "bounds": None if self.bounds is None else [round(b, 6) for b in self.bounds],
-                "times": {k: round(v, 2) for k, v in self.times.items()}, "stats": self.stats, "notes": self.notes}
+                "times": {k: round(v, 2) for k, v in self.times.items()}, "stats": self.stats, "notes": self.notes,
+                "native_failures": self.native_failures}
 
 
 def depth_bounds(cameras, xyz: np.ndarray, near_percentile: float = 1.0, far_percentile: float = 99.0,
@@ -129,6 +133,9 @@ def initial_geometry(cameras, method: str, config: GeometryConfig | None = None,
                     why = f"{len(cameras)} training views, fewer than geometry.sfm_min_views {cfg.sfm_min_views}"
             except SfmInputError:
                 raise
+            except SfmNativeError as e:  # pycolmap's child died or hung: the next method of the chain
+                pts, why = None, f"triangulation failed ({e})"
+                geo.native_failures.append(str(e))
             except SfmError as e:  # too few matches or points: the next method may do better
                 pts, why = None, f"triangulation found too few points ({e})"
             geo.times["sfm_s"] = time.perf_counter() - t0
@@ -146,6 +153,8 @@ def initial_geometry(cameras, method: str, config: GeometryConfig | None = None,
         st = stereo_points(cameras, cfg.stereo, rng, extend_far=extend_far, device=device)
         geo.times["stereo_s"] = time.perf_counter() - t0
         geo.stats["stereo"] = st.stats
+        if st.stats.get("filter_failure"):
+            geo.native_failures.append(st.stats["filter_failure"])
         return st
 
     for m in CHAIN[method]:
@@ -172,5 +181,5 @@ def initial_geometry(cameras, method: str, config: GeometryConfig | None = None,
     return geo
 
 
-__all__ = ["CHAIN", "METHODS", "Geometry", "GeometryConfig", "SfmError", "SfmInputError", "SfmOptions", "StereoInitOptions",
+__all__ = ["CHAIN", "METHODS", "Geometry", "GeometryConfig", "SfmError", "SfmInputError", "SfmNativeError", "SfmOptions", "StereoInitOptions",
            "StereoPoints", "depth_bounds", "initial_geometry", "resolvable_depth_range", "stereo_points", "triangulate"]

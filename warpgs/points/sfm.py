@@ -154,6 +154,8 @@ def _check_cameras(cameras: Sequence) -> None:
         V, K = np.asarray(c.viewmat, np.float64), np.asarray(c.K, np.float64)
         if V.shape != (4, 4) or K.shape != (3, 3) or not (np.all(np.isfinite(V)) and np.all(np.isfinite(K))):
             raise SfmInputError(f"sfm view {k} ({c.name}): viewmat must be a finite 4x4 and K a finite 3x3 matrix")
+        if not (K[0, 0] > 0 and K[1, 1] > 0):
+            raise SfmInputError(f"sfm view {k} ({c.name}): focal lengths fx={K[0, 0]:g}, fy={K[1, 1]:g} must be positive")
 
 
 def _write_images(cameras, folder: Path, max_size: int) -> tuple[list[str], list[np.ndarray], list[list[int]]]:
@@ -389,11 +391,25 @@ def _match(pycolmap, db_path: Path, rec, opts: SfmOptions) -> None:
                                                num_threads=opts.num_threads)
 
 
+class SfmNativeError(SfmError):
+    """pycolmap's child process died (a signal), hung past its time limit or left no result: the next
+    initialisation of the chain takes over (``warpgs.points.initial_geometry``), and the line is recorded."""
+
+
+SFM_TIMEOUT_S = 1800.0  # the child process of a triangulation is stopped after this long
+
+
 def triangulate(cameras: Sequence, options: SfmOptions | None = None, *, workdir: str | Path | None = None,
-                log: Callable[[str], Any] = print) -> SfmPoints:
+                log: Callable[[str], Any] = print, isolate: bool = True,
+                timeout_s: float = SFM_TIMEOUT_S) -> SfmPoints:
     """Triangulates a sparse point cloud from ``cameras`` (their images, K and viewmat; nothing
     else is read) with the poses held fixed. ``workdir``: keep the images, database and COLMAP
     model there (default: a temporary folder). ``log`` gets one summary line.
+
+    The inputs are checked here (at least 2 views, images of their cameras' sizes, finite matrices, positive focal
+    lengths); pycolmap then runs in a child process (``isolate``; ``warpgs.densify.native``), never imported into
+    this one, so that its aborts and glog's signal handlers stay there: a child that dies or runs past
+    ``timeout_s`` raises SfmNativeError.
 
     Raises SfmError (one line) for fewer than 2 views, pycolmap missing, no verified matches between
     any pair, or no point triangulated."""
@@ -401,6 +417,21 @@ def triangulate(cameras: Sequence, options: SfmOptions | None = None, *, workdir
     opts.check()
     cameras = list(cameras)
     _check_cameras(cameras)
+    if not isolate:
+        pts, line = _triangulate_here(cameras, opts, workdir)
+    else:
+        from warpgs.densify.native import NativeStepFailed, run_native
+
+        try:
+            pts, line = run_native("sfm", _triangulate_here, cameras, opts, workdir, timeout_s=timeout_s)
+        except NativeStepFailed as e:
+            raise SfmNativeError(f"pycolmap: {e}") from None
+    log(line)
+    return pts
+
+
+def _triangulate_here(cameras: list, opts: SfmOptions, workdir) -> tuple[SfmPoints, str]:
+    """``triangulate``'s work in this process: (the points, the summary line)."""
     pycolmap = _import_pycolmap()
     n, n_pairs = len(cameras), len(cameras) * (len(cameras) - 1) // 2
     Vs = [_viewmat(c) for c in cameras]
@@ -458,9 +489,9 @@ def triangulate(cameras: Sequence, options: SfmOptions | None = None, *, workdir
         raise SfmError(
             f"no 3D points triangulated from the {n} training views ({pairs} verified pairs, {verified} matches): "
             "the baselines are too small or the views overlap too little")
-    log(f"sfm: {len(xyz)} points from {n} views ({pairs}/{n_pairs} pairs verified, median error "
-        f"{stats['median_error']:.2f} px, {secs['total']:.1f} s)")
-    return SfmPoints(xyz, rgb, track, err, stats, obs)
+    line = (f"sfm: {len(xyz)} points from {n} views ({pairs}/{n_pairs} pairs verified, median error "
+            f"{stats['median_error']:.2f} px, {secs['total']:.1f} s)")
+    return SfmPoints(xyz, rgb, track, err, stats, obs), line
 
 
-__all__ = ["SfmError", "SfmInputError", "SfmOptions", "SfmPoints", "triangulate"]
+__all__ = ["SFM_TIMEOUT_S", "SfmError", "SfmInputError", "SfmNativeError", "SfmOptions", "SfmPoints", "triangulate"]

@@ -162,4 +162,6 @@ def _finish(res, depth_range, passes, opts: StereoInitOptions, t0: float) -> Ste
     rgb = np.zeros((0, 3), np.float32) if flt is None else np.asarray(flt.colors, np.float32)
     stats = {"passes": passes, "matched": int(len(pts)), "after_filter": int(len(xyz)),
              "size": [int(res.depth.shape[2]), int(res.depth.shape[1])], "seconds": round(time.perf_counter() - t0, 2)}
+    if flt is not None and flt.failure:
+        stats["filter_failure"] = flt.failure
     return StereoPoints(xyz, rgb.clip(0, 1), tuple(map(float, depth_range)), stats)
