@@ -213,7 +213,7 @@ class TrainConfig:
     #   loss and PSNR are read at the same steps. None: 10 on CUDA, 1 (every step) on the CPU
     cuda_graph: bool = True  # CUDA: a deferred step that holds nothing a graph cannot (no densification or
     #   pruning at that step, no Pearson depth term, no co-regularised pair, the baseline's loss; dropout, opacity
-    #   noise, a random background and the far field are held) is recorded once as a CUDA graph and replayed (warpgs/graphstep.py): the same numbers, a fraction of the host
+    #   noise, a random background and the far field are held) is recorded once as a CUDA graph and replayed (warpgs/engine/graphstep.py): the same numbers, a fraction of the host
     #   time; false: every step launches its kernels one by one
     progress: bool = True
 

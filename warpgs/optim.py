@@ -53,7 +53,7 @@ class GroupedAdam(torch.optim.Adam):
     def set_lr(self, name: str, value: float) -> None:
         """Group ``name``'s learning rate, also kept on the device where the fused step runs (float32, the
         precision fused Adam reads a tensor learning rate in): a CUDA graph of the step then reads each step's
-        rate (``warpgs.graphstep``), and a step outside the graph uses the same rounded value."""
+        rate (``warpgs.engine.graphstep``), and a step outside the graph uses the same rounded value."""
         for g in self.param_groups:
             if g.get("name") == name:
                 g["lr"] = value

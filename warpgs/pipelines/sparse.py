@@ -39,7 +39,7 @@ from pathlib import Path
 from warpgs import losses
 from warpgs.config import CONFIG_DIR, ConfigError, build_config, parse_override, read_yaml, save_config
 from warpgs.console import warn_once
-from warpgs.pipelines.full import ABLATIONS
+from warpgs.methods.full import ABLATIONS
 
 METHODS = ("baseline", "full", "compare")
 
@@ -130,7 +130,7 @@ def make_config(args):
     """-> (config, resume folder or None). Every layer is checked on its own (``build_config``): a value out
     of range is an error naming the file, ``--set`` or flag it came from, even where a later layer sets the
     key again."""
-    from warpgs.train import resumable_checkpoint
+    from warpgs.engine.checkpoint import resumable_checkpoint
 
     resume_dir = None
     if args.resume is not None:
@@ -197,17 +197,16 @@ def print_metrics(m: dict, out: Path) -> None:
 
 
 def training_methods() -> dict:
-    """The training methods by name: each a ``warpgs.train.Method`` class."""
-    from warpgs.pipelines.full import FullMethod
-    from warpgs.train import Method
+    """The training methods by name: each a ``warpgs.engine.method.Method`` class (``warpgs.methods``)."""
+    from warpgs.methods import METHODS, method_class
 
-    return {"baseline": Method, "full": FullMethod}
+    return {name: method_class(name) for name in METHODS}
 
 
 def make_trainer(cfg, scene, out: Path | None = None, **kwargs):
     """The trainer of ``cfg.method`` with the stages its config asks for (compact mode)."""
     from warpgs.compact import attach
-    from warpgs.train import Trainer
+    from warpgs.engine.loop import Trainer
 
     methods = training_methods()
     if cfg.method not in methods:
@@ -218,8 +217,8 @@ def make_trainer(cfg, scene, out: Path | None = None, **kwargs):
 
 
 class RunStopped(Exception):
-    """A run that ends without metrics (bad settings, Ctrl-C): ``code`` is the process's exit code (2, 130);
-    what to tell the user has been printed already."""
+    """A run that ends without metrics (bad settings, Ctrl-C, SIGTERM): ``code`` is the process's exit code (2,
+    130, 143); what to tell the user has been printed already."""
 
     def __init__(self, code: int):
         super().__init__(code)
@@ -233,7 +232,9 @@ def run_method(method: str, cfg, scene, out: Path, resume: bool, baseline_metric
     a checkpoint that cannot be read or written, outputs that cannot be written (each said in one line)."""
     import torch
 
-    from warpgs.train import CHECKPOINT, PREVIOUS_CHECKPOINT, CheckpointError, TrainingDiverged, TrainingInterrupted
+    from warpgs.engine.checkpoint import (CHECKPOINT, PREVIOUS_CHECKPOINT, CheckpointError, TrainingDiverged,
+                                          TrainingInterrupted)
+    from warpgs.engine.signals import exit_code
 
     cfg = copy.deepcopy(cfg)
     cfg.method = method
@@ -256,7 +257,7 @@ def run_method(method: str, cfg, scene, out: Path, resume: bool, baseline_metric
     except TrainingInterrupted as e:
         print(f"\nwarpgs: stopped at step {e.step}; checkpoint {e.checkpoint}. Continue with:\n"
               f"  python -m warpgs.pipelines.sparse {resume_hint}", file=sys.stderr)
-        raise RunStopped(130) from e
+        raise RunStopped(exit_code(e.signum)) from e  # 130 after Ctrl-C, 143 after SIGTERM
     except KeyboardInterrupt as e:
         print(f"\nwarpgs: stopped; the last checkpoint in {out} is intact ({resume_hint})", file=sys.stderr)
         raise RunStopped(130) from e
@@ -352,7 +353,8 @@ def main(argv=None) -> int:
     ``error: ...``, and exit code 2, before any training; Ctrl-C with 130."""
     from warpgs.data.scene import SceneError
     from warpgs.runfolder import RunFolderError, open_run_folder
-    from warpgs.train import CheckpointError, prepare_geometry
+    from warpgs.engine.checkpoint import CheckpointError
+    from warpgs.engine.init import prepare_geometry
 
     args = build_parser().parse_args(argv)
     started = time.perf_counter()
@@ -408,7 +410,7 @@ def compare_in_parallel(args, cfg) -> bool:
     2-core machine this nearly halves the wall time; on a GPU the two would only take turns."""
     import os
 
-    from warpgs.train import resolve_device
+    from warpgs.engine.init import resolve_device
 
     if args.jobs is not None:
         return args.jobs >= 2
@@ -438,7 +440,7 @@ def compare_parallel(cfg, scene, out: Path, resume: bool, hint: str):
     --resume continues both."""
     import multiprocessing as mp
 
-    from warpgs.evaluation import write_report
+    from warpgs.engine.evaluation import write_report
 
     bcfg = copy.deepcopy(cfg)
     bcfg.train.progress = False

@@ -35,6 +35,7 @@ import torch
 from warpgs import losses
 from warpgs._warp import arg, device_of, launch, stream_of
 from warpgs.kernels import warping as kw
+from warpgs.regularizers.base import Regularizer
 import warp as wp
 
 MIN_DEPTH = 1e-6
@@ -145,8 +146,10 @@ def moved_viewmat(viewmat: torch.Tensor, t: torch.Tensor) -> torch.Tensor:
     return vm
 
 
-class Binocular:
+class Binocular(Regularizer):
     """The term of one trainer (module docstring); ``loss`` adds it for an input render."""
+
+    name = "binocular"
 
     def __init__(self, weight: float, shift: float, start: int, smooth: float, device, seed: int,
                  path: dict[str, torch.Tensor] | None = None, axes: str = "x"):
@@ -199,3 +202,28 @@ class Binocular:
             term = term + self.smooth * losses.edge_aware_smoothness(disparity, cam.image, normalise=False)
         parts["binocular"] = term.detach()
         return self.weight * term
+
+    # the Regularizer hooks: the term a step adds, not held by a CUDA graph (a second render of a pose drawn anew)
+    def step_term(self, ctx, step: int, out, cam, bg, parts: dict) -> torch.Tensor | None:
+        return self.loss(ctx.model, out, cam, bg, parts) if self.active(step) else None
+
+    def graph_safe(self, ctx, step: int) -> bool:
+        return not self.active(step)
+
+    def state_dict(self) -> dict:
+        return {"binocular_gen": self.gen.get_state()}
+
+    def load_state_dict(self, st: dict) -> None:
+        if "binocular_gen" in st:
+            self.gen.set_state(st["binocular_gen"])
+
+
+def build(cfg, ctx) -> Binocular | None:
+    """``train.binocular`` > 0: the term, from ``train.binocular_start`` x the run on; with
+    ``train.binocular_partner: path`` its partners are poses of the capture path next to each input."""
+    tc = cfg.train
+    if not tc.binocular > 0:
+        return None
+    path = ctx.cameras.path_partners(tc.binocular_reach) if tc.binocular_partner == "path" else None
+    return Binocular(tc.binocular, tc.binocular_shift, int(tc.binocular_start * tc.iterations), tc.binocular_smooth,
+                     ctx.device, tc.seed, path=path, axes=tc.binocular_axes)

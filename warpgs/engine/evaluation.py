@@ -18,7 +18,7 @@ import numpy as np
 import torch
 
 from warpgs.config import save_config
-from warpgs.metrics import LPIPSMetric, mean_or_none, peak_memory_mb, psnr, ssim
+from warpgs.metrics import LPIPSMetric, mean_or_none, peak_memory_mb, psnr, render_fps, ssim
 from warpgs.model import size_report
 from warpgs.viz import save_image
 
@@ -107,6 +107,36 @@ def run_metrics(trainer, ev: dict, train_ev: dict, fps: float) -> dict:
     if tr.compact_report is not None:
         metrics["compact"] = tr.compact_report
     return metrics
+
+
+def finish_run(tr, baseline: dict | None = None) -> dict:
+    """After training ``tr`` (a ``Trainer``): a checkpoint of the trained state (unless one was written at this
+    step), the final pruning (if asked), the stages, test metrics and renders, FPS, PLY, final checkpoint,
+    metrics.json, then the method's records and outputs (``baseline``: the baseline run's metrics, for its
+    report)."""
+    out = tr.out
+    if out is not None and tr.saved_step != tr.step:
+        # the trained state, before the final pruning changes it: an interrupt while the results are written
+        # loses no training (--resume writes them from here, as an uninterrupted run would)
+        tr.save_checkpoint()
+    if tr.cfg.train.path_floaters_final:
+        tr.remove_path_floaters(tr.step)
+    if tr.cfg.train.prune_unseen_at_end:
+        removed = tr.prune_unseen()
+        if removed:
+            tr.log(f"warpgs: pruning the unseen removed {removed} of {tr.n_before_compaction} Gaussians")
+    for stage in tr.stages:
+        stage.before_evaluation(tr)
+    ev = tr.evaluate(save_dir=(out / "test") if out is not None and tr.cfg.eval.save_images else None)
+    train_ev = tr.evaluate(tr.train_cams, lpips=False)
+    fps = render_fps(lambda i: tr.render(tr.test_cams[i] if tr.test_cams else tr.train_cams[i]),
+                     len(tr.test_cams) or len(tr.train_cams), tr.cfg.eval.fps_repeats, tr.device)
+    metrics = run_metrics(tr, ev, train_ev, fps)
+    if tr.pair is not None:
+        metrics["co_reg"] = tr.pair.report()
+    if out is not None:
+        write_run_outputs(tr, metrics)
+    return tr.method.finish(metrics, baseline)
 
 
 def write_run_outputs(trainer, metrics: dict) -> None:
