@@ -44,7 +44,7 @@ def test_on_and_off_read_as_words_from_yaml_and_the_command_line():
 
     assert load_config(overrides=["train.hold_geometry=on"]).train.hold_geometry == "on"  # YAML 1.1: True
     assert load_config(overrides=["train.hold_geometry=off"]).train.hold_geometry == "off"
-    assert load_config([Path(__file__).resolve().parents[1] / "configs" / "dl3dv.yaml"]).train.hold_geometry == "stereo"  # the captures' default
+    assert load_config([Path(__file__).resolve().parents[1] / "configs" / "datasets" / "dl3dv.yaml"]).train.hold_geometry == "stereo"  # the captures' default
     with pytest.raises(ValueError, match="far_field"):  # a boolean where on / off mean nothing stays an error
         load_config(overrides=["train.far_field=on"])
 

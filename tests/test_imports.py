@@ -21,7 +21,7 @@ LAYERS = [
     ["engine", "coreg"],
     ["compact"],
     ["methods"],
-    ["train", "pipelines", "view"],
+    ["train", "pipelines", "view", "configdoc"],
 ]
 RANK = {name: i for i, names in enumerate(LAYERS) for name in names}
 
@@ -131,8 +131,10 @@ def test_the_wheel_lists_every_package_and_carries_the_configs():
     meta = tomllib.loads((PKG.parent / "pyproject.toml").read_text())["tool"]["setuptools"]
     tree = {".".join(("warpgs",) + p.parent.relative_to(PKG).parts) for p in PKG.rglob("__init__.py")}
     assert set(meta["packages"]) - {"warpgs.configs"} == tree
-    assert meta["package-dir"]["warpgs.configs"] == "configs" and (PKG.parent / "configs" / "baseline.yaml").is_file()
-    assert set(meta["package-data"]["warpgs.configs"]) == {"*.yaml", "data/*.yaml"}
+    assert meta["package-dir"]["warpgs.configs"] == "configs"
+    assert (PKG.parent / "configs" / "methods" / "baseline.yaml").is_file()
+    folders = {p.parent.name for p in (PKG.parent / "configs").rglob("*.yaml")}
+    assert set(meta["package-data"]["warpgs.configs"]) == {f"{f}/*.yaml" for f in folders}
 
 
 OPTIONAL = ("ray",)  # extras (pyproject's optional-dependencies) a module may import only where it is used

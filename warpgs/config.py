@@ -1,11 +1,14 @@
-"""Run configuration: dataclasses with the published defaults, read from ``configs/*.yaml``, overridable.
+"""Run configuration: dataclasses with the published defaults, read from ``configs/``, overridable.
 
 A run's config is built in layers, later ones winning:
 
 1. the dataclass defaults below (3D-GS / gsplat numbers);
-2. the method's file ``configs/<method>.yaml`` (e.g. ``baseline.yaml``);
-3. the dataset's file ``configs/<dataset>.yaml`` if there is one (``blender``, ``llff``, ``dtu``, ``synthetic``);
-4. files given with ``--config`` (a file may name another with ``base: other.yaml``, read first);
+2. the method's file ``configs/methods/<method>.yaml`` (only the run's method's: ``full.yaml`` names
+   ``baseline.yaml`` as its base; a compare run reads ``full.yaml``);
+3. the dataset's file ``configs/datasets/<dataset>.yaml`` if there is one (``blender``, ``llff``, ``dtu``,
+   ``nerfstudio``, ``synthetic``), which may name shared blocks of ``configs/presets/`` as its base;
+4. files given with ``--config`` (a file may name another with ``base: other.yaml``, or a list of them, read
+   first);
 5. ``--set section.key=value`` overrides (values parsed as YAML: ``--set strategy.max_gaussians=20000``);
 6. explicit flags (``--iterations``, ``--views``, ``--device``, ...).
 
@@ -119,7 +122,7 @@ class TrainConfig:
     opacity_decay: float = 0.0  # Binocular3DGS's opacity decay (Han et al., NeurIPS 2024): from
     #   strategy.refine_start_iter on, every step multiplies each opacity by (1 - this) after the update, so what
     #   the inputs' gradients do not hold up fades and is pruned (theirs: 0.005 a step); 0: off
-    binocular: float = 0.0  # weight of their binocular consistency on the input views (warpgs/binocular.py): the
+    binocular: float = 0.0  # weight of their binocular consistency on the input views (warpgs/regularizers/binocular.py): the
     #   render from the camera moved along its x axis, warped back with the input's rendered depth, against the
     #   photo (their weight: 1); 0: off
     binocular_shift: float = 0.1  # the largest move: this x the image width of disparity at the median depth
@@ -131,7 +134,7 @@ class TrainConfig:
     binocular_axes: str = "x"  # shift partner: x: along the camera's x axis (theirs) | xy: in a direction of the image
     #   plane drawn each step (up and down too: DTU's test cameras sit in the rows above and below its inputs')
     path_consistency: float = 0.0  # weight of the two inputs' agreement at a pose of the pseudo views' trajectories
-    #   drawn each step (warpgs/pathconsistency.py; one more render a step): their photos warped into it with its
+    #   drawn each step (warpgs/regularizers/pathconsistency.py; one more render a step): their photos warped into it with its
     #   rendered depth, L1 where both land. The full method's own is full.path_consistency, at its pseudo views; 0: off
     path_consistency_start: float = 0.4  # share of the run's steps before it starts (the full method's first cycle)
     random_background: bool = False  # views with an alpha channel: a random background each step (no floaters
@@ -168,13 +171,13 @@ class TrainConfig:
     #   geometry: no densification or pruning by the strategy (strategy.refine_stop_iter 0) and the means', scales'
     #   and rotations' learning rates x the hold_* factors below; stereo: only when the initial points came from
     #   plane-sweep stereo alone (model.init sfm falling back to stereo on wide baselines, or stereo): a dense
-    #   cloud that growth would only bend towards the few inputs (warpgs.train.hold_geometry)
+    #   cloud that growth would only bend towards the few inputs (warpgs.engine.init.hold_geometry)
     hold_means_lr: float = 0.1
     hold_scales_lr: float = 0.2
     hold_quats_lr: float = 0.1
-    prune_unseen_at_end: bool = False  # at the end, drop Gaussians no training view needs (the captures' default since
-    #   session 20: a Gaussian no input sees can only stand in front of a novel view; on scenes whose test views see
-    #   what the inputs do not, it can cost novel-view PSNR)
+    prune_unseen_at_end: bool = False  # at the end, drop Gaussians no training view needs (the captures' default:
+    #   a Gaussian no input sees can only stand in front of a novel view; on scenes whose test views see what the
+    #   inputs do not, it can cost novel-view PSNR)
     # CoR-GS (Zhang et al., ECCV 2024; warpgs/coreg.py): a second model trained beside the first from the same
     # initial Gaussians, on the same views, with its own random streams; twice the training cost. The first model
     # is the one evaluated and exported
@@ -189,7 +192,7 @@ class TrainConfig:
     #   between two neighbouring training views, each against the other's detached render (CoR-GS: 1); 0: off
     co_reg_start: int = 500  # first step of the co-regularisation (CoR-GS's LLFF script: 500)
     co_reg_frames: int = 24  # pseudo poses between each pair of neighbouring training views, drawn in turn
-    # divergence (warpgs/train.py): a non-finite loss or gradient, or a loss above explode_factor x the median
+    # divergence (warpgs/engine/stepguard.py): a non-finite loss or gradient, or a loss above explode_factor x the median
     # of the phase's last explode_window finite losses, skips the step; max_nan_steps skipped steps in a row,
     # explode_patience exploding ones in a row, or non-finite parameters after the optimiser step roll back to
     # the last good in-memory snapshot with the learning rates scaled by recovery_lr_factor; after
@@ -241,7 +244,7 @@ class EvalConfig:
 
 @dataclass
 class FullConfig:
-    """The generation-guided method (``method: full``; warpgs/pipelines/full.py). Loss weights are the
+    """The generation-guided method (``method: full``; warpgs/methods/full.py). Loss weights are the
     paper's (w4 LPIPS 1.0, w5 D-SSIM 0.2, w6 depth 1.0 on pseudo views, scaled by pseudo_weight)."""
 
     cycles: int = 2  # pseudo-view updates (the paper: refinement cycles of 10K iterations)
@@ -256,8 +259,8 @@ class FullConfig:
     depth_weight: float = 1.0  # w6, Pearson against the plane-sweep depth where it is confident
     input_depth_weight: float = 1.0  # w3 on the inputs, against their plane-sweep depth (never the loader's)
     early_depth: bool = False  # the inputs' depth prior from plane-sweep stereo between them before the first step
-    #   (the paper's input loss has its depth term throughout); false: from the first cycle's stereo on. Session 15
-    #   (captures, 384x256, seeds 0-2): -0.97 dB on average against the default, castle 6 / 9 views -2.0 / -3.6
+    #   (the paper's input loss has its depth term throughout); false: from the first cycle's stereo on. On the
+    #   captures (384x256, seeds 0-2) it cost 0.97 dB on average, castle 6 / 9 views 2.0 / 3.6
     pseudo_loss: str = "lpips"  # lpips | l1 (ablation; also the fallback when LPIPS weights are absent)
     guidance: str = "warped"  # warped | render (ablation: 3D-GS renders instead of warped guidance)
     densify: bool = True  # densification from pseudo views (ablation: false)
@@ -278,7 +281,7 @@ class FullConfig:
     far_field: str | None = None  # the far field for this method (train.far_field: none | elevation); None: train's
     refine_stop_fraction: float | None = None  # strategy.refine_stop_fraction for this method; None: the strategy's
     path_consistency: float = 0.0  # weight of the two inputs' agreement at each pseudo view trained on: the photos of
-    #   the inputs it lies between, warped into it with its rendered depth (warpgs.binocular.pose_warp), compared
+    #   the inputs it lies between, warped into it with its rendered depth (warpgs.regularizers.binocular.pose_warp), compared
     #   (L1 where both land); its gradient reaches the depth each step, unlike the pseudo view's fixed image. 0: off
     reliable_weight: float = 1.0  # weight of a pseudo view's reliable pixels (U < pseudo.sampler.delta: where the
     #   warped inputs were kept) in its L1 and D-SSIM, the other pixels' being 1 (the render they were filled from,
@@ -334,8 +337,8 @@ def check_compact_config(c: CompactConfig) -> CompactConfig:
 
 @dataclass
 class Config:
-    method: str = "baseline"
-    out: str = "outputs/sparse"
+    method: str = "baseline"  # baseline | full | corgs (warpgs.methods); the command's compare runs baseline and full
+    out: str = "outputs/sparse"  # the run folder
     data: DataConfig = field(default_factory=DataConfig)
     model: ModelConfig = field(default_factory=ModelConfig)
     optim: OptimConfig = field(default_factory=OptimConfig)

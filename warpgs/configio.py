@@ -194,7 +194,8 @@ def apply_values(obj, values: dict, where: str, prefix: str = "") -> None:
 
 
 def read_yaml(path: str | Path, _seen=None) -> dict:
-    """A config file as a dict, with its ``base:`` file (relative to it) merged underneath."""
+    """A config file as a dict, with its ``base:`` file (relative to it; or a list of files, merged in order)
+    merged underneath."""
     path = Path(path)
     if not path.is_file():
         raise ConfigError(f"{path}: config file not found")
@@ -212,12 +213,16 @@ def read_yaml(path: str | Path, _seen=None) -> dict:
         raise ConfigError(f"{path}: expected a mapping at the top level")
     base = data.pop("base", None)
     if base:
-        if not isinstance(base, str):
-            raise ConfigError(f"{path}: base = {base!r}: expected the name of another config file")
-        try:
-            data = merge(read_yaml(path.parent / base, seen), data)
-        except ConfigError as e:
-            raise ConfigError(f"{path}: base: {e}") from None
+        bases = base if isinstance(base, list) else [base]
+        if not all(isinstance(b, str) for b in bases):
+            raise ConfigError(f"{path}: base = {base!r}: expected the name of another config file, or a list of them")
+        under: dict = {}
+        for b in bases:
+            try:
+                under = merge(under, read_yaml(path.parent / b, set(seen)))
+            except ConfigError as e:
+                raise ConfigError(f"{path}: base: {e}") from None
+        data = merge(under, data)
     return data
 
 

@@ -1,6 +1,6 @@
 """The divergence guard: decides, step by step, whether training is healthy, skips a bad step, or has
 diverged. It only judges; the trainer acts on its verdicts (skip the update, or roll back to the last good
-state with lower learning rates; ``warpgs.train``).
+state with lower learning rates; ``warpgs.engine.stepguard``).
 
     guard = DivergenceGuard(cfg.train)
     guard.restart(step)                       # a new phase: its losses make their own statistic

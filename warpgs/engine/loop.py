@@ -144,9 +144,10 @@ class Trainer:
         # that ``finish`` calls in order, after training and before the test metrics. They are attached by
         # whoever builds the trainer (warpgs.pipelines.sparse.make_trainer), so this module imports none of them.
         self.stages: list = []
-        # CoR-GS (train.co_reg): the second model of the co-regularised pair, its optimiser and strategy
+        # CoR-GS (--method corgs, or train.co_reg with any method): the second model of the co-regularised pair,
+        # its optimiser and strategy
         self.pair = None
-        if cfg.train.co_reg:
+        if cfg.train.co_reg or getattr(method, "pair", False):
             from warpgs.coreg import CoRegPair
 
             self.pair = CoRegPair(self)

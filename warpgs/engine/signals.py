@@ -13,6 +13,26 @@ SIGNALS = (signal.SIGINT, signal.SIGTERM)
 _NAMES = {signal.SIGINT: "Ctrl-C", signal.SIGTERM: "SIGTERM"}
 
 
+class Terminated(KeyboardInterrupt):
+    """SIGTERM where Ctrl-C raises ``KeyboardInterrupt`` (outside training, or a second signal)."""
+
+    signum = signal.SIGTERM
+
+
+def _interrupt(signum, frame):
+    raise Terminated() if signum == signal.SIGTERM else KeyboardInterrupt()
+
+
+def sigterm_as_interrupt():
+    """For a command: SIGTERM outside training raises ``Terminated`` as Ctrl-C raises ``KeyboardInterrupt``,
+    so both end a run on one path (in the main thread only). Returns the function that puts the previous
+    handler back."""
+    if threading.current_thread() is not threading.main_thread():
+        return lambda: None
+    previous = signal.signal(signal.SIGTERM, _interrupt)
+    return lambda: signal.signal(signal.SIGTERM, previous)
+
+
 class StopRequest:
     """Whether a stop was asked for, and by which signal (``signum``; SIGINT for ``request()`` in code)."""
 
@@ -38,8 +58,8 @@ class StopRequest:
         def handler(signum, frame):
             if self.requested:  # the second signal: stop now; the last checkpoint on disk stays intact
                 for s in SIGNALS:
-                    signal.signal(s, signal.default_int_handler if s == signal.SIGINT else signal.SIG_DFL)
-                raise KeyboardInterrupt
+                    signal.signal(s, _interrupt)
+                _interrupt(signum, frame)
             self.request(signum)
             name = _NAMES.get(signum, f"signal {signum}")
             self.log(f"\nwarpgs: {name}: finishing this step and saving a checkpoint ({name} again to stop at once)")
@@ -57,3 +77,8 @@ class StopRequest:
 def exit_code(signum: int | None) -> int:
     """The exit code of a run stopped by ``signum``: 128 + it (130 Ctrl-C, 143 SIGTERM)."""
     return 128 + int(signum if signum is not None else signal.SIGINT)
+
+
+def interrupt_code(e: KeyboardInterrupt) -> int:
+    """The exit code of a run ended by ``e`` (``Terminated``: 143, else 130)."""
+    return exit_code(getattr(e, "signum", None))

@@ -1,12 +1,14 @@
 """The training methods, each a ``Method`` of the one loop (``warpgs.engine.Trainer``): ``base`` (the baseline,
-which adds nothing) and ``full`` (the paper's generation-guided method). ``METHODS`` names them for
+which adds nothing), ``full`` (the paper's generation-guided method) and ``corgs`` (CoR-GS's co-regularised
+pair over the baseline). ``METHODS`` names them for
 ``--method``; the modules load when asked for."""
 
 from __future__ import annotations
 
 import importlib
 
-METHODS = {"baseline": ("warpgs.methods.base", "Baseline"), "full": ("warpgs.methods.full", "FullMethod")}
+METHODS = {"baseline": ("warpgs.methods.base", "Baseline"), "full": ("warpgs.methods.full", "FullMethod"),
+           "corgs": ("warpgs.methods.corgs", "CoRGS")}
 
 
 def method_class(name: str):

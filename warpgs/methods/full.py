@@ -36,6 +36,7 @@ import torch
 from warpgs import losses
 from warpgs.config import FullConfig, check_limits
 from warpgs.console import warn_once
+from warpgs.engine.checkpoint import TrainingInterrupted
 from warpgs.engine.loop import Trainer
 from warpgs.engine.method import Method
 from warpgs.model import rgb_to_sh
@@ -394,10 +395,16 @@ class FullMethod(Method):
         for c in range(self.cycles_done, s.cycles):
             start, end = bounds[c], bounds[c + 1]
             if tr.step <= start:  # this cycle's pseudo views are not made yet
-                times = self.update_pseudo_views(c + 1)
+                restore = tr.stop.install()  # Ctrl-C / SIGTERM while they are made: stop once they are checkpointed
+                try:
+                    times = self.update_pseudo_views(c + 1)
+                finally:
+                    restore()
                 if s.restart_lr:  # the means' learning-rate schedule restarts (the paper)
                     tr.phase_start, tr.phase_len = start, end - start
-                tr.save_checkpoint()
+                path = tr.save_checkpoint()
+                if tr.context.stop_requested():
+                    raise TrainingInterrupted(tr.step, path, tr.stop.signum)
             else:
                 times = {}
             self.apply_growth_budget()  # every cycle, a resumed one too (the strategy's budget is not checkpointed)
