@@ -89,8 +89,8 @@ def test_held_training_keeps_the_gaussians_and_moves_the_means_less():
 
 def test_a_resumed_held_run_holds_once_and_keeps_its_growth_schedule(tmp_path):
     """The checkpoint (and config.yaml) hold the configuration as requested, not the one derived from it at run time
-    (held learning rates, growth resolved against the run's length): resuming from it derives the same again. Before
-    session 35 the held one was saved, so a resumed held run scaled its geometry's learning rates twice (x 0.01)."""
+    (held learning rates, growth resolved against the run's length): resuming from it derives the same again. A
+    saved held one would make a resumed held run scale its geometry's learning rates twice (x 0.01)."""
     from warpgs.config import config_from_dict
     from warpgs.train import read_checkpoint
 

@@ -410,7 +410,7 @@ def test_the_guard_judges_against_the_median_of_its_phase():
 
 
 def test_out_of_memory_writes_the_last_good_state_in_one_paragraph(tmp_path, capsys, monkeypatch):
-    """A device that runs out of memory mid-run (session 21: 16 runs sharing one GPU) stops the run with one
+    """A device that runs out of memory mid-run (e.g. 16 runs sharing one GPU) stops the run with one
     paragraph, and its metrics, renders and PLY are those of the last good state, as after a divergence."""
     import torch
 
