@@ -170,21 +170,18 @@ def write_metrics(out: Path, metrics: dict) -> Path:
 # the full method's outputs beside these: fly-through, charts, report
 
 
-def write_flythrough(trainer, path: Path, frames_per_segment: int = 24, order: str | None = None) -> Path | None:
-    """A GIF along the interpolated path through the inputs (the trajectories the pseudo views use;
-    ``order`` as ``trajectory.order``)."""
+def write_flythrough(trainer, path: Path, frames_per_segment: int = 24) -> Path | None:
+    """A GIF along the interpolated path through the inputs (the scene's capture path, ``trainer.cameras``:
+    the trajectories the pseudo views use)."""
     from PIL import Image
-
-    from warpgs.pseudo.trajectory import path_trajectories
 
     cams = trainer.train_cams
     if len(cams) < 2:
         return None
-    V = np.stack([c.viewmat.detach().cpu().double().numpy() for c in cams])
     cam0 = cams[0]
     frames = []
     with torch.no_grad():
-        for traj in path_trajectories(V, max(frames_per_segment, 2), order):
+        for traj in trainer.cameras.trajectories(max(frames_per_segment, 2)):
             for vm in traj.viewmats:
                 v = torch.as_tensor(vm, dtype=torch.float32, device=trainer.device)
                 view = SimpleNamespace(viewmat=v, K=cam0.K, width=cam0.width, height=cam0.height)

@@ -442,8 +442,7 @@ class FullMethod(Method):
             # the method's records go into metrics.json before the slower fly-through and report, so a run
             # stopped while those are written keeps them
             write_metrics(tr.out, metrics)
-            write_flythrough(tr, tr.out / "flythrough.gif", self.settings.flythrough_frames,
-                             self.pseudo_config().trajectory.order)
+            write_flythrough(tr, tr.out / "flythrough.gif", self.settings.flythrough_frames)
             write_report(tr.out, metrics, self.history, baseline)
         return metrics
 
