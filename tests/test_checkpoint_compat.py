@@ -45,3 +45,20 @@ def test_a_checkpoint_of_the_old_engine_resumes_to_the_uninterrupted_run(tmp_pat
     straight.train()
     assert resumed.step == straight.step == 60
     assert same_params(param_copy(straight), param_copy(resumed)) and straight.losses == resumed.losses
+
+
+def test_keys_of_the_single_train_section_load_where_they_live_now():
+    """``train.<key>`` of the layout before the ``guard`` and ``regularizers`` sections (config files, --set, the
+    configs inside checkpoints) lands in them through ``MOVED``; ``cfg.train.<key>`` still reads and sets them."""
+    from warpgs.config import config_from_dict, load_config
+
+    cfg = load_config([], ["train.binocular=0.5", "train.binocular_start=0.25", "train.drop_rate=0.1",
+                           "train.sync_every=3", "train.explode_factor=7"])
+    assert cfg.regularizers.binocular.weight == 0.5 and cfg.regularizers.binocular.start == 0.25
+    assert cfg.regularizers.dropout.rate == 0.1 and cfg.guard.sync_every == 3 and cfg.guard.explode_factor == 7
+    assert cfg.train.binocular == 0.5 and cfg.train.sync_every == 3
+    cfg.train.opacity_noise = 0.2
+    assert cfg.regularizers.opacity_noise.sigma == 0.2
+    saved = config_from_dict(read_checkpoint(FIXTURE)["config"])
+    assert saved.regularizers.binocular.weight == 0.5 and saved.regularizers.path_consistency.start == 0.3
+    assert saved.regularizers.dropout.rate == 0.2 and saved.regularizers.opacity_noise.sigma == 0.3

@@ -4,7 +4,7 @@ default and the comment beside its field."""
 import dataclasses
 from pathlib import Path
 
-from warpgs.config import Config, TrainConfig
+from warpgs.config import Config, GuardConfig, TrainConfig
 from warpgs.configdoc import field_comments, render
 
 DOC = Path(__file__).resolve().parents[1] / "docs" / "configuration.md"
@@ -19,8 +19,9 @@ def test_every_key_is_listed_with_its_default_and_its_comment():
     for f in dataclasses.fields(TrainConfig):
         assert f"| `train.{f.name}` |" in text
     # a field's comment and the comment lines that continue it, joined
-    notes = field_comments(TrainConfig)
+    notes = field_comments(GuardConfig)
     assert notes["sync_every"].startswith("steps between host reads") and notes["sync_every"].endswith(
         "None: 10 on CUDA, 1 (every step) on the CPU")
     assert f"| `train.iterations` | `{Config().train.iterations!r}` |" in text
     assert "## pseudo.trajectory" in text  # nested sections of other packages' dataclasses
+    assert "| `guard.sync_every` |" in text and "| `train.sync_every` |" not in text  # a key where it lives now

@@ -164,7 +164,7 @@ def test_no_checkpoint_and_no_recovery_is_said_too(scene, monkeypatch):
     real = tr.compute_loss
     monkeypatch.setattr(tr, "compute_loss", lambda out, cam: (real(out, cam)[0] * (1e6 if tr.step >= 5 else 1), {}))
     with pytest.raises(TrainingDiverged, match=r"at step 7: 3 consecutive steps with an exploding loss.*recovery is off "
-                                               r"\(train.max_recoveries=0\).*no output folder"):
+                                               r"\(guard.max_recoveries=0\).*no output folder"):
         tr.train()
 
 

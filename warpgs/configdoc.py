@@ -87,8 +87,8 @@ def render() -> str:
         rows, nested = section_rows(cls, name)
         doc = (inspect.getdoc(cls) or "").split("\n\n")[0].replace("\n", " ")
         auto = doc.startswith(cls.__name__ + "(")  # dataclass's generated signature: no docstring of its own
-        parts.append(f"\n## {name}\n\n" + ("" if auto or not doc else doc + "\n\n")
-                     + f"`{cls.__module__}.{cls.__name__}`\n\n| key | default | meaning |\n| --- | --- | --- |")
+        parts.append(f"\n## {name}\n\n" + ("" if auto or not doc else doc + "\n\n") + f"`{cls.__module__}.{cls.__name__}`"
+                     + ("\n\n| key | default | meaning |\n| --- | --- | --- |" if rows else ""))
         parts += [f"| `{k}` | {_cell(d)} | {_cell(c)} |" for k, d, c in rows]
         todo = nested + todo
     return "\n".join(parts) + "\n"

@@ -81,7 +81,7 @@ def run_metrics(trainer, ev: dict, train_ev: dict, fps: float) -> dict:
         "skipped_steps": sum(1 for x in tr.losses if not math.isfinite(x)),
         "recoveries": tr.recoveries,  # divergences survived: step, cause, step rolled back to, lr scale after
         "lr_scale": tr.lr_scale,
-        "max_loss_ratio": round(tr.guard.max_loss_ratio, 3),  # largest loss / running median (train.explode_factor)
+        "max_loss_ratio": round(tr.guard.max_loss_ratio, 3),  # largest loss / running median (guard.explode_factor)
         "curve": tr.curve,
         "per_view": ev["views"],
     }

@@ -79,10 +79,10 @@ class Trainer:
         self.out = Path(out_dir) if out_dir is not None else None
         self.log = log or (lambda msg: print(msg, file=sys.stderr))
         self.device = resolve_device(cfg.train.device)
-        if self.device.type == "cpu" and cfg.train.cpu_threads > 0:
+        if self.device.type == "cpu" and cfg.guard.cpu_threads > 0:
             # The images are small and Warp's CPU kernels run on one thread: more torch threads gain
             # little, and on a busy machine their synchronisation made small ops 50x slower.
-            torch.set_num_threads(cfg.train.cpu_threads)
+            torch.set_num_threads(cfg.guard.cpu_threads)
         if self.device.type == "cuda":
             # the rasterizer's backward is deterministic (fixed-point sums); cuDNN's convolutions (SSIM)
             # must be too, so two runs with one seed give the same numbers
@@ -155,7 +155,7 @@ class Trainer:
         self.method.attach(self)
         # train.cuda_graph: deferred steps replayed as one CUDA graph (warpgs/engine/graphstep.py)
         self.graph = None
-        if self.device.type == "cuda" and cfg.train.cuda_graph and cfg.train.guard_kernels:
+        if self.device.type == "cuda" and cfg.guard.cuda_graph and cfg.guard.guard_kernels:
             from warpgs.engine.graphstep import StepGraph
 
             self.graph = StepGraph(self)

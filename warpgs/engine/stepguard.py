@@ -1,24 +1,24 @@
 """The step guard: each training step's verdict (make the update, skip it, or roll back), the host reads
-that are deferred between ``train.sync_every`` steps and their replay, the snapshots of the last good state
+that are deferred between ``guard.sync_every`` steps and their replay, the snapshots of the last good state
 and the rollback to it.
 
 Divergence (judged by ``warpgs.guard.DivergenceGuard``, acted on here): a step is skipped (no update)
 when its loss or gradients are not finite, or when its loss on the input views (``parts["inputs"]`` of
-``Trainer.compute_loss``; pseudo views are left out) explodes: above ``train.explode_factor`` x the median of
-the last ``train.explode_window`` finite losses (the statistic restarts with each ``Trainer.train()`` call,
+``Trainer.compute_loss``; pseudo views are left out) explodes: above ``guard.explode_factor`` x the median of
+the last ``guard.explode_window`` finite losses (the statistic restarts with each ``Trainer.train()`` call,
 i.e. each phase of the full method, and after an opacity reset, whose expected jumps are not divergence). A
-divergence is ``train.max_nan_steps`` skipped steps in a row, ``train.explode_patience`` exploding ones
+divergence is ``guard.max_nan_steps`` skipped steps in a row, ``guard.explode_patience`` exploding ones
 in a row (one high loss alone, e.g. a hard view early in a phase, costs one step, never the run), or
 parameters that are not finite after the optimiser step. The guard keeps an in-memory snapshot of the
 last good state (parameters, Adam moments, densification statistics, RNGs), taken at each ``train()``
-call and every ``train.snapshot_every`` steps when all of it is finite; on a divergence it rolls back to
-it, scales every learning rate by ``train.recovery_lr_factor`` and goes on (each recovery is logged and
-listed in metrics.json). After ``train.max_recoveries`` recoveries the next divergence stops the run with
+call and every ``guard.snapshot_every`` steps when all of it is finite; on a divergence it rolls back to
+it, scales every learning rate by ``guard.recovery_lr_factor`` and goes on (each recovery is logged and
+listed in metrics.json). After ``guard.max_recoveries`` recoveries the next divergence stops the run with
 ``TrainingDiverged``, naming the step, the cause and the last good checkpoint on disk; the model is left
 at the last good state. A checkpoint is never written from a state that is not finite, so the one on disk
 stays the last good one.
 
-Host reads (``train.sync_every``; 10 on CUDA, every step on the CPU): reading a loss or a flag on the host
+Host reads (``guard.sync_every``; 10 on CUDA, every step on the CPU): reading a loss or a flag on the host
 waits for the device, so on CUDA the verdicts are read every ``sync_every`` steps (and before every
 snapshot, checkpoint, evaluation, the end of a phase and a stop). In between, a step is judged on the
 device (finite loss and gradients; the exploding-loss median over ``warpgs.guard.LossWindow``, the same
@@ -39,7 +39,7 @@ from warpgs.engine.checkpoint import CheckpointError, TrainingDiverged, read_che
 from warpgs.guard import DivergenceGuard, LossWindow
 from warpgs.optim import finite_flags, masked_step
 
-SYNC_EVERY_CUDA = 10  # train.sync_every's default on CUDA: host reads of the verdicts every this many steps
+SYNC_EVERY_CUDA = 10  # guard.sync_every's default on CUDA: host reads of the verdicts every this many steps
 # a step's record (StepGuard.step_record): [loss, loss finite, each gradient finite ..., exploding, MSE]
 _VALUE, _LOSS_FINITE, _EXPLODING, _MSE = 0, 1, -2, -1
 
@@ -60,9 +60,9 @@ class StepGuard:
 
     def __init__(self, trainer):
         self.tr = trainer
-        self.guard = DivergenceGuard(trainer.cfg.train)
+        self.guard = DivergenceGuard(trainer.cfg.guard)
         self.snapshot: dict | None = None
-        # host reads every train.sync_every steps: the deferred steps' records, the end of the running phase
+        # host reads every guard.sync_every steps: the deferred steps' records, the end of the running phase
         # (None: outside train(), every step reads), the guard's statistic on the device
         self.pending: list[tuple[int, int, torch.Tensor]] = []
         self.phase_end: int | None = None
@@ -104,7 +104,7 @@ class StepGuard:
         tr.losses.append(value)
         if self.window is not None:
             self.window.push(step, value)
-        every = tr.cfg.train.snapshot_every
+        every = tr.cfg.guard.snapshot_every
         if every and (step + 1) % every == 0:
             self.take_snapshot(step + 1)
         return {"loss": value, "psnr": -10 * math.log10(max(row[_MSE], 1e-10)), **info}
@@ -120,7 +120,7 @@ class StepGuard:
 
     def skipped(self, step: int, why: str) -> dict:
         """Counts a step that made no update: the log line, the guard's count (a divergence when it is the
-        ``train.max_nan_steps``-th in a row), a NaN loss."""
+        ``guard.max_nan_steps``-th in a row), a NaN loss."""
         self.tr.log(f"warpgs: step {step} skipped: {why}")
         if self.guard.skipped():
             return self.diverge(step, f"{self.guard.nan_steps} consecutive steps without a usable loss and gradient "
@@ -129,13 +129,13 @@ class StepGuard:
         return {"loss": float("nan"), "psnr": float("nan"), "skipped": 1}
 
     # ------------------------------------------------------------------------------------------
-    # host reads (train.sync_every): deferred verdicts
+    # host reads (guard.sync_every): deferred verdicts
 
     @property
     def sync_every(self) -> int:
-        """Steps between host reads of the verdicts (``train.sync_every``; None: ``SYNC_EVERY_CUDA`` on CUDA,
+        """Steps between host reads of the verdicts (``guard.sync_every``; None: ``SYNC_EVERY_CUDA`` on CUDA,
         every step on the CPU, where a read costs nothing)."""
-        n = self.tr.cfg.train.sync_every
+        n = self.tr.cfg.guard.sync_every
         if n is None:
             n = SYNC_EVERY_CUDA if self.tr.device.type == "cuda" else 1
         return max(int(n), 1)
@@ -149,7 +149,7 @@ class StepGuard:
             return True
         n, tc = step + 1, self.tr.cfg.train
         return (n % every == 0 or n >= end or self.tr.stop_requested
-                or any(k and n % k == 0 for k in (tc.snapshot_every, tc.checkpoint_every, tc.eval_every)))
+                or any(k and n % k == 0 for k in (self.tr.cfg.guard.snapshot_every, tc.checkpoint_every, tc.eval_every)))
 
     def step_record(self, loss: torch.Tensor, inputs: torch.Tensor) -> torch.Tensor:
         """A step's record, float64 on the device: [the input views' loss, whether the loss and each
@@ -179,7 +179,7 @@ class StepGuard:
     def deferred_step(self, step: int, loss: torch.Tensor, inputs: torch.Tensor, out, cam) -> dict:
         """A step whose verdict the host reads later: the guard's verdict on the device (non-finite, or an
         exploding loss against ``LossWindow``, which gets the step's entry; ``DivergenceGuard.step_on_device``
-        with ``train.guard_kernels``, else ``deferred_verdict``), the update made or skipped there
+        with ``guard.guard_kernels``, else ``deferred_verdict``), the update made or skipped there
         (``masked_step``), and only a step that made its update counts in the densification statistics. The
         record waits in ``pending`` for the next read (``resolve``)."""
         record, apply = self.update_on_device(step, loss, inputs)
@@ -190,9 +190,9 @@ class StepGuard:
     def update_on_device(self, step: int | None, loss: torch.Tensor, inputs: torch.Tensor):
         """A deferred step's verdict and its update, made or skipped on the device (``masked_step``); returns
         (the step's record, whether the update applies). ``step`` None: the guard kernels' window slot was set
-        beforehand (a CUDA graph's replay, ``warpgs.engine.graphstep``, which needs ``train.guard_kernels``)."""
+        beforehand (a CUDA graph's replay, ``warpgs.engine.graphstep``, which needs ``guard.guard_kernels``)."""
         tr = self.tr
-        if tr.cfg.train.guard_kernels:
+        if tr.cfg.guard.guard_kernels:
             window = self.window if step is None else self.loss_window(step)
             record, apply, found_inf = self.guard.step_on_device(self.guarded_tensors(loss), inputs, window, step)
         else:
@@ -217,7 +217,7 @@ class StepGuard:
 
     def loss_window(self, step: int) -> LossWindow:
         if self.window is None:  # after a new statistic: from the host's losses (none, at a phase's start)
-            self.window = LossWindow(self.tr.cfg.train.explode_window, self.tr.device)
+            self.window = LossWindow(self.tr.cfg.guard.explode_window, self.tr.device)
             self.window.rebuild(self.tr.losses, self.guard.stat_start, step)
         return self.window
 
@@ -271,7 +271,7 @@ class StepGuard:
                     self.guard.healthy()
                     losses.append(value)
                     continue
-                why = why or f"the loss {value:.4g} is above train.explode_factor x the running median"
+                why = why or f"the loss {value:.4g} is above guard.explode_factor x the running median"
                 if self.guard.exploded():
                     return self.diverge(k, f"{self.guard.explode_steps} consecutive steps with an exploding loss "
                                            f"(the last: {why})")
@@ -325,13 +325,13 @@ class StepGuard:
 
     def take_snapshot(self, step: int | None = None) -> bool:
         """Keeps the current ``model`` and ``progress`` in memory as the last good state, if it is all finite;
-        returns whether it did. On CUDA with ``train.snapshot_on_device`` (default) the copy stays in GPU memory
+        returns whether it did. On CUDA with ``guard.snapshot_on_device`` (default) the copy stays in GPU memory
         (the training state once more; a copy there takes microseconds, where one to the CPU stops the host
         for each transfer: about 160 MB every 100 steps for 225,000 Gaussians), else it goes to the CPU."""
         tr = self.tr
         if not self.state_is_finite():
             return False
-        on_device = tr.device.type == "cuda" and tr.cfg.train.snapshot_on_device
+        on_device = tr.device.type == "cuda" and tr.cfg.guard.snapshot_on_device
         self.snapshot = None  # the old copy goes first: at most one extra copy of the state at a time
         try:
             self.snapshot = tr.state_dict(("model", "progress"), device=tr.device if on_device else "cpu")
@@ -368,22 +368,22 @@ class StepGuard:
 
     def diverge(self, step: int, cause: str) -> dict:
         """A divergence at ``step``: rolls back to the last good state with lower learning rates, or, when
-        ``train.max_recoveries`` are spent (or there is no good state), stops with ``TrainingDiverged``."""
+        ``guard.max_recoveries`` are spent (or there is no good state), stops with ``TrainingDiverged``."""
         tr = self.tr
-        tc = tr.cfg.train
+        tc, gc = tr.cfg.train, tr.cfg.guard
         for opt in tr.optimizers:
             opt.zero_grad(set_to_none=True)
-        if self.snapshot is None or len(tr.recoveries) >= tc.max_recoveries:
+        if self.snapshot is None or len(tr.recoveries) >= gc.max_recoveries:
             if self.snapshot is not None:
                 self.restore_snapshot()  # leave the model at the last good state, never at the diverged one
             ck = tr.last_checkpoint()
             if self.snapshot is None:
                 tried = "there was no finite state to roll back to"
-            elif tc.max_recoveries <= 0:
-                tried = "recovery is off (train.max_recoveries=0)"
+            elif gc.max_recoveries <= 0:
+                tried = "recovery is off (guard.max_recoveries=0)"
             else:
                 tried = (f"{len(tr.recoveries)} recoveries (each a rollback to the last good state with the learning "
-                         f"rates x{tc.recovery_lr_factor:g}, now x{tr.lr_scale:g}) did not help")
+                         f"rates x{gc.recovery_lr_factor:g}, now x{tr.lr_scale:g}) did not help")
             if ck is not None:
                 saved = tr.saved_step
                 if saved is None:  # a file this trainer neither wrote nor read
@@ -399,9 +399,9 @@ class StepGuard:
             raise TrainingDiverged(f"training diverged at step {step}: {cause}; {tried}. {where} Lower the learning "
                                    f"rates (--set optim.NAME_lr=...) or check the inputs (poses, images).",
                                    step=step, cause=cause, checkpoint=ck)
-        tr.lr_scale *= tc.recovery_lr_factor
+        tr.lr_scale *= gc.recovery_lr_factor
         back_to = self.restore_snapshot()
         tr.recoveries.append({"step": step, "cause": cause, "rolled_back_to": back_to, "lr_scale": tr.lr_scale})
         tr.log(f"warpgs: step {step}: {cause}; rolled back to step {back_to} (the last good state) with the learning "
-               f"rates x{tr.lr_scale:g} (recovery {len(tr.recoveries)} of {tc.max_recoveries})")
+               f"rates x{tr.lr_scale:g} (recovery {len(tr.recoveries)} of {gc.max_recoveries})")
         return {"loss": float("nan"), "psnr": float("nan"), "rolled_back": 1}

@@ -9,12 +9,14 @@
 
 The registry's order is the order of the terms in the loss and of the draws from the generators, so it is part
 of the runs' numbers: a new regulariser goes at the end of it. To add one (the binocular term is the worked
-example, ``warpgs/regularizers/binocular.py``): a module with a ``Regularizer`` subclass and a
-``build(cfg, ctx)`` that returns it or None (off), a line below, and a test (docs/architecture.md).
+example, ``warpgs/regularizers/binocular.py``): a module with its settings' dataclass (``CONFIG``, the section
+``regularizers.<name>``), a ``Regularizer`` subclass and a ``build(cfg, ctx)`` that returns it or None (off), a
+line below, and a test (docs/architecture.md).
 """
 
 from __future__ import annotations
 
+import dataclasses
 import importlib
 
 import torch
@@ -32,6 +34,19 @@ REGISTRY = {
     "path_consistency": "pathconsistency",
 }
 
+MODULES = {name: importlib.import_module(f"warpgs.regularizers.{m}") for name, m in REGISTRY.items()}
+
+# the config's section ``regularizers``: one subsection per regulariser, its module's ``CONFIG`` dataclass
+RegularizersConfig = dataclasses.make_dataclass(
+    "RegularizersConfig", [(name, mod.CONFIG, dataclasses.field(default_factory=mod.CONFIG))
+                           for name, mod in MODULES.items()])
+RegularizersConfig.__doc__ = "The regularisers' settings (``regularizers.<name>``; warpgs/regularizers/<name>.py)."
+RegularizersConfig.__module__ = __name__
+
+# keys of ``train`` before the section existed -> (regulariser, its key): warpgs.config's MOVED and TrainConfig
+LEGACY_TRAIN_KEYS = {old: (name, new) for name, mod in MODULES.items()
+                     for old, new in getattr(mod.CONFIG, "LEGACY", {}).items()}
+
 
 class Regularizers:
     """The regularisers on for one trainer, by name in the registry's order; each hook calls theirs in turn."""
@@ -43,7 +58,7 @@ class Regularizers:
     def build(cls, cfg, ctx, names=None) -> "Regularizers":
         items = {}
         for name in names or REGISTRY:
-            reg = importlib.import_module(f"warpgs.regularizers.{REGISTRY[name]}").build(cfg, ctx)
+            reg = MODULES[name].build(cfg, ctx)
             if reg is not None:
                 items[name] = reg
         return cls(items)
@@ -112,4 +127,4 @@ class Regularizers:
             reg.load_state_dict(st)
 
 
-__all__ = ["REGISTRY", "Regularizer", "Regularizers"]
+__all__ = ["LEGACY_TRAIN_KEYS", "MODULES", "REGISTRY", "Regularizer", "Regularizers", "RegularizersConfig"]

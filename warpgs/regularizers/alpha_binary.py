@@ -1,11 +1,26 @@
-"""``train.alpha_binary``: weight x mean(alpha (1 - alpha)) over each input render, which pushes every pixel to
+"""``regularizers.alpha_binary``: weight x mean(alpha (1 - alpha)) over each input render, which pushes every pixel to
 be either covered or empty (no half-transparent haze)."""
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import torch
 
 from warpgs.regularizers.base import Regularizer
+
+
+@dataclass
+class AlphaBinaryConfig:
+    weight: float = 0.0  # weight of mean(alpha (1 - alpha)) over each input render: every pixel either covered by
+    #   Gaussians or showing what is behind them (with a far field, no translucent cover that a novel view sees at
+    #   another angle); 0: off
+
+    LIMITS = {"weight": ">= 0"}
+    LEGACY = {"alpha_binary": "weight"}  # train.<key> of earlier versions -> this section's key
+
+
+CONFIG = AlphaBinaryConfig  # the section regularizers.<name> of the run's config
 
 
 class AlphaBinary(Regularizer):
@@ -21,4 +36,5 @@ class AlphaBinary(Regularizer):
 
 
 def build(cfg, ctx) -> AlphaBinary | None:
-    return AlphaBinary(cfg.train.alpha_binary) if cfg.train.alpha_binary > 0 else None
+    c = cfg.regularizers.alpha_binary
+    return AlphaBinary(c.weight) if c.weight > 0 else None

@@ -1,5 +1,5 @@
-"""DropGaussian (Park et al., CVPR 2025; ``train.drop_rate``): each training render drops Gaussians at the rate
-``drop_rate`` x step / iterations and scales the others by 1 / (1 - rate). Evaluation renders use all of them.
+"""DropGaussian (Park et al., CVPR 2025; ``regularizers.dropout``): each training render drops Gaussians at the
+rate ``rate`` x step / iterations and scales the others by 1 / (1 - rate). Evaluation renders use all of them.
 
 The mask is drawn from the trainer's ``drop_gen`` (the context's generator; the co-regularised partner's own),
 before the opacity noise's draw (``opacity_noise``), so a run without noise draws exactly what it drew before.
@@ -8,9 +8,23 @@ so that a CUDA graph of the step draws at each replay's rate."""
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import torch
 
 from warpgs.regularizers.base import Regularizer
+
+
+@dataclass
+class DropoutConfig:
+    rate: float = 0.0  # the rate rising linearly from 0 to this at the last step, the rest's opacity x 1 / (1 - rate);
+    #   0: off. The paper: 0.2
+
+    LIMITS = {"rate": "[0, 1)"}
+    LEGACY = {"drop_rate": "rate"}  # train.<key> of earlier versions
+
+
+CONFIG = DropoutConfig  # the section regularizers.<name> of the run's config
 
 
 class Dropout(Regularizer):
@@ -18,7 +32,7 @@ class Dropout(Regularizer):
 
     def __init__(self, rate: float, device):
         if not 0.0 <= rate < 1.0:
-            raise ValueError(f"train.drop_rate must be in [0, 1), got {rate}")
+            raise ValueError(f"regularizers.dropout.rate must be in [0, 1), got {rate}")
         self.rate = rate  # the final rate (the full method may set its own, full.drop_rate)
         self.device = device
         self._t = (torch.zeros((), device=device), torch.zeros((), device=device))  # (rate, 1 - rate)
@@ -54,4 +68,4 @@ class Dropout(Regularizer):
 
 def build(cfg, ctx) -> Dropout:
     """Always built (the full method may turn it on with its own rate)."""
-    return Dropout(cfg.train.drop_rate, ctx.device)
+    return Dropout(cfg.regularizers.dropout.rate, ctx.device)

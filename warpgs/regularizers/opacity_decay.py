@@ -1,11 +1,25 @@
-"""Binocular3DGS's opacity decay (Han et al., NeurIPS 2024; ``train.opacity_decay``): after each update from
+"""Binocular3DGS's opacity decay (Han et al., NeurIPS 2024; ``regularizers.opacity_decay``): after each update from
 ``strategy.refine_start_iter`` on, every opacity x (1 - rate), on the logits the model holds."""
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import torch
 
 from warpgs.regularizers.base import Regularizer
+
+
+@dataclass
+class OpacityDecayConfig:
+    rate: float = 0.0  # from strategy.refine_start_iter on, every step multiplies each opacity by (1 - rate) after the
+    #   update, so what the inputs' gradients do not hold up fades and is pruned (theirs: 0.005 a step); 0: off
+
+    LIMITS = {"rate": "[0, 1)"}
+    LEGACY = {"opacity_decay": "rate"}  # train.<key> of earlier versions
+
+
+CONFIG = OpacityDecayConfig  # the section regularizers.<name> of the run's config
 
 
 class OpacityDecay(Regularizer):
@@ -29,5 +43,5 @@ class OpacityDecay(Regularizer):
 
 
 def build(cfg, ctx) -> OpacityDecay | None:
-    rate = cfg.train.opacity_decay
+    rate = cfg.regularizers.opacity_decay.rate
     return OpacityDecay(rate) if rate > 0 else None

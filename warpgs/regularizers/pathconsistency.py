@@ -1,16 +1,17 @@
-"""Two-view consistency at poses of the capture path (``full.path_consistency``, ``train.path_consistency``).
+"""Two-view consistency at poses of the capture path (``full.path_consistency``, ``regularizers.path_consistency``).
 
 At a pose between two neighbouring inputs, the photos of both, warped into it with the depth the model renders there
 (``warpgs.regularizers.binocular.pose_warp``), should agree wherever both see the same surface. The term is their mean absolute
 difference over the pixels both land in; its gradient reaches that depth only (the photos are fixed). The full method
 evaluates it at the pseudo view it trains on anyway (its render is there; ``full.path_consistency``). Any method can
 have it at a pose of the pseudo views' trajectories drawn each step, at the cost of one more render
-(``train.path_consistency``, this module's ``PathConsistency``): the measure of whether a gain is the pseudo views'.
+(``regularizers.path_consistency``, this module's ``PathConsistency``): the measure of whether a gain is the pseudo views'.
 """
 
 from __future__ import annotations
 
 import copy
+from dataclasses import dataclass
 import numpy as np
 import torch
 
@@ -38,15 +39,29 @@ def check_one_camera(cams, option: str) -> None:
                          f"set {option}=0")
 
 
+@dataclass
+class PathConsistencyConfig:
+    weight: float = 0.0  # weight of the two inputs' agreement at a pose of the pseudo views' trajectories drawn each
+    #   step (one more render a step): their photos warped into it with its rendered depth, L1 where both land. The
+    #   full method's own is full.path_consistency, at its pseudo views; 0: off
+    start: float = 0.4  # share of the run's steps before it starts (the full method's first cycle)
+
+    LIMITS = {"weight": ">= 0", "start": "[0, 1]"}
+    LEGACY = {"path_consistency": "weight", "path_consistency_start": "start"}  # train.<key> of earlier versions
+
+
+CONFIG = PathConsistencyConfig  # the section regularizers.<name> of the run's config
+
+
 class PathConsistency(Regularizer):
-    """``train.path_consistency`` for one trainer: the interior poses of the pseudo views' trajectories between each
+    """``regularizers.path_consistency`` for one trainer: the interior poses of the pseudo views' trajectories between each
     pair of neighbouring inputs; from step ``start`` on, each step one of them (drawn with a generator the checkpoint
     keeps) is rendered and the term computed there."""
 
     name = "path_consistency"
 
     def __init__(self, weight: float, start: int, cams, trajectories, seed: int, device):
-        check_one_camera(cams, "train.path_consistency")
+        check_one_camera(cams, "regularizers.path_consistency")
         self.weight, self.start = weight, start
         poses, self.pairs = [], []
         for traj in trajectories:
@@ -91,10 +106,10 @@ class PathConsistency(Regularizer):
 
 
 def build(cfg, ctx) -> PathConsistency | None:
-    """``train.path_consistency`` > 0 with two inputs or more: the term at the interior poses of the pseudo views'
-    trajectories (``pseudo.trajectory.n_frames`` a segment), from ``train.path_consistency_start`` x the run on."""
-    tc = cfg.train
-    if not (tc.path_consistency > 0 and len(ctx.cameras.views) >= 2):
+    """``weight`` > 0 with two inputs or more: the term at the interior poses of the pseudo views' trajectories
+    (``pseudo.trajectory.n_frames`` a segment), from ``start`` x the run on."""
+    c, tc = cfg.regularizers.path_consistency, cfg.train
+    if not (c.weight > 0 and len(ctx.cameras.views) >= 2):
         return None
-    return PathConsistency(tc.path_consistency, int(tc.path_consistency_start * tc.iterations), ctx.cameras.views,
+    return PathConsistency(c.weight, int(c.start * tc.iterations), ctx.cameras.views,
                            ctx.cameras.trajectories(max(cfg.pseudo.trajectory.n_frames, 3)), tc.seed, ctx.device)
