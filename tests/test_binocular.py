@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 import torch
 
-from warpgs.binocular import moved_viewmat, shift_warp
+from warpgs.regularizers.binocular import moved_viewmat, shift_warp
 
 from devices import DEVICES  # noqa: E402 (tests/devices.py: WARPGS_TEST_DEVICES restricts them)
 
@@ -159,10 +159,10 @@ def test_binocular_term_trains_and_checkpoints_its_draws(tmp_path):
         return cfg
 
     on = Trainer(cfg_of(True), make_scene(), None, log=lambda m: None)
-    assert on.binocular.start == 10
+    assert on.regularizers.get("binocular").start == 10
     calls = []
-    term = on.binocular.loss
-    on.binocular.loss = lambda *a: (calls.append(on.step), term(*a))[1]
+    term = on.regularizers.get("binocular").loss
+    on.regularizers.get("binocular").loss = lambda *a: (calls.append(on.step), term(*a))[1]
     on.train()
     assert calls == list(range(10, 40))  # every step from the start on, none before
     off = Trainer(cfg_of(False), make_scene(), None, log=lambda m: None)
@@ -202,7 +202,7 @@ def _plane_view(gx, gy, colours):
 def test_binocular_loss_is_lower_with_the_true_depth():
     """On the textured plane, the term computed with the input's rendered depth is below the term with that
     depth 30% too far or too near (the warp then misaligns the moved render)."""
-    from warpgs.binocular import Binocular
+    from warpgs.regularizers.binocular import Binocular
 
     gx, gy = np.meshgrid(np.linspace(-2.4, 2.4, 60), np.linspace(-1.6, 1.6, 40))
     model, inp, cam, bg = _plane_view(gx, gy, np.random.default_rng(0).random((gx.size, 3)))
@@ -239,7 +239,7 @@ def pose_oracle(moved: torch.Tensor, depth: torch.Tensor, rel: torch.Tensor, K: 
 
 @pytest.mark.parametrize("device", DEVICES)
 def test_pose_warp_matches_grid_sample_and_its_gradients(device):
-    from warpgs.binocular import pose_warp
+    from warpgs.regularizers.binocular import pose_warp
     from warpgs.geometry import axis_angle_to_rotmat
 
     g = torch.Generator().manual_seed(3)
@@ -271,7 +271,7 @@ def test_pose_warp_matches_grid_sample_and_its_gradients(device):
 
 
 def test_pose_warp_of_a_move_along_x_is_shift_warp_and_no_depth_warps_nothing():
-    from warpgs.binocular import pose_warp
+    from warpgs.regularizers.binocular import pose_warp
 
     g = torch.Generator().manual_seed(4)
     H, W = 5, 12
@@ -316,7 +316,7 @@ def test_path_partner_term_is_lower_with_the_true_depth_and_reaches_the_depth():
     turn's geometry is checked against grid_sample above.)"""
     from types import SimpleNamespace
 
-    from warpgs.binocular import Binocular
+    from warpgs.regularizers.binocular import Binocular
     from warpgs.model import GaussianModel
 
     n = 60 * 40
@@ -365,10 +365,10 @@ def test_path_partner_trains_from_the_config_and_resumes_bit_for_bit(tmp_path):
 
     scene = make_scene()
     path = Trainer(cfg_of("path"), scene, tmp_path / "whole", log=lambda m: None)
-    assert set(path.binocular.path) == {c.name for c in scene.train}
+    assert set(path.regularizers.get("binocular").path) == {c.name for c in scene.train}
     path.train()
     shift = Trainer(cfg_of("shift"), make_scene(), None, log=lambda m: None)
-    assert shift.binocular.path == {}
+    assert shift.regularizers.get("binocular").path == {}
     shift.train()
     assert not same_params(param_copy(path), param_copy(shift))
     half = Trainer(cfg_of("path"), make_scene(), tmp_path / "half", log=lambda m: None)
@@ -384,7 +384,7 @@ def test_binocular_xy_sees_depth_errors_a_sideways_move_cannot():
     """Horizontal stripes (colour varies with the row only): a sideways partner warps along the rows and sees no
     error in the depth, whatever it is; ``train.binocular_axes: xy`` moves the camera up and down too, so the term
     with the depth 30% off is well above the term with the true depth. With the true depth both are small."""
-    from warpgs.binocular import Binocular
+    from warpgs.regularizers.binocular import Binocular
 
     n_x, n_y = 150, 40  # wider than the view and its moves: no edge of the plane in sight along the rows
     gx, gy = np.meshgrid(np.linspace(-6.0, 6.0, n_x), np.linspace(-1.6, 1.6, n_y))

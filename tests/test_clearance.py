@@ -50,7 +50,7 @@ def test_gaussians_on_the_path_are_inside_and_the_scene_is_not():
 @pytest.mark.skipif("cpu" not in DEVICES, reason="trains on the CPU (the GPU machine's packed Warp has no CPU compiler)")
 def test_trainer_removes_gaussians_on_the_camera_path(tmp_path):
     from tiny_scene import make_scene, tiny_config
-    from warpgs.pipelines.full import append_gaussians
+    from warpgs.methods.full import append_gaussians
     from warpgs.train import Trainer
 
     scene = make_scene()
@@ -171,7 +171,7 @@ def test_path_floaters_on_both_paths_find_what_stands_before_the_line_where_the_
 def test_trainer_removes_the_path_floaters_on_its_schedule(tmp_path):
     from tiny_scene import make_scene, tiny_config
     from warpgs.clearance import PathFloaters
-    from warpgs.pipelines.full import append_gaussians
+    from warpgs.methods.full import append_gaussians
     from warpgs.train import Trainer
 
     scene = make_scene()

@@ -216,3 +216,23 @@ def test_off_by_default_trains_exactly_as_before(scene):
     uncoupled = Trainer(tiny_config(60, co_reg=True, co_reg_weight=0.0, co_prune_every=0), scene)
     uncoupled.train()
     assert uncoupled.losses == plain.losses and same_params(param_copy(uncoupled), param_copy(plain))
+
+
+def test_the_method_corgs_is_the_baseline_with_the_pair(scene):
+    """``--method corgs`` (``warpgs.methods.corgs``) trains what ``train.co_reg=true`` over the baseline trains,
+    bit for bit, and the command line knows it."""
+    from warpgs.methods import method_class
+    from warpgs.pipelines.sparse import build_parser, make_config
+
+    cfg = _pair_config(30)
+    cfg.train.co_reg = False
+    as_method = Trainer(cfg, scene, method=method_class("corgs")())
+    as_flag = Trainer(_pair_config(30), scene)
+    assert as_method.pair is not None and as_method.method.name == "corgs"
+    as_method.train()
+    as_flag.train()
+    assert as_method.losses == as_flag.losses and same_params(param_copy(as_method), param_copy(as_flag))
+    assert same_params({k: v for k, v in as_method.pair.model.params.items()},
+                       {k: v for k, v in as_flag.pair.model.params.items()})
+    parsed, _ = make_config(build_parser().parse_args(["--method", "corgs"]))
+    assert parsed.method == "corgs"

@@ -353,7 +353,7 @@ def test_the_captures_config_asks_for_the_cylinder_and_a_bad_proxy_is_named():
 
     from warpgs.config import load_config
 
-    assert load_config([Path(__file__).resolve().parents[1] / "configs" / "dl3dv.yaml"]).train.far_field_proxy == "auto"
+    assert load_config([Path(__file__).resolve().parents[1] / "configs" / "datasets" / "dl3dv.yaml"]).train.far_field_proxy == "auto"
     assert load_config().train.far_field_proxy == "none"
     with pytest.raises(ValueError, match="far_field_proxy"):
         load_config(overrides=["train.far_field_proxy=sphere"])

@@ -8,7 +8,7 @@ import pytest
 import torch
 
 from warpgs.config import FullConfig
-from warpgs.pipelines.full import ABLATIONS, append_gaussians, check_settings, phase_boundaries
+from warpgs.methods.full import ABLATIONS, append_gaussians, check_settings, phase_boundaries
 
 
 def test_phase_boundaries_split_the_iterations():
@@ -66,7 +66,7 @@ def test_ablation_switches_reach_the_config(tmp_path):
 def test_appended_gaussians_train_with_fresh_adam_state():
     from warpgs.config import build_config
     from warpgs.data import load_scene
-    from warpgs.pipelines.full import FullMethod
+    from warpgs.methods.full import FullMethod
     from warpgs.train import Trainer
 
     cfg = build_config([{"method": "full", "train": {"device": "cpu", "progress": False, "iterations": 2},
@@ -167,7 +167,7 @@ def test_early_input_depth_is_the_scene_depth_where_confident_and_trains_from_st
     has the input depth term. A view with too few confident pixels gets no prior (depth_prior)."""
     from warpgs.config import build_config
     from warpgs.data import load_scene
-    from warpgs.pipelines.full import FullMethod, depth_prior
+    from warpgs.methods.full import FullMethod, depth_prior
     from warpgs.train import Trainer
 
     cfg = build_config([{"method": "full", "train": {"device": "cpu", "progress": False, "iterations": 2},

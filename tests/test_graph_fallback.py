@@ -1,4 +1,4 @@
-"""CUDA graphs of training steps (``warpgs.graphstep``): a run whose step cannot be recorded goes on without the
+"""CUDA graphs of training steps (``warpgs.engine.graphstep``): a run whose step cannot be recorded goes on without the
 graphs, drawing its dropout masks from a generator that takes the draws (a generator registered with a failed
 capture refused them: "Offset increment outside graph capture"). CUDA only: skipped where torch sees no GPU."""
 
@@ -6,7 +6,7 @@ import pytest
 import torch
 
 from tiny_scene import make_scene, tiny_config
-from warpgs.graphstep import StepGraph
+from warpgs.engine.graphstep import StepGraph
 from warpgs.train import Trainer
 
 pytestmark = pytest.mark.skipif(not torch.cuda.is_available(), reason="CUDA graphs need a GPU")

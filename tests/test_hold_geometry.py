@@ -44,7 +44,7 @@ def test_on_and_off_read_as_words_from_yaml_and_the_command_line():
 
     assert load_config(overrides=["train.hold_geometry=on"]).train.hold_geometry == "on"  # YAML 1.1: True
     assert load_config(overrides=["train.hold_geometry=off"]).train.hold_geometry == "off"
-    assert load_config([Path(__file__).resolve().parents[1] / "configs" / "dl3dv.yaml"]).train.hold_geometry == "stereo"  # the captures' default
+    assert load_config([Path(__file__).resolve().parents[1] / "configs" / "datasets" / "dl3dv.yaml"]).train.hold_geometry == "stereo"  # the captures' default
     with pytest.raises(ValueError, match="far_field"):  # a boolean where on / off mean nothing stays an error
         load_config(overrides=["train.far_field=on"])
 
@@ -89,8 +89,8 @@ def test_held_training_keeps_the_gaussians_and_moves_the_means_less():
 
 def test_a_resumed_held_run_holds_once_and_keeps_its_growth_schedule(tmp_path):
     """The checkpoint (and config.yaml) hold the configuration as requested, not the one derived from it at run time
-    (held learning rates, growth resolved against the run's length): resuming from it derives the same again. Before
-    session 35 the held one was saved, so a resumed held run scaled its geometry's learning rates twice (x 0.01)."""
+    (held learning rates, growth resolved against the run's length): resuming from it derives the same again. A
+    saved held one would make a resumed held run scale its geometry's learning rates twice (x 0.01)."""
     from warpgs.config import config_from_dict
     from warpgs.train import read_checkpoint
 

@@ -7,8 +7,8 @@ import pytest
 import torch
 
 from devices import DEVICES  # tests/devices.py: WARPGS_TEST_DEVICES restricts them
-from warpgs.pathconsistency import two_view_consistency
-from warpgs.pipelines.full import pseudo_pair
+from warpgs.regularizers.pathconsistency import two_view_consistency
+from warpgs.methods.full import pseudo_pair
 
 
 def textured_plane(device="cpu"):
@@ -90,7 +90,7 @@ def test_full_method_trains_with_it_and_a_resumed_run_finds_the_pairs_again(tmp_
 
 def test_a_negative_weight_is_named():
     from warpgs.config import FullConfig
-    from warpgs.pipelines.full import check_settings
+    from warpgs.methods.full import check_settings
 
     with pytest.raises(ValueError, match="path_consistency"):
         check_settings(FullConfig(path_consistency=-1.0))
@@ -126,10 +126,10 @@ def test_any_method_has_it_at_drawn_path_poses_and_resumes_bit_for_bit(tmp_path)
 
     scene = make_scene()
     whole = Trainer(cfg_of(1.0), scene, tmp_path / "whole", log=lambda m: None)
-    pc = whole.path_consistency
+    pc = whole.regularizers.get("path_consistency")
     n = len(scene.train)
     assert len(pc.pairs) == 3 * (n - 1) and all(abs(a - b) == 1 for a, b in pc.pairs)  # 3 poses between each pair of neighbours
-    assert whole.path_consistency_active(9) and not whole.path_consistency_active(8)
+    assert pc.active(9) and not pc.active(8)
     parts = []
     original = whole.compute_loss
 
@@ -142,7 +142,7 @@ def test_any_method_has_it_at_drawn_path_poses_and_resumes_bit_for_bit(tmp_path)
     whole.train()
     assert ["path_consistency" in p for p in parts] == [k >= 9 for k in range(30)]
     off = Trainer(cfg_of(0.0), make_scene(), None, log=lambda m: None)
-    assert off.path_consistency is None
+    assert off.regularizers.get("path_consistency") is None
     off.train()
     assert not same_params(param_copy(whole), param_copy(off))
     half = Trainer(cfg_of(1.0), make_scene(), tmp_path / "half", log=lambda m: None)

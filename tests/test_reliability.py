@@ -91,7 +91,11 @@ def test_config_values_are_checked_in_every_layer_before_anything_runs(tmp_path,
         (["--iterations", "0"], "train.iterations = 0 (from --iterations 0): must be >= 1"),
         (["--set", "full.baseline_fraction=1.5"], "full.baseline_fraction = 1.5 (from --set full.baseline_fraction=1.5): "
                                                   "must be in [0, 1)"),
-        (["--set", "train.drop_rate=.nan"], "train.drop_rate = nan (from --set train.drop_rate=.nan): must be a finite number"),
+        (["--set", "regularizers.dropout.rate=.nan"], "regularizers.dropout.rate = nan (from --set "
+                                                      "regularizers.dropout.rate=.nan): must be a finite number"),
+        # a key of an earlier version (warpgs.config.MOVED) is named where it lives now, and where it came from
+        (["--set", "train.drop_rate=.nan"], "regularizers.dropout.rate = nan (from --set train.drop_rate=.nan): "
+                                            "must be a finite number"),
         (["--set", "strategy.reset_every=0"], "strategy.reset_every = 0 (from --set strategy.reset_every=0): must be >= 1"),
         (["--set", "geometry.stereo.sgm_paths=8"],
          "geometry.stereo.sgm_paths = 8 (from --set geometry.stereo.sgm_paths=8): must be in [0, 4]"),

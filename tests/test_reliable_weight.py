@@ -109,7 +109,7 @@ def test_without_it_no_maps_are_kept(tmp_path):
 
 def test_a_weight_of_zero_is_named():
     from warpgs.config import FullConfig
-    from warpgs.pipelines.full import check_settings
+    from warpgs.methods.full import check_settings
 
     with pytest.raises(ValueError, match="reliable_weight"):
         check_settings(FullConfig(reliable_weight=0.0))

@@ -20,6 +20,11 @@ from warpgs.config import Config
 from warpgs.train import CHECKPOINT, Trainer, TrainingDiverged, base_learning_rates, load_trained
 
 
+def dropout_scale(tr, step):
+    """DropGaussian's factors alone for one training render of ``tr``'s model at ``step`` (None at rate 0)."""
+    return tr.regularizers.get("dropout").opacity_factor(tr.context, step, len(tr.model), tr.drop_gen)
+
+
 def _cfg(iterations=100, **train) -> Config:
     """The tiny scene's training config (tiny_scene.tiny_config): densification from step 30 every 20,
     opacity resets every 120."""
@@ -109,7 +114,7 @@ def test_nonfinite_parameters_are_rolled_back_and_never_checkpointed(scene, tmp_
     with torch.no_grad():
         tr.model.params["sh0"][0] = float("nan")
     assert tr.save_checkpoint() is None and path.read_bytes() == good  # the last good one stays
-    assert tr.restore_snapshot() == 20 and _finite(tr)
+    assert tr.stepguard.restore_snapshot() == 20 and _finite(tr)
     real = tr.strategy.step_post_backward
     hit = []
 
@@ -125,7 +130,7 @@ def test_nonfinite_parameters_are_rolled_back_and_never_checkpointed(scene, tmp_
     tr.train()
     assert [(r["step"], r["rolled_back_to"]) for r in tr.recoveries] == [(45, 40)]
     assert "scales are not finite after the optimiser step" in tr.recoveries[0]["cause"]
-    assert tr.step == 60 and _finite(tr) and not tr.nonfinite_parameters()
+    assert tr.step == 60 and _finite(tr) and not tr.stepguard.nonfinite_parameters()
 
 
 def test_persistent_nan_stops_with_a_clear_message_and_keeps_the_checkpoint(scene, tmp_path, monkeypatch):
@@ -159,7 +164,7 @@ def test_no_checkpoint_and_no_recovery_is_said_too(scene, monkeypatch):
     real = tr.compute_loss
     monkeypatch.setattr(tr, "compute_loss", lambda out, cam: (real(out, cam)[0] * (1e6 if tr.step >= 5 else 1), {}))
     with pytest.raises(TrainingDiverged, match=r"at step 7: 3 consecutive steps with an exploding loss.*recovery is off "
-                                               r"\(train.max_recoveries=0\).*no output folder"):
+                                               r"\(guard.max_recoveries=0\).*no output folder"):
         tr.train()
 
 
@@ -356,15 +361,15 @@ def test_dropgaussian_drops_at_its_rate_and_keeps_the_expected_opacity(tmp_path)
     import torch
 
     cfg, tr = small_full_trainer(tmp_path, "--set", "model.init_num=4000", "--set", "train.drop_rate=0.2")
-    assert tr.dropout_scale(0) is None  # the rate starts at 0
-    s = tr.dropout_scale(tr.total_steps // 2)  # rate 0.1
+    assert dropout_scale(tr, 0) is None  # the rate starts at 0
+    s = dropout_scale(tr, tr.total_steps // 2)  # rate 0.1
     assert s.shape == (len(tr.model),)
     vals = torch.unique(s)
     assert torch.allclose(vals, torch.tensor([0.0, 1 / 0.9]))
     dropped = float((s == 0).float().mean())
     assert abs(dropped - 0.1) < 4 * np.sqrt(0.1 * 0.9 / len(s))  # binomial, 4 sigma
     assert abs(float(s.mean()) - 1.0) < 4 * np.sqrt(0.1 / 0.9 / len(s))  # opacity kept in expectation
-    full = tr.dropout_scale(tr.total_steps)  # the final rate
+    full = dropout_scale(tr, tr.total_steps)  # the final rate
     assert abs(float((full == 0).float().mean()) - 0.2) < 4 * np.sqrt(0.2 * 0.8 / len(full))
     # a dropped Gaussian is absent from the render: a render with it removed is the same image
     cam = tr.train_cams[0]
@@ -405,7 +410,7 @@ def test_the_guard_judges_against_the_median_of_its_phase():
 
 
 def test_out_of_memory_writes_the_last_good_state_in_one_paragraph(tmp_path, capsys, monkeypatch):
-    """A device that runs out of memory mid-run (session 21: 16 runs sharing one GPU) stops the run with one
+    """A device that runs out of memory mid-run (e.g. 16 runs sharing one GPU) stops the run with one
     paragraph, and its metrics, renders and PLY are those of the last good state, as after a divergence."""
     import torch
 

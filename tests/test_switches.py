@@ -16,6 +16,11 @@ from warpgs.config import ConfigError, load_config
 from warpgs.train import Trainer
 
 
+def dropout_scale(tr, step):
+    """DropGaussian's factors alone for one training render of ``tr``'s model at ``step`` (None at rate 0)."""
+    return tr.regularizers.get("dropout").opacity_factor(tr.context, step, len(tr.model), tr.drop_gen)
+
+
 def _trainer(tmp_path=None, iterations=30, init_num=300, **train):
     cfg = tiny_config(iterations, **train)
     cfg.model.init_num = init_num
@@ -36,7 +41,7 @@ def test_opacity_noise_factors_have_the_clipped_normal_statistics():
     sigma, n = 0.8, 20000
     tr = _trainer(init_num=n, opacity_noise=sigma)
     s = tr.opacity_scale(0).double()
-    assert s.shape == (n,) and tr.dropout_scale(0) is None
+    assert s.shape == (n,) and dropout_scale(tr, 0) is None
     phi1 = math.exp(-0.5) / math.sqrt(2 * math.pi)
     p_out = 2 * (1 - _normal_cdf(1.0))
     m2 = 1 - 2 * phi1  # E[min(Z^2, 1)]
@@ -76,7 +81,7 @@ def test_switched_off_the_noise_draws_nothing():
     assert tr.opacity_scale(0) is None  # the rate starts at 0 and there is no noise
     assert torch.equal(tr.drop_gen.get_state(), before)
     ref = _trainer(drop_rate=0.2)
-    assert torch.equal(tr.opacity_scale(20), ref.dropout_scale(20))
+    assert torch.equal(tr.opacity_scale(20), dropout_scale(ref, 20))
 
 
 def test_noise_and_dropout_act_on_training_renders_only(monkeypatch):
@@ -212,7 +217,7 @@ def test_baseline_switches_off_give_the_losses_of_the_code_without_them(monkeypa
     steps = 40
     off_losses, off_params = _losses_of_a_run(_trainer(iterations=steps, drop_rate=0.2))
     with monkeypatch.context() as mp:
-        mp.setattr(Trainer, "opacity_scale", lambda self, step: self.dropout_scale(step))
+        mp.setattr(Trainer, "opacity_scale", lambda self, step, *rest: dropout_scale(self, step))
 
         def forbidden(*a, **kw):
             raise AssertionError("a switched-off regulariser ran")

@@ -30,13 +30,13 @@ def scene():
 def _reads(tr, monkeypatch) -> list[int]:
     """Records the step of every host read of the verdicts."""
     steps = []
-    real = tr._resolve
+    real = tr.stepguard.resolve
 
     def counted(*args, **kw):
         steps.append(tr.step)
         return real(*args, **kw)
 
-    monkeypatch.setattr(tr, "_resolve", counted)
+    monkeypatch.setattr(tr.stepguard, "resolve", counted)
     return steps
 
 
@@ -50,7 +50,7 @@ def test_the_default_reads_every_step_on_the_cpu_and_the_setting_is_checked():
     with pytest.raises(ConfigError, match="sync_every"):
         load_config([], ["train.sync_every=0"])
     tr = Trainer(tiny_config(1), make_scene())
-    assert tr.sync_every == 1 and tr._sync_due(0) and tr._sync_due(3)
+    assert tr.sync_every == 1 and tr.stepguard.sync_due(0) and tr.stepguard.sync_due(3)
 
 
 @pytest.mark.parametrize("kernels", [False, True])
@@ -65,7 +65,7 @@ def test_deferred_reads_give_the_same_run(scene, monkeypatch, kernels):
         tr.train()
         runs[every] = (param_copy(tr), tr.losses, tr.guard.max_loss_ratio, len(reads), tr)
     assert same_params(runs[1][0], runs[5][0]) and runs[1][1] == runs[5][1] and runs[1][2] == runs[5][2]
-    assert (runs[1][3], runs[5][3]) == (130, 26) and not runs[5][4]._pending
+    assert (runs[1][3], runs[5][3]) == (130, 26) and not runs[5][4].stepguard.pending
     assert len(runs[5][1]) == 130 and len(runs[5][0]["means"]) != 300  # densification ran
 
 
@@ -88,19 +88,19 @@ def _inf_gradient_at(tr, steps):
 def test_a_nonfinite_gradient_never_reaches_the_parameters_between_reads(scene, monkeypatch, kernels):
     tr = Trainer(tiny_config(40, sync_every=5, guard_kernels=kernels), scene)
     monkeypatch.setattr(tr, "compute_loss", _inf_gradient_at(tr, {12}))
-    import warpgs.train
+    import warpgs.engine.stepguard
 
     seen = {}
 
     def watched(optimizer, apply, found_inf=None):  # the state around step 12's (deferred) update
         if tr.step == 12:
             seen["before"] = (param_copy(tr), [{k: v.clone() for k, v in st.items()} for st in optimizer.state.values()])
-            seen["pending"] = len(tr._pending)
+            seen["pending"] = len(tr.stepguard.pending)
         masked_step(optimizer, apply, found_inf)
         if tr.step == 12:
             seen["after"] = (param_copy(tr), [{k: v.clone() for k, v in st.items()} for st in optimizer.state.values()])
 
-    monkeypatch.setattr(warpgs.train, "masked_step", watched)
+    monkeypatch.setattr(warpgs.engine.stepguard, "masked_step", watched)
     logs = []
     tr.log = logs.append
     tr.train()
@@ -168,7 +168,7 @@ def test_nan_losses_between_reads_roll_back(scene, monkeypatch):
 
 def test_nonfinite_parameters_between_reads_are_rolled_back(scene, monkeypatch):
     tr = Trainer(tiny_config(60, snapshot_every=20, sync_every=5), scene)
-    real = tr._after_update
+    real = tr.after_update
 
     def after_step_45_a_scale_is_infinite(step, out, cam, apply=None):  # finite as stored, infinite as rendered
         info = real(step, out, cam, apply)
@@ -177,13 +177,13 @@ def test_nonfinite_parameters_between_reads_are_rolled_back(scene, monkeypatch):
                 tr.model.params["scales"][3] = 200.0
         return info
 
-    monkeypatch.setattr(tr, "_after_update", after_step_45_a_scale_is_infinite)
+    monkeypatch.setattr(tr, "after_update", after_step_45_a_scale_is_infinite)
     tr.log = lambda msg: None
     tr.train()
     # step 45 was deferred; the read at step 49 finds the scales infinite and rolls back to the snapshot at 40
     assert [(r["step"], r["rolled_back_to"]) for r in tr.recoveries] == [(48, 40)]
     assert "scales are not finite after the optimiser step (of one of steps 45-48" in tr.recoveries[0]["cause"]
-    assert tr.step == 60 and _finite(tr) and not tr.nonfinite_parameters()
+    assert tr.step == 60 and _finite(tr) and not tr.stepguard.nonfinite_parameters()
 
 
 def test_ctrl_c_between_reads_saves_a_state_that_resumes_exactly(scene, tmp_path, monkeypatch):
@@ -201,7 +201,7 @@ def test_ctrl_c_between_reads_saves_a_state_that_resumes_exactly(scene, tmp_path
     with pytest.raises(TrainingInterrupted) as e:
         tr.train()
     assert e.value.step == 23 and torch.load(tmp_path / CHECKPOINT, weights_only=False)["step"] == 23
-    assert len(tr.losses) == 23 and not tr._pending
+    assert len(tr.losses) == 23 and not tr.stepguard.pending
     resumed = Trainer(tiny_config(60, sync_every=5), scene, tmp_path)
     resumed.load_checkpoint()
     resumed.train()

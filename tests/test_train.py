@@ -57,7 +57,7 @@ def test_embedded_synthetic_scene_three_views():
     from warpgs.data import load_scene
 
     scene = load_scene("synthetic", views=3, downscale=2)
-    cfg = load_config([CONFIG_DIR / "baseline.yaml", CONFIG_DIR / "synthetic.yaml"],
+    cfg = load_config([CONFIG_DIR / "methods" / "baseline.yaml", CONFIG_DIR / "datasets" / "synthetic.yaml"],
                       ["train.iterations=200", "model.init_num=1500", "strategy.refine_start_iter=100",
                        "strategy.max_gaussians=3000", "train.device=cpu", "train.progress=false"])
     tr = Trainer(cfg, scene)
@@ -184,9 +184,9 @@ def test_config_layers_and_errors(tmp_path):
         read_yaml(loop)
 
 
-@pytest.mark.parametrize("name", ["baseline", "synthetic", "blender", "llff", "dtu"])
+@pytest.mark.parametrize("name", ["synthetic", "blender", "llff", "dtu", "nerfstudio", "dl3dv", "colmap"])
 def test_repository_configs_load(name):
-    cfg = load_config([CONFIG_DIR / "baseline.yaml", CONFIG_DIR / f"{name}.yaml"])
+    cfg = load_config([CONFIG_DIR / "methods" / "baseline.yaml", CONFIG_DIR / "datasets" / f"{name}.yaml"])
     assert cfg.method == "baseline" and cfg.train.iterations > 0
     if name == "blender":
         assert cfg.model.init == "hull" and len(cfg.model.init_box) == 6 and 7000 <= cfg.train.iterations <= 10000

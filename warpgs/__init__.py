@@ -14,7 +14,7 @@ import platform as _platform
 import torch as _torch
 
 # torch picks its CPU kernels by the processor's vector width: on a CPU with AVX-512 its reductions round
-# differently from an AVX2 CPU's, so the same CPU command gave other figures on another x86 machine (session 27: the
+# differently from an AVX2 CPU's, so the same CPU command gave other figures on another x86 machine (the
 # no-argument run 19.98 -> 21.84 with AVX-512 kernels, 20.30 -> 22.05 with AVX2 ones, in the same time). Where no
 # CUDA device is visible (a CPU run), warpgs asks for the AVX2 kernels on x86 unless ATEN_CPU_CAPABILITY is set
 # (``avx512`` gives the wider kernels back). It must be set before torch first dispatches a CPU kernel, so here,
@@ -22,7 +22,7 @@ import torch as _torch
 #
 # The same holds for MKL, the BLAS of torch's x86 wheels (matrix products: torch.cdist's distances for the initial
 # scales, the weight-free video prior's DCT): it picks its kernels by the processor too, and a product rounds
-# differently on another. Session 37: on a 2-core Intel Xeon with AVX-512 the initial scales of the no-argument run
+# differently on another: on a 2-core Intel Xeon with AVX-512 the initial scales of the no-argument run
 # differed in the last bits from those MKL's AVX2 kernels give, and the baseline ended at 19.62 instead of 20.78
 # (full 22.47 / 22.52). MKL's conditional numerical reproducibility ``COMPATIBLE`` branch gives the same results on
 # every x86 processor (Intel's documentation), so CPU runs ask for it; ``MKL_CBWR`` set by the user is kept. Like

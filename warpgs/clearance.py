@@ -3,7 +3,7 @@
 Whoever took the photos stood where the cameras are and walked between them, so nothing of the scene lies
 on the camera path. The inputs of a sparse capture rarely see that space (it is beside or behind them), so
 nothing in the loss removes what drifts there, and a novel view taken from the path looks through it. On
-castle_p30 every sudden drop of test PSNR in session 13 was one such Gaussian or a few: opaque, black, within
+castle_p30 every sudden drop of test PSNR was one such Gaussian or a few: opaque, black, within
 0.04-2 m of test frame 8 (the scene's near depth is 7.6-11 m), carrying up to 74% of that view's blending
 weight with under 60 pixels of weight in all the inputs together; removing them took that view from 13.50 to
 23.47 dB (`bench/floaters.py`).
@@ -19,7 +19,7 @@ neighbouring inputs, where novel views of a walk-through are taken) that sees a 
 ``ratio`` x its blending weight in all the inputs together, and for which it carries a visible share of the
 weight, is looking at something no input constrains. It is ``bench/floaters.py``'s test with poses of the path
 for the test views (which it may not see); that test, with the test views, found the Gaussians behind every
-collapse of castle_p30 at 9 views in session 14, and removing them restored the views.
+collapse of castle_p30 at 9 views, and removing them restored the views.
 
 ``path_partners`` gives the binocular term its partners on the path (``train.binocular_partner: path``): the
 poses of the same trajectories next to each input.
@@ -47,6 +47,16 @@ def segment_distance(points: torch.Tensor, a: torch.Tensor, b: torch.Tensor, chu
     return torch.cat(out) if out else torch.zeros(0, device=points.device)
 
 
+def _path(V: np.ndarray, order, trajectories=None):
+    """``trajectories`` (a function of the frames per segment and the centres' kind: ``SceneCameras.
+    trajectories``), or one that makes the path of the views ``V`` in ``order`` (``path_trajectories``)."""
+    if trajectories is not None:
+        return trajectories
+    from warpgs.pseudo.trajectory import path_trajectories
+
+    return lambda frames, centres="spline": path_trajectories(V, frames, order, centres=centres)
+
+
 class PathClearance:
     """Free segments of the camera path and a clearance radius (module docstring); with ``view_depth`` > 0
     also the space each pose of the path looks into, up to that depth (``in_view``)."""
@@ -60,17 +70,18 @@ class PathClearance:
     @classmethod
     def build(cls, viewmats, radius: float, order="nearest", samples: int = 16,
               geometry: np.ndarray | torch.Tensor | None = None, device="cpu", K=None, size=(0, 0),
-              view_depth: float = 0.0) -> "PathClearance":
+              view_depth: float = 0.0, trajectories=None) -> "PathClearance":
         """From the inputs' world-to-camera matrices [N, 4, 4], the path ``order`` (``path_trajectories``'),
         ``samples`` poses per pair of neighbours, and the points the initialisation found (``geometry``).
-        ``K`` [3, 3] and ``size`` (width, height) of the inputs and ``view_depth`` > 0: the view clearance."""
-        from warpgs.pseudo.trajectory import camera_centres, path_trajectories
+        ``K`` [3, 3] and ``size`` (width, height) of the inputs and ``view_depth`` > 0: the view clearance.
+        ``trajectories``: the path as ``SceneCameras.trajectories`` hands it out (default: made here)."""
+        from warpgs.pseudo.trajectory import camera_centres
 
         V = np.asarray(viewmats if not torch.is_tensor(viewmats) else viewmats.detach().cpu().numpy(), np.float64)
         segs = []
         poses = [V[i] for i in range(len(V))]
         if len(V) >= 2:
-            for traj in path_trajectories(V, max(samples, 2), order):
+            for traj in _path(V, order, trajectories)(max(samples, 2)):
                 c = camera_centres(np.asarray(traj.viewmats, np.float64))
                 segs += [(c[i], c[i + 1]) for i in range(len(c) - 1)]
                 poses += [np.asarray(m, np.float64) for m in traj.viewmats[1:-1]]
@@ -127,20 +138,19 @@ class PathFloaters:
 
     @classmethod
     def build(cls, viewmats, K, size, ratio: float, per_pair: int = 3, order="nearest", device="cpu",
-              min_share: float = 1e-3, paths: str = "spline") -> "PathFloaters":
+              min_share: float = 1e-3, paths: str = "spline", trajectories=None) -> "PathFloaters":
         """``per_pair`` poses strictly between each pair of neighbouring inputs (world-to-camera [N, 4, 4], in
         ``order`` as the pseudo views' trajectories), seen with the inputs' ``K`` [3, 3] and ``size`` (W, H).
         ``paths``: ``"spline"``, the pseudo views' path; ``"both"``, also as many poses on the straight line
-        between each pair (the walk between two far-apart inputs can lie nearer the line than the spline)."""
-        from warpgs.pseudo.trajectory import path_trajectories
-
+        between each pair (the walk between two far-apart inputs can lie nearer the line than the spline).
+        ``trajectories``: the path as ``SceneCameras.trajectories`` hands it out (default: made here)."""
         if paths not in ("spline", "both"):
             raise ValueError(f"train.path_floaters_paths must be spline or both, got {paths!r}")
         V = np.asarray(viewmats if not torch.is_tensor(viewmats) else viewmats.detach().cpu().numpy(), np.float64)
         poses = []
         if len(V) >= 2 and per_pair > 0:
             for centres in ("spline", "line") if paths == "both" else ("spline",):
-                for traj in path_trajectories(V, per_pair + 2, order, centres=centres):
+                for traj in _path(V, order, trajectories)(per_pair + 2, centres=centres):
                     poses += [np.asarray(m, np.float64) for m in traj.viewmats[1:-1]]
         P = torch.tensor(np.array(poses).reshape(-1, 4, 4), dtype=torch.float32, device=device)
         return cls(P, torch.as_tensor(np.asarray(K, np.float32), device=device), size, ratio, min_share)
@@ -166,18 +176,93 @@ class PathFloaters:
         return found
 
 
-def path_partners(viewmats, names: list[str], order, reach: float, frames: int = 21) -> dict[str, torch.Tensor]:
+def path_partners(viewmats, names: list[str], order, reach: float, frames: int = 21,
+                  trajectories=None) -> dict[str, torch.Tensor]:
     """{name: [M, 4, 4]} the partner poses of each input for ``train.binocular_partner: path``
-    (``warpgs.binocular``): the poses of the pseudo views' trajectories (``path_trajectories``, ``frames`` a
-    segment, in the path ``order``) from the input up to ``reach`` x the way to each neighbouring input."""
-    from warpgs.pseudo.trajectory import path_trajectories
-
+    (``warpgs.regularizers.binocular``): the poses of the pseudo views' trajectories (``path_trajectories``,
+    ``frames`` a segment, in the path ``order``) from the input up to ``reach`` x the way to each neighbouring input."""
     V = np.asarray(viewmats, np.float64).reshape(-1, 4, 4)
     out: dict[int, list] = {}
     if len(V) < 2 or reach <= 0:
         return {}
     m = max(1, int(round(reach * (frames - 1))))
-    for traj in path_trajectories(V, frames, order=order):
+    for traj in _path(V, order, trajectories)(frames):
         out.setdefault(traj.start, []).extend(traj.viewmats[1:m + 1])
         out.setdefault(traj.end, []).extend(traj.viewmats[frames - 1 - m:frames - 1])
     return {names[k]: torch.as_tensor(np.stack(v), dtype=torch.float32) for k, v in out.items()}
+
+
+class PathPruning:
+    """The pruning on the camera path that follows the strategy's densification: ``train.path_clearance`` /
+    ``train.view_clearance`` (``PathClearance``, every ``strategy.refine_every`` steps) and
+    ``train.path_floaters`` (``PathFloaters``, every ``train.path_floaters_every`` steps and before the final
+    evaluation). ``time``: seconds the floater passes took (metrics.json's ``path_floaters_s``)."""
+
+    def __init__(self, clearance: PathClearance | None, floaters: PathFloaters | None, floaters_every: int):
+        self.clearance, self.floaters, self.floaters_every = clearance, floaters, floaters_every
+        self.time = None if floaters is None else 0.0
+
+    @classmethod
+    def build(cls, cfg, scene, cameras, device) -> "PathPruning":
+        """From the run's ``train`` settings, the scene (its near depth, the initial points on ``scene.geometry``)
+        and its cameras and path (``warpgs.engine.cameras.SceneCameras``)."""
+        tc = cfg.train
+        c0 = scene.train[0]
+        clearance = floaters = None
+        if tc.path_clearance > 0 or tc.view_clearance > 0:
+            geo = getattr(scene, "geometry", None)
+            clearance = PathClearance.build(
+                cameras.viewmats, tc.path_clearance * float(scene.bounds[0]), order=cameras.order,
+                geometry=None if geo is None else geo.xyz, device=device, K=c0.K, size=(c0.width, c0.height),
+                view_depth=tc.view_clearance * float(scene.bounds[0]), trajectories=cameras.trajectories)
+        if tc.path_floaters > 0 and len(scene.train) >= 2:
+            floaters = PathFloaters.build(
+                cameras.viewmats, c0.K, (c0.width, c0.height), tc.path_floaters, per_pair=tc.path_floaters_poses,
+                order=cameras.order, device=device, paths=tc.path_floaters_paths, trajectories=cameras.trajectories)
+        return cls(clearance, floaters, tc.path_floaters_every)
+
+    def floaters_due(self, step: int) -> bool:
+        """Whether the pass after step ``step``'s densification removes the camera path's floaters."""
+        return self.floaters is not None and step > 0 and step % self.floaters_every == 0
+
+    def prunes_at(self, step: int, refine_every: int) -> bool:
+        """Whether the pass after step ``step`` prunes anything (a CUDA graph cannot hold such a step)."""
+        return (self.clearance is not None and step % refine_every == 0) or self.floaters_due(step)
+
+    def after_densify(self, ctx, step: int, refine_every: int, info: dict) -> None:
+        """After the strategy's densification of the trained model at ``step``: the Gaussians on the path go
+        (``pruned_on_path`` in ``info``), and the floaters when due (``pruned_floaters``)."""
+        from warpgs.strategy import remove
+
+        model = ctx.model
+        if self.clearance is not None and step % refine_every == 0:
+            on_path = self.clearance.inside(model.means)
+            n = int(on_path.sum())
+            if 0 < n < len(model):
+                remove(model, ctx.optimizer, ctx.state, on_path)
+                info["pruned_on_path"] = n
+        if self.floaters_due(step):
+            info["pruned_floaters"] = self.remove_floaters(ctx, step)
+
+    def remove_floaters(self, ctx, step: int) -> int:
+        """Removes the Gaussians that poses of the camera path see and no input does (``PathFloaters.find``);
+        returns how many."""
+        import time
+
+        from warpgs.strategy import remove
+
+        if self.floaters is None:
+            return 0
+        model = ctx.model
+        t0 = time.perf_counter()
+        found = self.floaters.find(model, ctx.cameras.train, ctx.background.colour)
+        n = int(found.sum())  # a read of the device: the pass's work is done when it returns
+        removing = 0 < n < len(model)
+        if removing:
+            remove(model, ctx.optimizer, ctx.state, found)
+        self.time += time.perf_counter() - t0
+        if not removing:
+            return 0
+        ctx.log(f"warpgs: step {step}: {n} Gaussians removed that poses of the camera path see and no input does "
+                f"(train.path_floaters)")
+        return n

@@ -199,7 +199,7 @@ def finetune(trainer, steps: int, seed: int = 0) -> int:
     method's pseudo views too), no densification, learning rates as at the end of training. The view order
     and random backgrounds come from ``seed``, so every candidate sees the same sequence. Returns the
     number of steps skipped for a non-finite loss or gradient."""
-    from warpgs.train import _all_finite  # (warpgs.train imports this module's config through warpgs.config)
+    from warpgs.engine.stepguard import all_finite as _all_finite
 
     if steps <= 0:
         return 0

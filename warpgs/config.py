@@ -1,11 +1,14 @@
-"""Run configuration: dataclasses with the published defaults, read from ``configs/*.yaml``, overridable.
+"""Run configuration: dataclasses with the published defaults, read from ``configs/``, overridable.
 
 A run's config is built in layers, later ones winning:
 
 1. the dataclass defaults below (3D-GS / gsplat numbers);
-2. the method's file ``configs/<method>.yaml`` (e.g. ``baseline.yaml``);
-3. the dataset's file ``configs/<dataset>.yaml`` if there is one (``blender``, ``llff``, ``dtu``, ``synthetic``);
-4. files given with ``--config`` (a file may name another with ``base: other.yaml``, read first);
+2. the method's file ``configs/methods/<method>.yaml`` (only the run's method's: ``full.yaml`` names
+   ``baseline.yaml`` as its base; a compare run reads ``full.yaml``);
+3. the dataset's file ``configs/datasets/<dataset>.yaml`` if there is one (``blender``, ``llff``, ``dtu``,
+   ``nerfstudio``, ``synthetic``), which may name shared blocks of ``configs/presets/`` as its base;
+4. files given with ``--config`` (a file may name another with ``base: other.yaml``, or a list of them, read
+   first);
 5. ``--set section.key=value`` overrides (values parsed as YAML: ``--set strategy.max_gaussians=20000``);
 6. explicit flags (``--iterations``, ``--views``, ``--device``, ...).
 
@@ -30,6 +33,7 @@ from warpgs.densify import DensifyConfig
 from warpgs.farfield import FAR_FIELDS
 from warpgs.points import GeometryConfig
 from warpgs.pseudo.views import PseudoConfig
+from warpgs.regularizers import LEGACY_TRAIN_KEYS, RegularizersConfig
 from warpgs.strategy import DefaultStrategy
 
 
@@ -108,32 +112,6 @@ class TrainConfig:
     checkpoint_every: int = 1000  # 0 = only at the end (and on Ctrl-C)
     eval_every: int = 0  # test PSNR/SSIM every this many steps into metrics.json's curve (0 = off)
     background: list | None = None  # [r, g, b]; None: white if the scene says so, else black
-    drop_rate: float = 0.0  # DropGaussian (Park et al., CVPR 2025): each training render drops Gaussians at a rate
-    #   rising linearly from 0 to this at the last step, the rest's opacity x 1 / (1 - rate); 0: off. The paper: 0.2
-    opacity_noise: float = 0.0  # Co-Adaptation (Chen et al., NeurIPS 2025): each training render's opacities x
-    #   (1 + eps), eps ~ N(0, this^2) clipped to [-this, this] as in their code; composes with drop_rate; 0: off.
-    #   Their scripts name 0.8, 0.4, 0.2 and 0.05, and find it less robust than dropout
-    scale_reg: float = 0.0  # weight of PhysGaussian's anisotropy regulariser (Xie et al., CVPR 2024): mean over the
-    #   Gaussians of max(max(s)/min(s), r) - r with r = scale_reg_ratio; 0: off
-    scale_reg_ratio: float = 10.0  # r: the largest axis ratio a Gaussian keeps without penalty
-    opacity_decay: float = 0.0  # Binocular3DGS's opacity decay (Han et al., NeurIPS 2024): from
-    #   strategy.refine_start_iter on, every step multiplies each opacity by (1 - this) after the update, so what
-    #   the inputs' gradients do not hold up fades and is pruned (theirs: 0.005 a step); 0: off
-    binocular: float = 0.0  # weight of their binocular consistency on the input views (warpgs/binocular.py): the
-    #   render from the camera moved along its x axis, warped back with the input's rendered depth, against the
-    #   photo (their weight: 1); 0: off
-    binocular_shift: float = 0.1  # the largest move: this x the image width of disparity at the median depth
-    binocular_start: float = 0.5  # share of the run's steps before the term starts (theirs: 2/3 LLFF/DTU, 4/7 Blender)
-    binocular_smooth: float = 0.05  # edge-aware smoothness of the disparity (pixels) with it (theirs: 0.05)
-    binocular_partner: str = "shift"  # shift: their partner, the camera moved along its x axis | path: a pose of the
-    #   capture path next to the input (the pseudo views' trajectories), up to binocular_reach of the way to a neighbour
-    binocular_reach: float = 0.5  # path partner: the farthest, as a share of the way to the neighbouring input
-    binocular_axes: str = "x"  # shift partner: x: along the camera's x axis (theirs) | xy: in a direction of the image
-    #   plane drawn each step (up and down too: DTU's test cameras sit in the rows above and below its inputs')
-    path_consistency: float = 0.0  # weight of the two inputs' agreement at a pose of the pseudo views' trajectories
-    #   drawn each step (warpgs/pathconsistency.py; one more render a step): their photos warped into it with its
-    #   rendered depth, L1 where both land. The full method's own is full.path_consistency, at its pseudo views; 0: off
-    path_consistency_start: float = 0.4  # share of the run's steps before it starts (the full method's first cycle)
     random_background: bool = False  # views with an alpha channel: a random background each step (no floaters
                                      # that mimic the background colour); evaluation keeps ``background``
     far_field: str = "none"  # none | elevation: behind the Gaussians, a colour per elevation band fitted on the
@@ -161,20 +139,17 @@ class TrainConfig:
     path_floaters_paths: str = "spline"  # spline: those poses on the pseudo views' path | both: also as many on the
     #   straight line between the two inputs (bench/plant_floaters.py: castle_p30 9 views' test frame 16 stands
     #   1.5 m from that line and 4.4 m from the spline, which bulges across the 22.6 m gap between its inputs)
-    alpha_binary: float = 0.0  # weight of mean(alpha (1 - alpha)) over each input render: every pixel either
-    #   covered by Gaussians or showing what is behind them (with a far field, no translucent cover that a novel
-    #   view sees at another angle); 0: off
     hold_geometry: str = "off"  # off | on | stereo: train the colours and opacities at full rate and hold the initial
     #   geometry: no densification or pruning by the strategy (strategy.refine_stop_iter 0) and the means', scales'
     #   and rotations' learning rates x the hold_* factors below; stereo: only when the initial points came from
     #   plane-sweep stereo alone (model.init sfm falling back to stereo on wide baselines, or stereo): a dense
-    #   cloud that growth would only bend towards the few inputs (warpgs.train.hold_geometry)
+    #   cloud that growth would only bend towards the few inputs (warpgs.engine.init.hold_geometry)
     hold_means_lr: float = 0.1
     hold_scales_lr: float = 0.2
     hold_quats_lr: float = 0.1
-    prune_unseen_at_end: bool = False  # at the end, drop Gaussians no training view needs (the captures' default since
-    #   session 20: a Gaussian no input sees can only stand in front of a novel view; on scenes whose test views see
-    #   what the inputs do not, it can cost novel-view PSNR)
+    prune_unseen_at_end: bool = False  # at the end, drop Gaussians no training view needs (the captures' default:
+    #   a Gaussian no input sees can only stand in front of a novel view; on scenes whose test views see what the
+    #   inputs do not, it can cost novel-view PSNR)
     # CoR-GS (Zhang et al., ECCV 2024; warpgs/coreg.py): a second model trained beside the first from the same
     # initial Gaussians, on the same views, with its own random streams; twice the training cost. The first model
     # is the one evaluated and exported
@@ -189,11 +164,33 @@ class TrainConfig:
     #   between two neighbouring training views, each against the other's detached render (CoR-GS: 1); 0: off
     co_reg_start: int = 500  # first step of the co-regularisation (CoR-GS's LLFF script: 500)
     co_reg_frames: int = 24  # pseudo poses between each pair of neighbouring training views, drawn in turn
-    # divergence (warpgs/train.py): a non-finite loss or gradient, or a loss above explode_factor x the median
-    # of the phase's last explode_window finite losses, skips the step; max_nan_steps skipped steps in a row,
-    # explode_patience exploding ones in a row, or non-finite parameters after the optimiser step roll back to
-    # the last good in-memory snapshot with the learning rates scaled by recovery_lr_factor; after
-    # max_recoveries rollbacks the run stops (TrainingDiverged), and the checkpoint on disk stays the last good one
+    progress: bool = True
+
+    def __post_init__(self):
+        # the sections keys of earlier versions moved to (a Config links its own here: Config.__post_init__);
+        # cfg.train.<old key> reads and sets them there (_moved_key)
+        self._sections = {"guard": GuardConfig(), "regularizers": RegularizersConfig()}
+
+    LIMITS = {"iterations": ">= 1", "seed": ">= 0", "sh_degree_interval": ">= 0", "checkpoint_every": ">= 0",
+              "eval_every": ">= 0", "background": "[0, 1]", "far_field": FAR_FIELD_RULE, "far_field_bins": ">= 1",
+              "far_field_blur": ">= 0 or {auto}", "far_field_proxy": "{none, auto}", "hold_geometry": "{off, on, stereo}",
+              "hold_means_lr": "> 0", "hold_scales_lr": "> 0", "hold_quats_lr": "> 0", "path_clearance": ">= 0",
+              "view_clearance": ">= 0", "path_floaters": ">= 0", "path_floaters_every": ">= 1", "path_floaters_poses": ">= 1",
+              "path_floaters_paths": "{spline, both}", "co_prune_every": ">= 0", "co_prune_dist": "> 0",
+              "co_reg_weight": ">= 0", "co_reg_start": ">= 0", "co_reg_frames": ">= 1"}
+
+
+@dataclass
+class GuardConfig:
+    """The step guard and the performance of the loop (``guard``; warpgs/engine/stepguard.py). Keys of
+    ``train`` before this section existed load through ``MOVED``, and ``cfg.train.<key>`` still reads and
+    sets them."""
+
+    # divergence: a non-finite loss or gradient, or a loss above explode_factor x the median of the phase's last
+    # explode_window finite losses, skips the step; max_nan_steps skipped steps in a row, explode_patience
+    # exploding ones in a row, or non-finite parameters after the optimiser step roll back to the last good
+    # in-memory snapshot with the learning rates scaled by recovery_lr_factor; after max_recoveries rollbacks the
+    # run stops (TrainingDiverged), and the checkpoint on disk stays the last good one
     max_nan_steps: int = 20  # consecutive skipped steps that count as a divergence
     explode_factor: float = 10.0  # 0 = no exploding-loss check; healthy runs stayed below 6x (bench/stability.py)
     explode_window: int = 100  # recent finite losses (of this phase) in the running median
@@ -213,21 +210,36 @@ class TrainConfig:
     #   loss and PSNR are read at the same steps. None: 10 on CUDA, 1 (every step) on the CPU
     cuda_graph: bool = True  # CUDA: a deferred step that holds nothing a graph cannot (no densification or
     #   pruning at that step, no Pearson depth term, no co-regularised pair, the baseline's loss; dropout, opacity
-    #   noise, a random background and the far field are held) is recorded once as a CUDA graph and replayed (warpgs/graphstep.py): the same numbers, a fraction of the host
-    #   time; false: every step launches its kernels one by one
-    progress: bool = True
+    #   noise, a random background and the far field are held) is recorded once as a CUDA graph and replayed
+    #   (warpgs/engine/graphstep.py): the same numbers, a fraction of the host time; false: every step launches its
+    #   kernels one by one
 
-    LIMITS = {"iterations": ">= 1", "seed": ">= 0", "sh_degree_interval": ">= 0", "checkpoint_every": ">= 0",
-              "eval_every": ">= 0", "background": "[0, 1]", "drop_rate": "[0, 1)", "opacity_noise": "[0, 1]",
-              "scale_reg": ">= 0", "scale_reg_ratio": ">= 1", "max_nan_steps": ">= 1", "opacity_decay": "[0, 1)",
-              "binocular": ">= 0", "binocular_shift": "(0, 1]", "binocular_start": "[0, 1]", "binocular_smooth": ">= 0",
-              "binocular_partner": "{shift, path}", "binocular_reach": "(0, 1]", "binocular_axes": "{x, xy}",
-              "path_consistency": ">= 0", "path_consistency_start": "[0, 1]",
-              "explode_factor": ">= 0", "explode_window": ">= 1", "explode_patience": ">= 1", "snapshot_every": ">= 0",
-              "max_recoveries": ">= 0", "recovery_lr_factor": "(0, 1]", "cpu_threads": ">= 0", "sync_every": ">= 1",
-              "far_field": FAR_FIELD_RULE, "hold_geometry": "{off, on, stereo}", "hold_means_lr": "> 0",
-              "hold_scales_lr": "> 0", "hold_quats_lr": "> 0", "far_field_bins": ">= 1", "far_field_blur": ">= 0 or {auto}", "far_field_proxy": "{none, auto}", "alpha_binary": ">= 0", "path_clearance": ">= 0", "view_clearance": ">= 0", "path_floaters": ">= 0", "path_floaters_every": ">= 1", "path_floaters_poses": ">= 1", "path_floaters_paths": "{spline, both}", "co_prune_every": ">= 0", "co_prune_dist": "> 0",
-              "co_reg_weight": ">= 0", "co_reg_start": ">= 0", "co_reg_frames": ">= 1"}
+    LIMITS = {"max_nan_steps": ">= 1", "explode_factor": ">= 0", "explode_window": ">= 1", "explode_patience": ">= 1",
+              "snapshot_every": ">= 0", "max_recoveries": ">= 0", "recovery_lr_factor": "(0, 1]", "cpu_threads": ">= 0",
+              "sync_every": ">= 1"}
+
+
+GUARD_KEYS = tuple(f.name for f in dataclasses.fields(GuardConfig))
+# keys of ``train`` before the sections existed -> where they live now (MOVED; TrainConfig reads and sets them)
+TRAIN_MOVED = {**{k: ("guard", k) for k in GUARD_KEYS},
+               **{old: ("regularizers", name, new) for old, (name, new) in LEGACY_TRAIN_KEYS.items()}}
+
+
+def _moved_key(path: tuple) -> property:
+    """``TrainConfig.<old key>``: the key at ``path`` (a section, its subsections, the key), for scripts that set
+    it on ``cfg.train`` as before the sections existed."""
+    def owner(train):
+        node = train._sections[path[0]]
+        for name in path[1:-1]:
+            node = getattr(node, name)
+        return node
+
+    return property(lambda self: getattr(owner(self), path[-1]), lambda self, v: setattr(owner(self), path[-1], v),
+                    doc=f"{'.'.join(path)} (read and set through train as before)")
+
+
+for _old, _path in TRAIN_MOVED.items():
+    setattr(TrainConfig, _old, _moved_key(_path))
 
 
 @dataclass
@@ -241,7 +253,7 @@ class EvalConfig:
 
 @dataclass
 class FullConfig:
-    """The generation-guided method (``method: full``; warpgs/pipelines/full.py). Loss weights are the
+    """The generation-guided method (``method: full``; warpgs/methods/full.py). Loss weights are the
     paper's (w4 LPIPS 1.0, w5 D-SSIM 0.2, w6 depth 1.0 on pseudo views, scaled by pseudo_weight)."""
 
     cycles: int = 2  # pseudo-view updates (the paper: refinement cycles of 10K iterations)
@@ -256,8 +268,8 @@ class FullConfig:
     depth_weight: float = 1.0  # w6, Pearson against the plane-sweep depth where it is confident
     input_depth_weight: float = 1.0  # w3 on the inputs, against their plane-sweep depth (never the loader's)
     early_depth: bool = False  # the inputs' depth prior from plane-sweep stereo between them before the first step
-    #   (the paper's input loss has its depth term throughout); false: from the first cycle's stereo on. Session 15
-    #   (captures, 384x256, seeds 0-2): -0.97 dB on average against the default, castle 6 / 9 views -2.0 / -3.6
+    #   (the paper's input loss has its depth term throughout); false: from the first cycle's stereo on. On the
+    #   captures (384x256, seeds 0-2) it cost 0.97 dB on average, castle 6 / 9 views 2.0 / 3.6
     pseudo_loss: str = "lpips"  # lpips | l1 (ablation; also the fallback when LPIPS weights are absent)
     guidance: str = "warped"  # warped | render (ablation: 3D-GS renders instead of warped guidance)
     densify: bool = True  # densification from pseudo views (ablation: false)
@@ -278,7 +290,7 @@ class FullConfig:
     far_field: str | None = None  # the far field for this method (train.far_field: none | elevation); None: train's
     refine_stop_fraction: float | None = None  # strategy.refine_stop_fraction for this method; None: the strategy's
     path_consistency: float = 0.0  # weight of the two inputs' agreement at each pseudo view trained on: the photos of
-    #   the inputs it lies between, warped into it with its rendered depth (warpgs.binocular.pose_warp), compared
+    #   the inputs it lies between, warped into it with its rendered depth (warpgs.regularizers.binocular.pose_warp), compared
     #   (L1 where both land); its gradient reaches the depth each step, unlike the pseudo view's fixed image. 0: off
     reliable_weight: float = 1.0  # weight of a pseudo view's reliable pixels (U < pseudo.sampler.delta: where the
     #   warped inputs were kept) in its L1 and D-SSIM, the other pixels' being 1 (the render they were filled from,
@@ -334,20 +346,25 @@ def check_compact_config(c: CompactConfig) -> CompactConfig:
 
 @dataclass
 class Config:
-    method: str = "baseline"
-    out: str = "outputs/sparse"
+    method: str = "baseline"  # baseline | full | corgs (warpgs.methods); the command's compare runs baseline and full
+    out: str = "outputs/sparse"  # the run folder
     data: DataConfig = field(default_factory=DataConfig)
     model: ModelConfig = field(default_factory=ModelConfig)
     optim: OptimConfig = field(default_factory=OptimConfig)
     loss: LossConfig = field(default_factory=LossConfig)
     strategy: DefaultStrategy = field(default_factory=DefaultStrategy)
     train: TrainConfig = field(default_factory=TrainConfig)
+    guard: GuardConfig = field(default_factory=GuardConfig)  # the step guard and the loop's performance
+    regularizers: RegularizersConfig = field(default_factory=RegularizersConfig)  # warpgs/regularizers, one each
     eval: EvalConfig = field(default_factory=EvalConfig)
     full: FullConfig = field(default_factory=FullConfig)
     compact: CompactConfig = field(default_factory=CompactConfig)  # compact mode (warpgs/compact.py, --compact)
     geometry: GeometryConfig = field(default_factory=GeometryConfig)  # model.init sfm / stereo (warpgs/points)
     pseudo: PseudoConfig = field(default_factory=PseudoConfig)  # the full method's pseudo views (warpgs/pseudo)
     densify: DensifyConfig = field(default_factory=DensifyConfig)  # its densification from them (warpgs/densify)
+
+    def __post_init__(self):
+        self.train._sections = {"guard": self.guard, "regularizers": self.regularizers}  # (TrainConfig.__post_init__)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -365,7 +382,8 @@ MOVED = {("full", "n_frames"): ("pseudo", "trajectory", "n_frames"),
          ("full", "densify_config"): ("densify",),
          ("train", "compact"): ("train", "prune_unseen_at_end"),
          ("strategy", "compact_when_full"): ("strategy", "prune_unseen_when_full"),
-         ("strategy", "compact_min_weight"): ("strategy", "unseen_min_weight")}
+         ("strategy", "compact_min_weight"): ("strategy", "unseen_min_weight"),
+         **{("train", old): new for old, new in TRAIN_MOVED.items()}}
 
 
 def upgrade(layer: dict) -> dict:

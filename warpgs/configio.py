@@ -219,8 +219,8 @@ class UniqueKeyLoader(yaml.SafeLoader):
 
 
 def read_yaml(path: str | Path, _seen=None) -> dict:
-    """A config file as a dict, with its ``base:`` file (relative to it) merged underneath. A key set twice in one
-    mapping is an error (``UniqueKeyLoader``)."""
+    """A config file as a dict, with its ``base:`` file (relative to it; or a list of files, merged in order)
+    merged underneath. A key set twice in one mapping is an error (``UniqueKeyLoader``)."""
     path = Path(path)
     if path.is_dir():
         raise ConfigError(f"{path}: is a folder, not a config file")
@@ -244,12 +244,16 @@ def read_yaml(path: str | Path, _seen=None) -> dict:
         raise ConfigError(f"{path}: expected a mapping at the top level")
     base = data.pop("base", None)
     if base:
-        if not isinstance(base, str):
-            raise ConfigError(f"{path}: base = {base!r}: expected the name of another config file")
-        try:
-            data = merge(read_yaml(path.parent / base, seen), data)
-        except ConfigError as e:
-            raise ConfigError(f"{path}: base: {e}") from None
+        bases = base if isinstance(base, list) else [base]
+        if not all(isinstance(b, str) for b in bases):
+            raise ConfigError(f"{path}: base = {base!r}: expected the name of another config file, or a list of them")
+        under: dict = {}
+        for b in bases:
+            try:
+                under = merge(under, read_yaml(path.parent / b, set(seen)))
+            except ConfigError as e:
+                raise ConfigError(f"{path}: base: {e}") from None
+        data = merge(under, data)
     return data
 
 

@@ -204,8 +204,6 @@ class CoRegPair:
     def report(self) -> dict:
         """metrics.json's ``co_reg``: the settings, the co-pruning record, the partner's size and its PSNR and
         SSIM on the test views (for comparison only: the first model is the run's result)."""
-        from warpgs.evaluation import evaluate_views
-
         tr, s = self.trainer, self.settings
         rec = {"co_prune_every": s.co_prune_every, "co_prune_dist": s.co_prune_dist,
                "co_prune_radius": s.co_prune_dist * tr.scene_scale, "co_reg_weight": s.co_reg_weight,
@@ -215,8 +213,7 @@ class CoRegPair:
             def render(cam):
                 return self.model.render(cam.viewmat, cam.K, cam.width, cam.height, background=tr.background_for(cam))
 
-            ev = evaluate_views(render, tr.test_cams, masked=bool(tr.scene.eval_masked), scene_name=tr.scene.name,
-                                lpips_weights=tr.cfg.eval.lpips_weights, device=tr.device, lpips=False)["mean"]
+            ev = tr.evaluate(lpips=False, render=render)["mean"]
             rec.update(partner_psnr=ev["psnr"], partner_ssim=ev["ssim"])
         return rec
 

@@ -92,7 +92,7 @@ def pose(R_c2w: np.ndarray, center: np.ndarray) -> np.ndarray:
 def small_inv(m):
     """``torch.linalg.inv`` of small matrices (cameras' 3x3 / 4x4, batched or not) computed on the CPU and returned
     on ``m``'s device in ``m``'s dtype: on CUDA it needs a cuSOLVER handle, whose creation failed in a GPU shared
-    by 12 runs (CUSOLVER_STATUS_INTERNAL_ERROR, session 28), and a 4x4 gains nothing from the GPU."""
+    by 12 runs (CUSOLVER_STATUS_INTERNAL_ERROR), and a 4x4 gains nothing from the GPU."""
     import torch
 
     return torch.linalg.inv(m.cpu()).to(m.device)

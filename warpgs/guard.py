@@ -1,14 +1,14 @@
 """The divergence guard: decides, step by step, whether training is healthy, skips a bad step, or has
 diverged. It only judges; the trainer acts on its verdicts (skip the update, or roll back to the last good
-state with lower learning rates; ``warpgs.train``).
+state with lower learning rates; ``warpgs.engine.stepguard``).
 
-    guard = DivergenceGuard(cfg.train)
+    guard = DivergenceGuard(cfg.guard)
     guard.restart(step)                       # a new phase: its losses make their own statistic
     why = guard.exploding(value, losses)      # None, or why this finite loss counts as exploding
     guard.skipped() / guard.exploded()        # True when that many in a row make a divergence
     guard.healthy()                           # a good step: the counts in a row start again
 
-    window = LossWindow(cfg.train.explode_window, device)   # the same statistic on the device (no host read)
+    window = LossWindow(cfg.guard.explode_window, device)   # the same statistic on the device (no host read)
     window.rebuild(losses, guard.stat_start, step)           # from the losses the host holds
     flag = guard.exploding_on_device(value, window)          # a bool tensor: ``exploding``'s verdict
     window.push(step, value)                                 # the step's entry (not finite: skipped)
@@ -20,7 +20,7 @@ A step is skipped when its loss or gradients are not finite, or when its loss ex
 ``max_nan_steps`` skipped steps in a row, or ``explode_patience`` exploding ones in a row (one high loss
 alone costs one step, never the run).
 
-On CUDA the trainer reads the verdicts only every ``train.sync_every`` steps (a host read waits for the
+On CUDA the trainer reads the verdicts only every ``guard.sync_every`` steps (a host read waits for the
 device): between reads a step's verdict is computed on the device from ``LossWindow``, the last
 ``explode_window`` losses of the phase kept there, and the update is skipped there; at the read the
 host replays the verdicts through the counts above. ``exploding_on_device`` computes the same median, in
@@ -48,7 +48,7 @@ def inf_norms(tensors: list[torch.Tensor]) -> torch.Tensor:
 
 class DivergenceGuard:
     def __init__(self, train_cfg):
-        self.cfg = train_cfg  # warpgs.config.TrainConfig: max_nan_steps, explode_factor, explode_window, explode_patience
+        self.cfg = train_cfg  # warpgs.config.GuardConfig: max_nan_steps, explode_factor, explode_window, explode_patience
         self.nan_steps = 0  # consecutive skipped steps
         self.explode_steps = 0  # consecutive steps with an exploding loss
         self.max_loss_ratio = 0.0  # the largest loss / running median seen (how close a healthy run came)
@@ -77,7 +77,7 @@ class DivergenceGuard:
         if ratio > tc.explode_factor:
             return (f"the loss {value:.4g} is {ratio:.3g}x the median {median:.4g} of the "
                     f"{len(recent)} finite loss{'es' if len(recent) > 1 else ''} before it "
-                    f"(train.explode_factor={tc.explode_factor:g})")
+                    f"(guard.explode_factor={tc.explode_factor:g})")
         return None
 
     def exploding_on_device(self, value: torch.Tensor, window: "LossWindow") -> torch.Tensor:

@@ -172,6 +172,31 @@ class LPIPSUnavailable(RuntimeError):
     """LPIPS cannot run: the package or the backbone weights are missing (the message says what to do)."""
 
 
+def input_loss(lc, out, cam) -> tuple[torch.Tensor, dict]:
+    """The loss of a render ``out`` of the input view ``cam`` against it with the weights of ``lc`` (the config's
+    ``loss``): w1 L1 + w2 D-SSIM, and the alpha and depth-prior terms where they are on; (loss, its parts by
+    name, the whole as ``inputs``)."""
+    l1_ = l1(out.image, cam.image)
+    loss = lc.l1_weight * l1_
+    parts = {"l1": l1_}
+    if lc.ssim_weight > 0:
+        ds = dssim(out.image, cam.image)
+        loss = loss + lc.ssim_weight * ds
+        parts["dssim"] = ds
+    if lc.alpha_weight > 0 and cam.alpha is not None:
+        al = (out.alpha - cam.alpha).abs().mean()
+        loss = loss + lc.alpha_weight * al
+        parts["alpha"] = al
+    if lc.depth_weight > 0 and lc.depth_prior == "scene" and cam.depth is not None:
+        dl = pearson_depth_loss(out.depth, cam.depth)
+        loss = loss + lc.depth_weight * dl
+        parts["depth"] = dl
+    # what the divergence guard judges: the inputs' loss, which the method's terms (extra views, priors that
+    # appear in a later phase) and the priors on the parameters leave out
+    parts["inputs"] = loss
+    return loss, parts
+
+
 def default_lpips_weights() -> list[Path]:
     """Where the AlexNet backbone is looked for, in order."""
     out = []

@@ -1,8 +1,8 @@
-"""The optimiser side of training, shared by the trainer (warpgs/train.py) and the co-regularised pair's second
+"""The optimiser side of training, shared by the trainer (warpgs/engine) and the co-regularised pair's second
 model (warpgs/coreg.py): Adam with each parameter group's learning rate, its implementation per device (fused on
 CUDA), a step applied or skipped on the device without a host read, and one model's training state (parameters,
 Adam's moments, densification statistics) copied to the CPU and back, as checkpoints and rollback snapshots
-keep it. ``warpgs.train`` re-exports every name here."""
+keep it. ``warpgs.train`` re-exports the names scripts imported from it."""
 
 from __future__ import annotations
 
@@ -53,7 +53,7 @@ class GroupedAdam(torch.optim.Adam):
     def set_lr(self, name: str, value: float) -> None:
         """Group ``name``'s learning rate, also kept on the device where the fused step runs (float32, the
         precision fused Adam reads a tensor learning rate in): a CUDA graph of the step then reads each step's
-        rate (``warpgs.graphstep``), and a step outside the graph uses the same rounded value."""
+        rate (``warpgs.engine.graphstep``), and a step outside the graph uses the same rounded value."""
         for g in self.param_groups:
             if g.get("name") == name:
                 g["lr"] = value

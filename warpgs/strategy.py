@@ -47,7 +47,7 @@ class DefaultStrategy:
     refine_stop_iter: int = 15_000
     refine_stop_fraction: float = 0.0  # > 0: growth, pruning and the opacity resets also stop at this fraction of the
     #   run (train.iterations) when that comes first (3D-GS: 15,000 of 30,000 steps, 0.5); 0: refine_stop_iter alone.
-    #   Resolved into refine_stop_iter by the trainer (warpgs.train.growth_schedule)
+    #   Resolved into refine_stop_iter by the trainer (warpgs.engine.init.growth_schedule)
     reset_every: int = 3000
     refine_every: int = 100
     pause_refine_after_reset: int = 0

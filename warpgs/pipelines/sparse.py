@@ -17,7 +17,7 @@ Examples:
     python -m warpgs.pipelines.sparse --resume outputs/lego             # continue an interrupted run
     python -m warpgs.pipelines.sparse --method baseline --data blender --compact   # fewest Gaussians
 
-Config layers (later wins): configs/<method>.yaml, configs/<dataset>.yaml, --config files, --set
+Config layers (later wins): configs/methods/<method>.yaml, configs/datasets/<dataset>.yaml, --config files, --set
 key=value, explicit flags. With --resume the checkpoint's config replaces the first two. Every layer is
 checked on its own (keys, types, ranges), so a bad value is named with the file, --set or flag it came from.
 
@@ -40,9 +40,9 @@ from pathlib import Path
 from warpgs import losses
 from warpgs.config import CONFIG_DIR, ConfigError, build_config, parse_override, read_yaml, save_config
 from warpgs.console import warn_once
-from warpgs.pipelines.full import ABLATIONS
+from warpgs.methods.full import ABLATIONS
 
-METHODS = ("baseline", "full", "compare")
+METHODS = ("baseline", "full", "corgs", "compare")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -59,7 +59,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="switch of the paper's Table 4 (repeatable): " + ", ".join(ABLATIONS))
     g.add_argument("--compact", action="store_true",
                    help="compact mode: the fewest Gaussians and lowest SH degree within 0.1 dB of the best "
-                        "training-view PSNR (configs/compact.yaml, warpgs/compact.py)")
+                        "training-view PSNR (configs/presets/compact.yaml, warpgs/compact.py)")
     g.add_argument("--config", action="append", default=[], metavar="FILE", help="extra YAML config (repeatable)")
     g.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                    help="override a config value, e.g. --set strategy.max_gaussians=20000 (repeatable)")
@@ -85,17 +85,17 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def dataset_overlay(data: str) -> Path | None:
-    """configs/<dataset>.yaml for a dataset name or a folder of a known format."""
+    """configs/datasets/<dataset>.yaml for a dataset name or a folder of a known format."""
     name = data
-    if not (CONFIG_DIR / f"{name}.yaml").is_file() or "/" in data:
+    if not (CONFIG_DIR / "datasets" / f"{name}.yaml").is_file() or "/" in data:
         try:
             from warpgs.data.registry import detect_format
 
             name, _ = detect_format(data)
         except Exception:
             return None
-    p = CONFIG_DIR / f"{name}.yaml"
-    return p if p.is_file() and name not in METHODS else None
+    p = CONFIG_DIR / "datasets" / f"{name}.yaml"
+    return p if p.is_file() else None
 
 
 def flag_layers(args) -> list[tuple[str, dict]]:
@@ -138,7 +138,7 @@ def make_config(args):
     """-> (config, resume folder or None). Every layer is checked on its own (``build_config``): a value out
     of range is an error naming the file, ``--set`` or flag it came from, even where a later layer sets the
     key again."""
-    from warpgs.train import resumable_checkpoint
+    from warpgs.engine.checkpoint import resumable_checkpoint
 
     resume_dir = None
     if args.resume is not None:
@@ -159,13 +159,14 @@ def make_config(args):
         method = args.method or "compare"
         if method not in METHODS:
             raise ConfigError(f"--method {method!r}: available methods are {', '.join(METHODS)}")
-        base = [(str(CONFIG_DIR / f"{m}.yaml"), read_yaml(CONFIG_DIR / f"{m}.yaml")) for m in ("baseline", "full")]
-        base.append((f"--method {method}", {"method": method}))
+        # only the method's file; a compare run reads full.yaml (whose base is baseline.yaml): it runs both
+        own = CONFIG_DIR / "methods" / f"{'full' if method == 'compare' else method}.yaml"
+        base = [(str(own), read_yaml(own)), (f"--method {method}", {"method": method})]
         overlay = dataset_overlay(args.data or "synthetic")
         if overlay is not None:
             base.append((str(overlay), read_yaml(overlay)))
     if getattr(args, "compact", False):
-        base.append(("--compact", read_yaml(CONFIG_DIR / "compact.yaml")))
+        base.append(("--compact", read_yaml(CONFIG_DIR / "presets" / "compact.yaml")))
     layers = (base + [(str(f), read_yaml(f)) for f in args.config] + [(f"--set {s}", parse_override(s)) for s in args.set]
               + flag_layers(args))
     return build_config(layers), resume_dir
@@ -205,17 +206,16 @@ def print_metrics(m: dict, out: Path) -> None:
 
 
 def training_methods() -> dict:
-    """The training methods by name: each a ``warpgs.train.Method`` class."""
-    from warpgs.pipelines.full import FullMethod
-    from warpgs.train import Method
+    """The training methods by name: each a ``warpgs.engine.method.Method`` class (``warpgs.methods``)."""
+    from warpgs.methods import METHODS, method_class
 
-    return {"baseline": Method, "full": FullMethod}
+    return {name: method_class(name) for name in METHODS}
 
 
 def make_trainer(cfg, scene, out: Path | None = None, **kwargs):
     """The trainer of ``cfg.method`` with the stages its config asks for (compact mode)."""
     from warpgs.compact import attach
-    from warpgs.train import Trainer
+    from warpgs.engine.loop import Trainer
 
     methods = training_methods()
     if cfg.method not in methods:
@@ -226,8 +226,8 @@ def make_trainer(cfg, scene, out: Path | None = None, **kwargs):
 
 
 class RunStopped(Exception):
-    """A run that ends without metrics (bad settings, Ctrl-C): ``code`` is the process's exit code (2, 130);
-    what to tell the user has been printed already."""
+    """A run that ends without metrics (bad settings, Ctrl-C, SIGTERM): ``code`` is the process's exit code (2,
+    130, 143); what to tell the user has been printed already."""
 
     def __init__(self, code: int):
         super().__init__(code)
@@ -241,7 +241,9 @@ def run_method(method: str, cfg, scene, out: Path, resume: bool, baseline_metric
     a checkpoint that cannot be read or written, outputs that cannot be written (each said in one line)."""
     import torch
 
-    from warpgs.train import CHECKPOINT, PREVIOUS_CHECKPOINT, CheckpointError, TrainingDiverged, TrainingInterrupted
+    from warpgs.engine.checkpoint import (CHECKPOINT, PREVIOUS_CHECKPOINT, CheckpointError, TrainingDiverged,
+                                          TrainingInterrupted)
+    from warpgs.engine.signals import exit_code, interrupt_code
 
     cfg = copy.deepcopy(cfg)
     cfg.method = method
@@ -264,10 +266,10 @@ def run_method(method: str, cfg, scene, out: Path, resume: bool, baseline_metric
     except TrainingInterrupted as e:
         print(f"\nwarpgs: stopped at step {e.step}; checkpoint {e.checkpoint}. Continue with:\n"
               f"  python -m warpgs.pipelines.sparse {resume_hint}", file=sys.stderr)
-        raise RunStopped(130) from e
+        raise RunStopped(exit_code(e.signum)) from e  # 130 after Ctrl-C, 143 after SIGTERM
     except KeyboardInterrupt as e:
         print(f"\nwarpgs: stopped; the last checkpoint in {out} is intact ({resume_hint})", file=sys.stderr)
-        raise RunStopped(130) from e
+        raise RunStopped(interrupt_code(e)) from e
     except TrainingDiverged as e:
         # the model is at its last good state: its metrics, renders and PLY are written all the same
         print("\n" + diverged_message(method, e, out), file=sys.stderr)
@@ -302,7 +304,7 @@ def run_method(method: str, cfg, scene, out: Path, resume: bool, baseline_metric
     except KeyboardInterrupt as e:  # Ctrl-C, or a batch's time limit, during the final evaluation and writing
         print(f"\nwarpgs: stopped while writing the results; training is complete and checkpointed in {out}. "
               f"Write them with:\n  python -m warpgs.pipelines.sparse {resume_hint}", file=sys.stderr)
-        raise RunStopped(130) from e
+        raise RunStopped(interrupt_code(e)) from e
     print_metrics(metrics, out)
     return metrics
 
@@ -357,13 +359,17 @@ DEFAULT_OUT = "outputs/sparse"  # Config.out: replaced by outputs/<method>/<scen
 
 def main(argv=None) -> int:
     """The command line. Bad input of any kind (config, scene, output folder, checkpoint) ends with one line,
-    ``error: ...``, and exit code 2, before any training; Ctrl-C with 130."""
+    ``error: ...``, and exit code 2, before any training; Ctrl-C with 130, SIGTERM with 143."""
     from warpgs.data.scene import SceneError
     from warpgs.pseudo.backends import SVDWeightsNotFound
     from warpgs.runfolder import RunFolderError, open_run_folder
-    from warpgs.train import CheckpointError, prepare_geometry
+    from warpgs.engine.checkpoint import CheckpointError
+    from warpgs.engine.init import prepare_geometry
+
+    from warpgs.engine.signals import sigterm_as_interrupt
 
     args = build_parser().parse_args(argv)
+    restore_sigterm = sigterm_as_interrupt()  # SIGTERM ends a run as Ctrl-C does (exit code 143)
     started = time.perf_counter()
     folder = None
     try:
@@ -405,6 +411,7 @@ def main(argv=None) -> int:
     except RunStopped as e:
         return e.code
     finally:
+        restore_sigterm()
         if folder is not None:
             folder.release()
 
@@ -421,7 +428,7 @@ def compare_in_parallel(args, cfg) -> bool:
     2-core machine this nearly halves the wall time; on a GPU the two would only take turns."""
     import os
 
-    from warpgs.train import resolve_device
+    from warpgs.engine.init import resolve_device
 
     if args.jobs is not None:
         return args.jobs >= 2
@@ -432,6 +439,9 @@ def _baseline_process(cfg, scene, out: Path, resume: bool, hint: str, log_path: 
     """Entry point of the second process: the baseline run, its output into ``log_path``."""
     import os
 
+    from warpgs.engine.signals import sigterm_as_interrupt
+
+    sigterm_as_interrupt()
     log = open(log_path, "a", buffering=1)
     os.dup2(log.fileno(), 1)
     os.dup2(log.fileno(), 2)
@@ -451,7 +461,7 @@ def compare_parallel(cfg, scene, out: Path, resume: bool, hint: str):
     --resume continues both."""
     import multiprocessing as mp
 
-    from warpgs.evaluation import write_report
+    from warpgs.engine.evaluation import write_report
 
     bcfg = copy.deepcopy(cfg)
     bcfg.train.progress = False

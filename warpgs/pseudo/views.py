@@ -204,6 +204,14 @@ def _camera_tensors(cams, device):
 # ----------------------------------------------------------------------------------------------
 
 
+class GenerationStopped(Exception):
+    """``generate_pseudo_views`` was asked to stop (``should_stop``) after ``done`` of ``total`` trajectories."""
+
+    def __init__(self, done: int, total: int):
+        super().__init__(f"pseudo-view generation stopped after {done} of {total} trajectories")
+        self.done, self.total = done, total
+
+
 def generate_pseudo_views(
     render_fn: RenderFn,
     inputs: Sequence,
@@ -215,6 +223,7 @@ def generate_pseudo_views(
     trajectories: Sequence[Trajectory] | None = None,
     out_dir: str | Path | None = None,
     generator: torch.Generator | None = None,
+    should_stop: Callable[[], bool] | None = None,
 ) -> list[PseudoSequence]:
     """Pseudo views between neighbouring inputs (see module doc).
 
@@ -226,6 +235,8 @@ def generate_pseudo_views(
         input_depths: depth at each input; default: rendered by ``render_fn`` (as in the paper).
         trajectories: poses to use instead of the path through all inputs (indices into ``inputs``).
         out_dir: if given, every sequence's images are saved there (``save_sequence``).
+        should_stop: asked before each trajectory; when it says True, ``GenerationStopped`` ends the generation
+            (a stop asked for by Ctrl-C or SIGTERM takes effect within one trajectory, not after all of them).
     """
     cfg = cfg or PseudoConfig()
     cams = _camera_tensors(inputs, device or "cpu")
@@ -256,6 +267,8 @@ def generate_pseudo_views(
         raise ValueError(f"trajectory.guidance_colour must be raw or affine, got {tc.guidance_colour!r}")
     out = []
     for traj in trajectories:
+        if should_stop is not None and should_stop():
+            raise GenerationStopped(len(out), len(trajectories))
         K, W, H = src_K[traj.start], cams[traj.start].width, cams[traj.start].height
 
         def warp(viewmats: torch.Tensor, frames: np.ndarray):

@@ -2,7 +2,7 @@
 
 On a GPU the training step is bound by the host: a step of fern at 504x378 keeps the GPU busy about a fifth of
 the time, the rest is Python and the launches of some hundred kernels and torch operations (measured in
-``bench/host_profile.py``). A step whose verdict the host reads later (``Trainer._deferred_step``) has no host
+``bench/host_profile.py``). A step whose verdict the host reads later (``StepGuard.deferred_step``) has no host
 read left but one, the render's count of tile intersections that sizes its sort buffers, so it can be
 recorded once as a CUDA graph and replayed:
 
@@ -16,12 +16,12 @@ statistics (``update_state``). What changes from step to step is read from the d
 background (copied into the graph's own tensors; a random colour behind an alpha channel and the far field's
 image are made outside the graph, as the step without it makes them), the means' learning rate
 (``GroupedAdam.set_lr``), the guard's slot (``LossWindow.set_slot``), DropGaussian's rate
-(``Trainer.drop_rate_tensors``). Dropout and opacity noise draw inside the graph from the trainer's
+(``Dropout.rate_tensors``). Dropout and opacity noise draw inside the graph from the trainer's
 ``drop_gen``, registered with it (``register_generator_state``): each replay draws anew, the numbers the step
 without the graph would draw. The render uses buffers of a fixed capacity (``rasterize(isect_capacity=...)``);
 before each replay ``count_intersections`` reads the step's count (the one host read, which the step without
 the graph also makes; on opacities scaled by the largest factor dropout and noise can give,
-``Trainer.opacity_scale_bound``, since the screen box grows with the opacity) and a count above the capacity
+``Regularizers.opacity_scale_bound``, since the screen box grows with the opacity) and a count above the capacity
 records the graph again with more room, so no step ever renders less than it would without the graph. The same
 kernels in the same order give the same numbers as the step without the graph, bit for bit (the GPU test in
 ``bench/graph_check.py`` checks it).
@@ -51,7 +51,7 @@ class StepGraph:
         self.graph: torch.cuda.CUDAGraph | None = None
         self.key = None  # what the recorded graph holds (``_key``)
         self.capacity = 0  # the render's intersection buffers
-        self.record: torch.Tensor | None = None  # the graph's output: the step's record (``_step_record``'s layout)
+        self.record: torch.Tensor | None = None  # the graph's output: the step's record (``StepGuard.step_record``'s layout)
         self.off: str | None = None  # why the graphs are off for this run
         self.captures = 0
         self.replays = 0
@@ -71,8 +71,8 @@ class StepGraph:
             return False  # a torch whose graphs cannot hold draws from the trainer's own generator
         if lc.depth_weight > 0 and lc.depth_prior == "scene" and cam.depth is not None:
             return False
-        if tr.binocular_active(step) or tr.path_consistency_active(step):
-            return False  # a second render a step, of a pose drawn anew: not held
+        if not tr.regularizers.graph_safe(tr.context, step):
+            return False  # e.g. a second render a step, of a pose drawn anew: not held
         if not tr.densify_only_updates_state(step) or not getattr(tr.method, "graph_safe", lambda: False)():
             return False
         # every parameter has its Adam state (the first step makes it, outside any graph)
@@ -81,24 +81,25 @@ class StepGraph:
     def draws(self, step: int) -> bool:
         """Whether the step's render draws from the trainer's ``drop_gen`` (DropGaussian, opacity noise): the graph
         holds the draws (the generator is registered with it, so each replay draws anew, what the step without
-        the graph would draw) and reads the dropout rate from the device (``Trainer.drop_rate_tensors``)."""
-        return self.tr.cfg.train.opacity_noise > 0 or self.tr.drop_rate_at(step) > 0
+        the graph would draw) and reads the dropout rate from the device (``Dropout.rate_tensors``)."""
+        return self.tr.regularizers.opacity_scale_bound(self.tr.context, step) is not None
 
     def step(self, step: int, cam) -> dict | None:
         """Step ``step`` on the view ``cam`` as a replay: the record waits in the trainer's ``_pending`` as a
         deferred step's does. None (nothing done) when recording failed."""
         tr = self.tr
         model = tr.model
-        window = tr._loss_window(step)
-        bound = tr.opacity_scale_bound(step)  # dropout's and the noise's largest factor: the count bounds the render's
+        window = tr.stepguard.loss_window(step)
+        bound = tr.regularizers.opacity_scale_bound(tr.context, step)  # dropout's and the noise's largest factor: the count bounds the render's
         count = count_intersections(model.means, model.quats, model.scales,
                                     model.opacities if bound is None else model.opacities * bound,
                                     cam.viewmat, cam.K, cam.width, cam.height)
         # the target and background of the step (a random colour behind an alpha channel, the far field), as
         # the step without the graph makes them, outside the graph
         cam, bg = tr.with_training_background(cam, tr.split_gen)
-        if tr.drop_rate_at(step) > 0:
-            tr.drop_rate_tensors(step)
+        dropout = tr.regularizers.get("dropout")
+        if dropout is not None and dropout.rate_at(tr.context, step) > 0:
+            dropout.rate_tensors(tr.context, step)
         key = self._key(cam, bg)
         if self.graph is None or key != self.key or count > self.capacity:
             capacity = max(count + count // 2, 1024)  # room for the other views and the next steps' growth
@@ -115,7 +116,7 @@ class StepGraph:
         window.set_slot(step)
         self.graph.replay()
         self.replays += 1
-        tr._pending.append((step, tr.guard.stat_start, self.record.clone()))
+        tr.stepguard.pending.append((step, tr.guard.stat_start, self.record.clone()))
         return {"cloned": 0, "split": 0, "pruned": 0, "reset": 0}
 
     # ------------------------------------------------------------------------------------------
@@ -135,13 +136,13 @@ class StepGraph:
                     ptrs.extend(v.data_ptr() for v in opt.state[p].values() if isinstance(v, torch.Tensor))
             ptrs.extend(t.data_ptr() for t in opt.lr_tensors.values())
         ptrs.extend(v.data_ptr() for v in tr.state.values())
-        w = tr._window
+        w = tr.stepguard.window
         ptrs += [w.values.data_ptr(), w.middle.data_ptr(), w.slot.data_ptr(), tr.background.data_ptr()]
-        ptrs += [t.data_ptr() for t in tr._drop_t]
+        ptrs += [t.data_ptr() for t in tr.regularizers.graph_tensors()]
         ptrs += [b.data_ptr() for b in render._ZERO_INPUTS.values()]  # the zeros a backward reads (it only grows)
         sc = tr.strategy
         return (tuple(ptrs), cam.width, cam.height, cam.alpha is not None, model.active_sh_degree,
-                tr.step < sc.refine_stop_iter, tr.decay_active(tr.step), tr.guard.cfg.explode_factor,
+                tr.step < sc.refine_stop_iter, tr.regularizers.graph_key(tr.context, tr.step), tr.guard.cfg.explode_factor,
                 bg is tr.background, tuple(bg.shape), self.draws(tr.step))
 
     def _capture(self, cam, bg, capacity: int) -> bool:
@@ -207,7 +208,7 @@ class StepGraph:
         tr = self.tr
         step = tr.step
         out, loss, inputs = tr.forward_backward(step, cam, self.background, capacity)
-        record, apply = tr.update_on_device(None, loss, inputs)
+        record, apply = tr.stepguard.update_on_device(None, loss, inputs)
         # a step without its update is one in which no Gaussian was seen, for the densification statistics
         tr.densify(tr.strategy, tr.model, tr.optimizer, tr.state, step, out._replace(radii=out.radii * apply), cam,
                    tr.split_gen)

@@ -18,7 +18,7 @@ import numpy as np
 import torch
 
 from warpgs.config import save_config
-from warpgs.metrics import LPIPSMetric, mean_or_none, peak_memory_mb, psnr, ssim
+from warpgs.metrics import LPIPSMetric, mean_or_none, peak_memory_mb, psnr, render_fps, ssim
 from warpgs.model import size_report
 from warpgs.viz import save_image
 
@@ -81,7 +81,7 @@ def run_metrics(trainer, ev: dict, train_ev: dict, fps: float) -> dict:
         "skipped_steps": sum(1 for x in tr.losses if not math.isfinite(x)),
         "recoveries": tr.recoveries,  # divergences survived: step, cause, step rolled back to, lr scale after
         "lr_scale": tr.lr_scale,
-        "max_loss_ratio": round(tr.guard.max_loss_ratio, 3),  # largest loss / running median (train.explode_factor)
+        "max_loss_ratio": round(tr.guard.max_loss_ratio, 3),  # largest loss / running median (guard.explode_factor)
         "curve": tr.curve,
         "per_view": ev["views"],
     }
@@ -107,6 +107,36 @@ def run_metrics(trainer, ev: dict, train_ev: dict, fps: float) -> dict:
     if tr.compact_report is not None:
         metrics["compact"] = tr.compact_report
     return metrics
+
+
+def finish_run(tr, baseline: dict | None = None) -> dict:
+    """After training ``tr`` (a ``Trainer``): a checkpoint of the trained state (unless one was written at this
+    step), the final pruning (if asked), the stages, test metrics and renders, FPS, PLY, final checkpoint,
+    metrics.json, then the method's records and outputs (``baseline``: the baseline run's metrics, for its
+    report)."""
+    out = tr.out
+    if out is not None and tr.saved_step != tr.step:
+        # the trained state, before the final pruning changes it: an interrupt while the results are written
+        # loses no training (--resume writes them from here, as an uninterrupted run would)
+        tr.save_checkpoint()
+    if tr.cfg.train.path_floaters_final:
+        tr.remove_path_floaters(tr.step)
+    if tr.cfg.train.prune_unseen_at_end:
+        removed = tr.prune_unseen()
+        if removed:
+            tr.log(f"warpgs: pruning the unseen removed {removed} of {tr.n_before_compaction} Gaussians")
+    for stage in tr.stages:
+        stage.before_evaluation(tr)
+    ev = tr.evaluate(save_dir=(out / "test") if out is not None and tr.cfg.eval.save_images else None)
+    train_ev = tr.evaluate(tr.train_cams, lpips=False)
+    fps = render_fps(lambda i: tr.render(tr.test_cams[i] if tr.test_cams else tr.train_cams[i]),
+                     len(tr.test_cams) or len(tr.train_cams), tr.cfg.eval.fps_repeats, tr.device)
+    metrics = run_metrics(tr, ev, train_ev, fps)
+    if tr.pair is not None:
+        metrics["co_reg"] = tr.pair.report()
+    if out is not None:
+        write_run_outputs(tr, metrics)
+    return tr.method.finish(metrics, baseline)
 
 
 def write_run_outputs(trainer, metrics: dict) -> None:
@@ -140,21 +170,18 @@ def write_metrics(out: Path, metrics: dict) -> Path:
 # the full method's outputs beside these: fly-through, charts, report
 
 
-def write_flythrough(trainer, path: Path, frames_per_segment: int = 24, order: str | None = None) -> Path | None:
-    """A GIF along the interpolated path through the inputs (the trajectories the pseudo views use;
-    ``order`` as ``trajectory.order``)."""
+def write_flythrough(trainer, path: Path, frames_per_segment: int = 24) -> Path | None:
+    """A GIF along the interpolated path through the inputs (the scene's capture path, ``trainer.cameras``:
+    the trajectories the pseudo views use)."""
     from PIL import Image
-
-    from warpgs.pseudo.trajectory import path_trajectories
 
     cams = trainer.train_cams
     if len(cams) < 2:
         return None
-    V = np.stack([c.viewmat.detach().cpu().double().numpy() for c in cams])
     cam0 = cams[0]
     frames = []
     with torch.no_grad():
-        for traj in path_trajectories(V, max(frames_per_segment, 2), order):
+        for traj in trainer.cameras.trajectories(max(frames_per_segment, 2)):
             for vm in traj.viewmats:
                 v = torch.as_tensor(vm, dtype=torch.float32, device=trainer.device)
                 view = SimpleNamespace(viewmat=v, K=cam0.K, width=cam0.width, height=cam0.height)

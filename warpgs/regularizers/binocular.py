@@ -1,5 +1,5 @@
 """Binocular consistency (Han et al., "Binocular-Guided 3D Gaussian Splatting with View Consistency for Sparse
-View Synthesis", NeurIPS 2024): a weight-free geometry term on the input views (``train.binocular``).
+View Synthesis", NeurIPS 2024): a weight-free geometry term on the input views (``regularizers.binocular``).
 
 At a training step on an input view, the model is also rendered from that camera moved by ``t`` along its own
 x axis (a rectified stereo partner: same intrinsics and rotation). With the depth ``z`` rendered at the input,
@@ -9,20 +9,20 @@ reaches the depth through the warp's sampling position and the moved render's co
 hold the photo's content at the right distance is pushed to where a second eye would see it. An edge-aware
 smoothness of the disparity ``fx t / z`` (in pixels) goes with it, as in their code (weight 0.05).
 
-``t`` is drawn each step uniformly in ``[-s, s]`` with ``s`` the shift that gives ``train.binocular_shift`` x
+``t`` is drawn each step uniformly in ``[-s, s]`` with ``s`` the shift that gives ``shift`` x
 the image width of disparity at the render's median depth: the same stereo geometry at every scene scale
 and resolution (their code draws in ``[-0.4, 0.4]`` scene units; Blender's 400-pixel views at 4 units give
 about 0.14 of the width). The draw happens on the device (no host read). The term starts at
-``train.binocular_start`` x the run's steps (theirs: 20,000 of 30,000 on LLFF and DTU, 4000 of 7000 on
+``start`` x the run's steps (theirs: 20,000 of 30,000 on LLFF and DTU, 4000 of 7000 on
 Blender).
 
-``train.binocular_axes: xy`` (ours) moves the camera in a direction of its image plane drawn each step
+``axes: xy`` (ours) moves the camera in a direction of its image plane drawn each step
 (uniform angle; the same distance as above), up and down as well as sideways, and warps back with the general
 reprojection (``pose_warp``).
 
-``train.binocular_partner: path`` (ours) replaces the sideways partner by a pose of the capture path: the
+``partner: path`` (ours) replaces the sideways partner by a pose of the capture path: the
 poses the pseudo views' trajectories pass through (splined centres, slerped rotations), from the input up to
-``train.binocular_reach`` x the way to each neighbouring input, one drawn per step. The moved render is warped
+``reach`` x the way to each neighbouring input, one drawn per step. The moved render is warped
 back with the general reprojection (``pose_warp``: a turn and a move in any direction) and compared with the
 photo as above. On a walk-around capture the test views lie along that path, between the inputs, where a
 sideways move of the same size says nothing about the depth the path's views need.
@@ -30,11 +30,14 @@ sideways move of the same size says nothing about the depth the path's views nee
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import torch
 
 from warpgs import losses
 from warpgs._warp import arg, device_of, launch, stream_of
 from warpgs.kernels import warping as kw
+from warpgs.regularizers.base import Regularizer
 import warp as wp
 
 MIN_DEPTH = 1e-6
@@ -145,8 +148,33 @@ def moved_viewmat(viewmat: torch.Tensor, t: torch.Tensor) -> torch.Tensor:
     return vm
 
 
-class Binocular:
+@dataclass
+class BinocularConfig:
+    weight: float = 0.0  # weight of the binocular consistency on the input views: the render from the camera moved
+    #   along its x axis, warped back with the input's rendered depth, against the photo (their weight: 1); 0: off
+    shift: float = 0.1  # the largest move: this x the image width of disparity at the median depth
+    start: float = 0.5  # share of the run's steps before the term starts (theirs: 2/3 LLFF/DTU, 4/7 Blender)
+    smooth: float = 0.05  # edge-aware smoothness of the disparity (pixels) with it (theirs: 0.05)
+    partner: str = "shift"  # shift: their partner, the camera moved along its x axis | path: a pose of the capture
+    #   path next to the input (the pseudo views' trajectories), up to reach of the way to a neighbour
+    reach: float = 0.5  # path partner: the farthest, as a share of the way to the neighbouring input
+    axes: str = "x"  # shift partner: x: along the camera's x axis (theirs) | xy: in a direction of the image plane
+    #   drawn each step (up and down too: DTU's test cameras sit in the rows above and below its inputs')
+
+    LIMITS = {"weight": ">= 0", "shift": "(0, 1]", "start": "[0, 1]", "smooth": ">= 0", "partner": "{shift, path}",
+              "reach": "(0, 1]", "axes": "{x, xy}"}
+    LEGACY = {"binocular": "weight", "binocular_shift": "shift", "binocular_start": "start",  # train.<key> of
+              "binocular_smooth": "smooth", "binocular_partner": "partner", "binocular_reach": "reach",  # earlier
+              "binocular_axes": "axes"}  # versions
+
+
+CONFIG = BinocularConfig  # the section regularizers.<name> of the run's config
+
+
+class Binocular(Regularizer):
     """The term of one trainer (module docstring); ``loss`` adds it for an input render."""
+
+    name = "binocular"
 
     def __init__(self, weight: float, shift: float, start: int, smooth: float, device, seed: int,
                  path: dict[str, torch.Tensor] | None = None, axes: str = "x"):
@@ -199,3 +227,28 @@ class Binocular:
             term = term + self.smooth * losses.edge_aware_smoothness(disparity, cam.image, normalise=False)
         parts["binocular"] = term.detach()
         return self.weight * term
+
+    # the Regularizer hooks: the term a step adds, not held by a CUDA graph (a second render of a pose drawn anew)
+    def step_term(self, ctx, step: int, out, cam, bg, parts: dict) -> torch.Tensor | None:
+        return self.loss(ctx.model, out, cam, bg, parts) if self.active(step) else None
+
+    def graph_safe(self, ctx, step: int) -> bool:
+        return not self.active(step)
+
+    def state_dict(self) -> dict:
+        return {"binocular_gen": self.gen.get_state()}
+
+    def load_state_dict(self, st: dict) -> None:
+        if "binocular_gen" in st:
+            self.gen.set_state(st["binocular_gen"])
+
+
+def build(cfg, ctx) -> Binocular | None:
+    """``weight`` > 0: the term, from ``start`` x the run on; with ``partner: path`` its partners are poses of the
+    capture path next to each input."""
+    c, tc = cfg.regularizers.binocular, cfg.train
+    if not c.weight > 0:
+        return None
+    path = ctx.cameras.path_partners(c.reach) if c.partner == "path" else None
+    return Binocular(c.weight, c.shift, int(c.start * tc.iterations), c.smooth, ctx.device, tc.seed, path=path,
+                     axes=c.axes)
