@@ -33,6 +33,7 @@ from warpgs.densify import DensifyConfig
 from warpgs.farfield import FAR_FIELDS
 from warpgs.points import GeometryConfig
 from warpgs.pseudo.views import PseudoConfig
+from warpgs.runfolder import atomic_write
 from warpgs.regularizers import LEGACY_TRAIN_KEYS, RegularizersConfig
 from warpgs.strategy import DefaultStrategy
 
@@ -426,8 +427,5 @@ def config_from_dict(d: dict, where: str = "a saved config") -> Config:
 
 
 def save_config(cfg: Config, path: str | Path) -> None:
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(yaml.safe_dump(to_dict(cfg), sort_keys=False))
-    tmp.replace(path)
+    text = yaml.safe_dump(to_dict(cfg), sort_keys=False)
+    atomic_write(path, lambda tmp: tmp.write_text(text))

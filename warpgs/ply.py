@@ -19,6 +19,8 @@ from pathlib import Path
 import numpy as np
 import plyfile
 
+from warpgs.runfolder import atomic_write
+
 _WRITE_TYPES = (np.dtype("<f4"), np.dtype("u1"))
 GAUSSIAN_FIELDS_HEAD = ["x", "y", "z", "nx", "ny", "nz", "f_dc_0", "f_dc_1", "f_dc_2"]
 GAUSSIAN_FIELDS_TAIL = ["opacity", "scale_0", "scale_1", "scale_2", "rot_0", "rot_1", "rot_2", "rot_3"]
@@ -55,13 +57,13 @@ def header(n: int, dtype: np.dtype) -> bytes:
 
 def write_vertices(path: str | Path, rec: np.ndarray) -> Path:
     """Writes the structured array ``rec`` as a binary PLY, through a temporary file and a rename."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(path.name + ".tmp")
-    with open(tmp, "wb") as f:
-        _ply_data(np.ascontiguousarray(rec)).write(f)
-    tmp.replace(path)
-    return path
+    data = _ply_data(np.ascontiguousarray(rec))
+
+    def write(tmp: Path) -> None:
+        with open(tmp, "wb") as f:
+            data.write(f)
+
+    return atomic_write(path, write)
 
 
 _TYPE_SIZES = {"char": 1, "uchar": 1, "int8": 1, "uint8": 1, "short": 2, "ushort": 2, "int16": 2, "uint16": 2,

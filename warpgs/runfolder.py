@@ -155,8 +155,26 @@ def earlier_run(folder: str | Path) -> str | None:
 def _reason(e: OSError) -> str:
     return {errno.ENOTDIR: "a part of the path is a file, not a folder", errno.EEXIST: "it exists and is not a folder",
             errno.EROFS: "the file system is read-only", errno.EACCES: "permission denied",
-            errno.EPERM: "permission denied", errno.ENOSPC: "no space left on the device"}.get(
-        e.errno, e.strerror or str(e))
+            errno.EPERM: "permission denied", errno.ENOSPC: "no space left on the device",
+            errno.EDQUOT: "the disk quota is used up", errno.EFBIG: "the file is larger than this process may write",
+            errno.ENAMETOOLONG: "a name in the path is longer than the file system allows (255 bytes): "
+                                "choose a shorter --out"}.get(e.errno, e.strerror or str(e))
+
+
+def atomic_write(path: str | Path, write) -> Path:
+    """Writes a file through ``write(tmp)`` into a temporary name beside ``path``, then renames it into place: a
+    reader never sees half a file, and when writing fails (a full disk) the temporary file is removed and the
+    ``OSError`` goes on, leaving ``path`` as it was."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(path.name + f".tmp{os.getpid()}")
+    try:
+        write(tmp)
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+    return path
 
 
 def check_writable(folder: str | Path) -> Path:
@@ -290,8 +308,16 @@ def remove_outputs(folder: str | Path) -> list[Path]:
 
 
 def open_run_folder(folder: str | Path, *, resume: bool = False, overwrite: bool = False, log=None) -> RunFolder:
-    """The checks and the lock of a run's output folder (module docstring), before any work starts."""
-    created = not Path(folder).exists()
+    """The checks and the lock of a run's output folder (module docstring), before any work starts; an OS error on
+    the way (a name too long, no permission) is a ``RunFolderError`` naming the folder."""
+    try:
+        return _open_run_folder(Path(folder), resume, overwrite, log)
+    except OSError as e:
+        raise RunFolderError(f"output folder {folder}: cannot be used: {_reason(e)}") from None
+
+
+def _open_run_folder(folder: Path, resume: bool, overwrite: bool, log) -> RunFolder:
+    created = not folder.exists()
     folder = check_writable(folder)
     held = take_lock(folder, log)
     held.created = created
@@ -310,5 +336,5 @@ def open_run_folder(folder: str | Path, *, resume: bool = False, overwrite: bool
     return held
 
 
-__all__ = ["LOCK", "RUN_OUTPUTS", "RunFolder", "RunFolderError", "check_writable", "earlier_run", "lock_is_stale",
+__all__ = ["LOCK", "RUN_OUTPUTS", "RunFolder", "RunFolderError", "atomic_write", "check_writable", "earlier_run", "lock_is_stale",
            "open_run_folder", "read_lock", "remove_outputs", "take_lock"]

@@ -11,7 +11,9 @@ and raises ``CheckpointError`` naming the last good one. A stop request (Ctrl-C,
 
 from __future__ import annotations
 
+import errno
 import os
+import shutil
 from pathlib import Path
 
 import torch
@@ -105,6 +107,12 @@ def atomic_torch_save(obj, path: Path, keep_previous: bool = True) -> None:
             torch.save(obj, f)
             f.flush()
             os.fsync(f.fileno())
+    except RuntimeError as e:  # torch's zip writer reports a failed write (a full disk) as a RuntimeError
+        tmp.unlink(missing_ok=True)
+        full = shutil.disk_usage(path.parent).free < (64 << 20)
+        raise OSError(errno.ENOSPC if full else errno.EIO,
+                      "no space left on the device" if full else f"the write failed ({str(e).splitlines()[0]})",
+                      str(path)) from None
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise

@@ -20,6 +20,7 @@ import torch
 from warpgs.config import save_config
 from warpgs.metrics import LPIPSMetric, mean_or_none, peak_memory_mb, psnr, render_fps, ssim
 from warpgs.model import size_report
+from warpgs.runfolder import atomic_write
 from warpgs.viz import save_image
 
 
@@ -161,9 +162,8 @@ def write_run_outputs(trainer, metrics: dict) -> None:
 
 def write_metrics(out: Path, metrics: dict) -> Path:
     """``out``/metrics.json, through a temporary file and a rename (never half written)."""
-    tmp = out / "metrics.json.tmp"
-    tmp.write_text(json.dumps(metrics, indent=2))
-    return tmp.replace(out / "metrics.json")
+    text = json.dumps(metrics, indent=2)
+    return atomic_write(out / "metrics.json", lambda tmp: tmp.write_text(text))
 
 
 # ----------------------------------------------------------------------------------------------------
@@ -188,10 +188,9 @@ def write_flythrough(trainer, path: Path, frames_per_segment: int = 24) -> Path 
                 bg = trainer.background_for(view, keep=False)  # a one-off pose: nothing kept
                 img = trainer.model.render(v, cam0.K, cam0.width, cam0.height, background=bg).image
                 frames.append(Image.fromarray((img.clamp(0, 1).cpu().numpy() * 255 + 0.5).astype(np.uint8)))
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(path.name + ".tmp")  # through a rename: an interrupted run leaves no half-written GIF
-    frames[0].save(tmp, format="GIF", save_all=True, append_images=frames[1:], duration=80, loop=0)
-    return tmp.replace(path)
+    # through a rename: an interrupted run leaves no half-written GIF
+    return atomic_write(path, lambda tmp: frames[0].save(tmp, format="GIF", save_all=True, append_images=frames[1:],
+                                                         duration=80, loop=0))
 
 
 def write_report(out: Path, metrics: dict, history: list[dict], baseline: dict | None = None) -> Path:

@@ -14,13 +14,21 @@ from warpgs.model import PARAM_NAMES, GaussianModel, read_point_cloud
 
 
 def resolve_device(name: str) -> torch.device:
+    """``train.device`` as a torch device: auto (CUDA when torch sees it, else the CPU), cpu, cuda or cuda:N.
+    A name torch does not know, another kind of device, or CUDA where there is none raises ``ValueError``
+    (one line naming the value), so a command can refuse it before any work."""
     if name in ("auto", "", None):
         return torch.device("cuda" if torch.cuda.is_available() else "cpu")
-    dev = torch.device(name)
-    if dev.type == "cuda" and not torch.cuda.is_available():
-        raise RuntimeError(f"device {name!r} was asked for, but torch sees no CUDA device")
+    try:
+        dev = torch.device(name)
+    except (RuntimeError, TypeError):
+        raise ValueError(f"device {name!r}: not a device name; give cpu, cuda, cuda:N or auto") from None
     if dev.type not in ("cpu", "cuda"):
-        raise RuntimeError(f"device {name!r}: warpgs runs on cpu or cuda")
+        raise ValueError(f"device {name!r}: warpgs runs on cpu or cuda (cuda:N), or auto")
+    if dev.type == "cuda" and not torch.cuda.is_available():
+        raise ValueError(f"device {name!r} was asked for, but torch sees no CUDA device; use --device cpu")
+    if dev.type == "cuda" and dev.index is not None and dev.index >= torch.cuda.device_count():
+        raise ValueError(f"device {name!r}: torch sees {torch.cuda.device_count()} CUDA device(s)")
     return dev
 
 

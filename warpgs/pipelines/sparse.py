@@ -364,7 +364,7 @@ def main(argv=None) -> int:
     from warpgs.pseudo.backends import SVDWeightsNotFound
     from warpgs.runfolder import RunFolderError, open_run_folder
     from warpgs.engine.checkpoint import CheckpointError
-    from warpgs.engine.init import prepare_geometry
+    from warpgs.engine.init import prepare_geometry, resolve_device
 
     from warpgs.engine.signals import sigterm_as_interrupt
 
@@ -376,10 +376,12 @@ def main(argv=None) -> int:
         try:
             cfg, resume_dir = make_config(args)
             resume = resume_dir is not None
-            if cfg.method != "baseline":  # the video model's weights, before the run folder is made
+            resolve_device(cfg.train.device)  # a device that cannot run stops here, before any work
+            if cfg.method != "baseline":  # the video model's weights, before the run folder is made (said below)
+                from warpgs.pseudo.backends import choose_backend
                 from warpgs.pseudo.views import resolve_backend
 
-                resolve_backend(cfg.pseudo, real_data=cfg.data.name != "synthetic")
+                choose_backend(cfg.pseudo.backend, cfg.pseudo.svd.path)
             chosen = args.out is not None or resume or cfg.out != DEFAULT_OUT
             if chosen:  # the folder is checked and locked before the scene loads
                 folder = open_run_folder(cfg.out, resume=resume, overwrite=args.overwrite)
@@ -389,6 +391,8 @@ def main(argv=None) -> int:
                 folder = open_run_folder(cfg.out, resume=resume, overwrite=args.overwrite)
             out = Path(cfg.out)
             print(f"warpgs: {scene.summary()}", file=sys.stderr)
+            if cfg.method != "baseline":  # which video prior, once the scene is known to load
+                resolve_backend(cfg.pseudo, real_data=cfg.data.name != "synthetic")
             prepare_geometry(cfg, scene)  # once for both methods of a compare run
         except (ConfigError, SceneError, RunFolderError, CheckpointError, ValueError, SVDWeightsNotFound) as e:
             print(f"error: {e}", file=sys.stderr)
