@@ -6,7 +6,7 @@ nothing in the loss removes what drifts there, and a novel view taken from the p
 castle_p30 every sudden drop of test PSNR was one such Gaussian or a few: opaque, black, within
 0.04-2 m of test frame 8 (the scene's near depth is 7.6-11 m), carrying up to 74% of that view's blending
 weight with under 60 pixels of weight in all the inputs together; removing them took that view from 13.50 to
-23.47 dB (`bench/floaters.py`).
+23.47 dB (`bench/diagnostics/floaters.py`).
 
 ``PathClearance`` is the path as the pseudo views' trajectories sample it (``warpgs.pseudo.trajectory``: the
 inputs in capture or nearest-neighbour order, a spline between neighbours), cut into short segments, with a
@@ -17,7 +17,7 @@ out. ``inside(means)`` marks the Gaussians whose centre lies within the radius o
 ``PathFloaters`` finds such Gaussians by what they do rather than where they are: a pose on the path (between
 neighbouring inputs, where novel views of a walk-through are taken) that sees a Gaussian with more than
 ``ratio`` x its blending weight in all the inputs together, and for which it carries a visible share of the
-weight, is looking at something no input constrains. It is ``bench/floaters.py``'s test with poses of the path
+weight, is looking at something no input constrains. It is ``bench/diagnostics/floaters.py``'s test with poses of the path
 for the test views (which it may not see); that test, with the test views, found the Gaussians behind every
 collapse of castle_p30 at 9 views, and removing them restored the views.
 

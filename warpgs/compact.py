@@ -28,7 +28,7 @@ Mini-Splatting (pruning by blending weight):
    The kept model stores only the coefficients of its degree, so the PLY and the byte counts shrink.
 
 **Only the training views judge.** The choice never looks at the test views; with ``report_test`` the
-test PSNR of each point of the search is recorded for the report (metrics.json, bench/compact.py's
+test PSNR of each point of the search is recorded for the report (metrics.json, bench/quality/compact.py's
 chart), after the fact, and is not used. On sparse views the training-view PSNR is an imperfect
 proxy for novel views: pruning what the inputs barely see can lose (or gain) test PSNR that the
 training views cannot show; ``importance_views: [train, virtual]`` also counts what poses between the

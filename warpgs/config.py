@@ -133,12 +133,12 @@ class TrainConfig:
     #   the Gaussians that a pose of the camera path between neighbouring inputs sees with more than this x
     #   their blending weight in all the inputs together (and with at least 0.1% of that pose's weight):
     #   floaters no input constrains, in front of novel views taken from the path (warpgs/clearance.py
-    #   ``PathFloaters``; bench/floaters.py's test, which used 10 with the test views); 0: off
+    #   ``PathFloaters``; bench/diagnostics/floaters.py's test, which used 10 with the test views); 0: off
     path_floaters_every: int = 500
     path_floaters_final: bool = True  # also the pass before the final evaluation (no training after it)
     path_floaters_poses: int = 3  # poses of the path between each pair of neighbouring inputs
     path_floaters_paths: str = "spline"  # spline: those poses on the pseudo views' path | both: also as many on the
-    #   straight line between the two inputs (bench/plant_floaters.py: castle_p30 9 views' test frame 16 stands
+    #   straight line between the two inputs (bench/diagnostics/plant_floaters.py: castle_p30 9 views' test frame 16 stands
     #   1.5 m from that line and 4.4 m from the spline, which bulges across the 22.6 m gap between its inputs)
     hold_geometry: str = "off"  # off | on | stereo: train the colours and opacities at full rate and hold the initial
     #   geometry: no densification or pruning by the strategy (strategy.refine_stop_iter 0) and the means', scales'
@@ -193,7 +193,7 @@ class GuardConfig:
     # in-memory snapshot with the learning rates scaled by recovery_lr_factor; after max_recoveries rollbacks the
     # run stops (TrainingDiverged), and the checkpoint on disk stays the last good one
     max_nan_steps: int = 20  # consecutive skipped steps that count as a divergence
-    explode_factor: float = 10.0  # 0 = no exploding-loss check; healthy runs stayed below 6x (bench/stability.py)
+    explode_factor: float = 10.0  # 0 = no exploding-loss check; healthy runs stayed below 6x (bench/quality/stability.py)
     explode_window: int = 100  # recent finite losses (of this phase) in the running median
     explode_patience: int = 3  # consecutive exploding steps that count as a divergence (fewer are only skipped)
     snapshot_every: int = 100  # steps between snapshots of the last good state (and one at each train() call)
@@ -204,7 +204,7 @@ class GuardConfig:
     cpu_threads: int = 1  # torch threads on the CPU (0: torch's default); Warp's CPU kernels use one anyway
     guard_kernels: bool = True  # a deferred step's verdict in two Warp launches (DivergenceGuard.step_on_device)
     #   instead of two dozen small torch ops: the same arithmetic (bit-identical runs); false: the torch ops. H100,
-    #   fern 3 views (bench/results/train_speed_cuda_kernels.json): the trainer 8% faster, the same model
+    #   fern 3 views (git show e26aeea:bench/results/train_speed_cuda_kernels.json): the trainer 8% faster, the same model
     sync_every: int | None = None  # steps between host reads of the losses and the guard's verdicts (a read
     #   waits for the device); in between, a step with a non-finite or exploding loss skips its update on the
     #   device and a divergence is acted on at the next read, up to this many steps late. The progress bar's

@@ -1,6 +1,6 @@
 """The far field: what a view shows where no Gaussian covers it.
 
-A few inputs of a walk-around capture leave much of a novel view unseen by any of them (bench/covisibility.py:
+A few inputs of a walk-around capture leave much of a novel view unseen by any of them (bench/diagnostics/covisibility.py:
 on castle_p30 with 3 views a test view's training views see 32% of it on average). Over a black background
 those regions render black, and during training Gaussians grow to cover the inputs' sky and distant walls
 with whatever depth they happen to have, then float in front of the novel views.

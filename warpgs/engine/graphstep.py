@@ -2,7 +2,7 @@
 
 On a GPU the training step is bound by the host: a step of fern at 504x378 keeps the GPU busy about a fifth of
 the time, the rest is Python and the launches of some hundred kernels and torch operations (measured in
-``bench/host_profile.py``). A step whose verdict the host reads later (``StepGuard.deferred_step``) has no host
+``bench/perf/host_profile.py``). A step whose verdict the host reads later (``StepGuard.deferred_step``) has no host
 read left but one, the render's count of tile intersections that sizes its sort buffers, so it can be
 recorded once as a CUDA graph and replayed:
 
@@ -24,7 +24,7 @@ the graph also makes; on opacities scaled by the largest factor dropout and nois
 ``Regularizers.opacity_scale_bound``, since the screen box grows with the opacity) and a count above the capacity
 records the graph again with more room, so no step ever renders less than it would without the graph. The same
 kernels in the same order give the same numbers as the step without the graph, bit for bit (the GPU test in
-``bench/graph_check.py`` checks it).
+``bench/perf/graph_check.py`` checks it).
 
 The graph is recorded again whenever what it holds changed: the Gaussians (growth, pruning, a reset, a
 rollback: other tensors), the optimiser's state or its other learning rates, the densification statistics,

@@ -557,12 +557,12 @@ rasterize_bwd_cuda = [[_compositing_kernels(True, f, d)[1] for d in (0, 1)] for 
 # tile do not), as gsplat reads its colours only there. alpha = min(alpha_max, opacity exp(-sigma)) is evaluated
 # for every pair, and a pair with sigma < 0, sigma > SIGMA_SKIP or alpha < 1/255 is skipped: the Warp loops' test
 # (the backward's too), so the sums are the same floats in the same order (on an H100 the forward took 170 us
-# instead of 263 us at 138,766 Gaussians, 648x420, where gsplat's takes 207 us: bench/results/s24).
+# instead of 263 us at 138,766 Gaussians, 648x420, where gsplat's takes 207 us: git show e26aeea:bench/results/s24).
 # Its first version left out the SIGMA_SKIP test (gsplat's, where alpha < 1/255 decides alone): that is the same
 # only for opacities up to 1, and DropGaussian's survivors (opacity x 1 / (1 - p)) and opacity noise exceed 1. Such
 # a pair past SIGMA_SKIP was composited by this forward and skipped by the backward, so their transmittances
 # disagreed; a few pixels per training render differed from the Warp forward's (found with
-# bench/rasterizer_commits.py on DTU scan65's training renders, steps 71-75).
+# bench/diagnostics/rasterizer_commits.py on DTU scan65's training renders, steps 71-75).
 # state: (T, colour r, g, b, depth sum, count as int bits, done, 0) in and out.
 fwd_state = wp.types.vector(length=8, dtype=wp.float32)
 

@@ -20,7 +20,7 @@ filtered, and coloured from the given images.
 Only the cameras passed in are used: callers pass the training views, never test views. Poses are
 never estimated; ``verification="ransac"`` (see ``SfmOptions.colmap_defaults``) verifies matches with
 COLMAP's own two-view geometry estimation instead, as the reference the defaults were tuned against
-(``bench/sfm_init.py``).
+(``bench/perf/sfm_init.py``).
 """
 
 from __future__ import annotations
