@@ -264,7 +264,11 @@ def run_method(method: str, cfg, scene, out: Path, resume: bool, baseline_metric
         save_config(cfg, out / "config.yaml")
         trainer.run()
     except TrainingInterrupted as e:
-        print(f"\nwarpgs: stopped at step {e.step}; checkpoint {e.checkpoint}. Continue with:\n"
+        try:  # the model as it stands, viewable now; metrics.json stays for the finished run (it marks one)
+            ply = f"; the model so far {trainer.export_ply()}"
+        except OSError:
+            ply = ""
+        print(f"\nwarpgs: stopped at step {e.step}; checkpoint {e.checkpoint}{ply}. Continue with:\n"
               f"  python -m warpgs.pipelines.sparse {resume_hint}", file=sys.stderr)
         raise RunStopped(exit_code(e.signum)) from e  # 130 after Ctrl-C, 143 after SIGTERM
     except KeyboardInterrupt as e:
