@@ -411,6 +411,7 @@ def test_cpu_row_kernels_match_the_per_pixel_kernels(monkeypatch):
     to the order of float additions. Edges: a width and height that are no multiple of the tile, saturated
     pixels (many opaque Gaussians), a coloured background."""
     import warpgs.kernels.rasterize as kr
+    import warpgs.kernels.rasterize_cpu as krc
 
     scene = make_scene(n=400, width=45, height=29, seed=7, scale_range=(0.05, 0.3), spread=0.9)
     scene["opacities"] = 0.5 + 0.49 * torch.rand(400, generator=torch.Generator().manual_seed(8), dtype=torch.float64)
@@ -424,8 +425,8 @@ def test_cpu_row_kernels_match_the_per_pixel_kernels(monkeypatch):
 
     rows, g_rows = render()
     assert float(rows.alpha.max()) > 0.999  # some pixels saturate (T <= 1e-4)
-    monkeypatch.setattr(kr, "rasterize_fwd_cpu", kr.rasterize_fwd)
-    monkeypatch.setattr(kr, "rasterize_bwd_cpu", kr.rasterize_bwd)
+    monkeypatch.setattr(krc, "rasterize_fwd_cpu", kr.rasterize_fwd)
+    monkeypatch.setattr(krc, "rasterize_bwd_cpu", kr.rasterize_bwd)
     monkeypatch.setattr(kr, "compositing_threads", lambda device, n_tiles: n_tiles * kr.TILE_SIZE_CPU ** 2)
     pixels, g_pixels = render()
     for name in ("image", "depth", "alpha"):

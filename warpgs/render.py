@@ -31,6 +31,7 @@ from warpgs._warp import (KeptFields, device_of, fast_launch, launch_parts, laun
 from warpgs.kernels import binning as kb
 from warpgs.kernels import projection as kp
 from warpgs.kernels import rasterize as kr
+from warpgs.kernels import rasterize_cpu as krc
 from warpgs.kernels import sh as ksh
 
 
@@ -340,7 +341,7 @@ class _Composite(torch.autograd.Function):
         outputs = (color.view(-1, 3), depth.view(-1), alpha.view(-1), last.view(-1))
         if dev == "cpu":  # the parts write disjoint pixels
             args = (ranges, gauss_ids, splats, background.reshape(1, 3), width, height, tiles_x, alpha_max) + outputs
-            launch_parts(kr.rasterize_fwd_cpu, n_threads, dev, CPU_PARTS, lambda p: args)
+            launch_parts(krc.rasterize_fwd_cpu, n_threads, dev, CPU_PARTS, lambda p: args)
         else:
             fast_launch(kr.rasterize_fwd_cuda, n_threads, dev, stream, keys, total, shift, gauss_ids, splats,
                         background.reshape(1, 3), width, height, tiles_x, alpha_max, ranges, *outputs)
@@ -378,7 +379,7 @@ class _Composite(torch.autograd.Function):
             # each part adds into buffers of its own (a CPU "atomic" add is a plain one), summed in part order
             parts = [grad_buffers(torch.empty if fixed else torch.zeros)]
             parts += [grad_buffers(torch.zeros) for _ in range(CPU_PARTS - 1)]
-            launch_parts(kr.rasterize_bwd_cpu, n_threads, dev, CPU_PARTS, lambda p: args + parts[p])
+            launch_parts(krc.rasterize_bwd_cpu, n_threads, dev, CPU_PARTS, lambda p: args + parts[p])
             for extra in parts[1:]:
                 for total, t in zip(parts[0], extra):
                     total += t
