@@ -23,6 +23,8 @@ a sample whose valid neighbours weigh less than one half counts as having no dep
 
 import warp as wp
 
+from warpgs.kernels.rasterize import to_fixed
+
 INVALID = wp.constant(-1.0)  # coordinate written where a pixel has no correspondence
 
 
@@ -220,19 +222,23 @@ def shift_warp_backward(
     v_moved: wp.array2d(dtype=wp.vec3),  # out, accumulated (zeroed by the caller)
     v_depth: wp.array2d(dtype=float),  # out
 ):
-    i, j = wp.tid()
-    z = depth[i, j]
-    v_depth[i, j] = 0.0
-    if z <= min_depth:
-        return
-    g = v_warped[i, j]
-    xa, xb, a, v0, v1 = _row_taps(moved.shape[1], float(j) + 0.5 - ft[0] / z)
-    if v0 > 0.0:
-        wp.atomic_add(v_moved, i, xa, g * (1.0 - a))
-    if v1 > 0.0:
-        wp.atomic_add(v_moved, i, xb, g * a)
-    # d a / d z = d (x - 0.5) / d z = ft / z^2
-    v_depth[i, j] = wp.dot(g, moved[i, xb] * v1 - moved[i, xa] * v0) * ft[0] / (z * z)
+    # one thread per row (launched over H): a row's pixels add their two taps into the row's v_moved in column
+    # order, without atomics. Several pixels land on one tap where the warp compresses the row, and float sums
+    # depend on their order: per-pixel atomic adds on CUDA arrive in the order the warps do, which changes from
+    # run to run. This is the order a CPU launch of one thread per pixel took, so the CPU's sums are unchanged.
+    i = wp.tid()
+    for j in range(depth.shape[1]):
+        z = depth[i, j]
+        v_depth[i, j] = 0.0
+        if z > min_depth:
+            g = v_warped[i, j]
+            xa, xb, a, v0, v1 = _row_taps(moved.shape[1], float(j) + 0.5 - ft[0] / z)
+            if v0 > 0.0:
+                v_moved[i, xa] = v_moved[i, xa] + g * (1.0 - a)
+            if v1 > 0.0:
+                v_moved[i, xb] = v_moved[i, xb] + g * a
+            # d a / d z = d (x - 0.5) / d z = ft / z^2
+            v_depth[i, j] = wp.dot(g, moved[i, xb] * v1 - moved[i, xa] * v0) * ft[0] / (z * z)
 
 
 @wp.func
@@ -289,6 +295,14 @@ def pose_warp(
     weight[i, j] = w00 + w01 + w10 + w11
 
 
+@wp.func
+def _add_fixed(v_fixed: wp.array3d(dtype=wp.int64), y: int, x: int, v: wp.vec3):
+    # v added to pixel (y, x) in 64-bit fixed point (the rasterizer's to_fixed, 2^-40 steps): integer sums do not
+    # depend on the order the atomic adds arrive in
+    for c in range(3):
+        wp.atomic_add(v_fixed, y, x, c, to_fixed(v[c]))
+
+
 @wp.kernel
 def pose_warp_backward(
     moved: wp.array2d(dtype=wp.vec3),
@@ -297,9 +311,11 @@ def pose_warp_backward(
     K: wp.array(dtype=wp.mat33),
     min_depth: float,
     v_warped: wp.array2d(dtype=wp.vec3),  # dL/d warped
-    v_moved: wp.array2d(dtype=wp.vec3),  # out, accumulated (zeroed by the caller)
+    v_fixed: wp.array3d(dtype=wp.int64),  # out (H, W, 3): dL/d moved in fixed point, accumulated (zeroed by the caller)
     v_depth: wp.array2d(dtype=float),  # out
 ):
+    # pixels of several rows reach one tap of the moved render, so the sums are fixed-point integers: float atomic
+    # adds on CUDA would sum in the order the warps arrive in, which changes from run to run
     i, j = wp.tid()
     v_depth[i, j] = 0.0
     x, y, ok, dxdz, dydz = _pose_warp_coords(depth, rel, K, min_depth, i, j)
@@ -309,13 +325,13 @@ def pose_warp_backward(
     xa, xb, a, v0, v1 = _row_taps(moved.shape[1], x)
     ya, yb, b, u0, u1 = _row_taps(moved.shape[0], y)
     if v0 * u0 > 0.0:
-        wp.atomic_add(v_moved, ya, xa, g * ((1.0 - a) * (1.0 - b)))
+        _add_fixed(v_fixed, ya, xa, g * ((1.0 - a) * (1.0 - b)))
     if v1 * u0 > 0.0:
-        wp.atomic_add(v_moved, ya, xb, g * (a * (1.0 - b)))
+        _add_fixed(v_fixed, ya, xb, g * (a * (1.0 - b)))
     if v0 * u1 > 0.0:
-        wp.atomic_add(v_moved, yb, xa, g * ((1.0 - a) * b))
+        _add_fixed(v_fixed, yb, xa, g * ((1.0 - a) * b))
     if v1 * u1 > 0.0:
-        wp.atomic_add(v_moved, yb, xb, g * (a * b))
+        _add_fixed(v_fixed, yb, xb, g * (a * b))
     m00 = moved[ya, xa] * (v0 * u0)
     m01 = moved[ya, xb] * (v1 * u0)
     m10 = moved[yb, xa] * (v0 * u1)

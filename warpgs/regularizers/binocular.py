@@ -66,9 +66,9 @@ class _ShiftWarp(torch.autograd.Function):
         v_moved = torch.zeros_like(moved)
         v_depth = torch.empty_like(depth)
         dev = device_of(depth)
-        launch(kw.shift_warp_backward, (H, W), [arg(moved, wp.vec3), arg(depth), arg(ft), MIN_DEPTH,
+        launch(kw.shift_warp_backward, (H,), [arg(moved, wp.vec3), arg(depth), arg(ft), MIN_DEPTH,
                                                  arg(v_warped.contiguous().float(), wp.vec3), arg(v_moved, wp.vec3),
-                                                 arg(v_depth)], dev, stream_of(dev))
+                                                 arg(v_depth)], dev, stream_of(dev))  # a thread per row
         return v_moved, v_depth, None
 
 
@@ -107,12 +107,13 @@ class _PoseWarp(torch.autograd.Function):
     def backward(ctx, v_warped, _v_weight):
         moved, depth, rel, K = ctx.saved_tensors
         H, W = depth.shape
-        v_moved = torch.zeros_like(moved)
+        v_fixed = torch.zeros(H, W, 3, device=depth.device, dtype=torch.int64)
         v_depth = torch.empty_like(depth)
         dev = device_of(depth)
         launch(kw.pose_warp_backward, (H, W), [arg(moved, wp.vec3), arg(depth), arg(rel, wp.mat44), arg(K, wp.mat33),
                                                 MIN_DEPTH, arg(v_warped.contiguous().float(), wp.vec3),
-                                                arg(v_moved, wp.vec3), arg(v_depth)], dev, stream_of(dev))
+                                                arg(v_fixed, wp.int64), arg(v_depth)], dev, stream_of(dev))
+        v_moved = (v_fixed.double() * 2.0**-40).float()  # the rasterizer's fixed point (FIXED_SCALE = 2^40)
         return v_moved, v_depth, None, None
 
 
