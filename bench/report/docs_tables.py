@@ -111,13 +111,16 @@ def main(argv=None) -> int:
             print(f"## {name}\n\n{text}\n")
         return 0
     doc = args.write.read_text()
+    present = [name for name in tables if markers(name)[0] in doc]  # the README holds some of them
+    if not present:
+        ap.error(f"{args.write}: no table markers ({', '.join(markers(n)[0] for n in tables)})")
     try:
-        for name, text in tables.items():
-            doc = replace_between_markers(doc, text, *markers(name))
+        for name in present:
+            doc = replace_between_markers(doc, tables[name], *markers(name))
     except ValueError as e:
         ap.error(f"{args.write}: {e}")
     args.write.write_text(doc)
-    print(f"wrote {len(tables)} tables into {args.write}")
+    print(f"wrote {len(present)} tables into {args.write}")
     return 0
 
 
