@@ -95,7 +95,11 @@ import importlib, sys
 for name in ("warpgs", "warp", "torch", "open3d", "kornia", "trimesh", "pycolmap", "plyfile", "cv2", "lpips", "scipy",
              "diffusers", "transformers", "ray", "viser", "playwright.sync_api"):
     try:
-        importlib.import_module(name)
+        if name == "lpips":  # as warpgs imports it: without torchvision, with its own AlexNet layout
+            from warpgs.losses import _import_lpips
+            _import_lpips()
+        else:
+            importlib.import_module(name)
     except Exception as e:
         sys.exit(f"warpgs setup: {name} does not import ({type(e).__name__}: {e})")
 PY
