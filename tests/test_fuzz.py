@@ -582,10 +582,11 @@ def _ply_case(rng: random.Random, work: Path):
 
 
 def _yaml_case(rng: random.Random, work: Path, k: int):
-    src = rng.choice(sorted(CONFIG_DIR.glob("*.yaml")))
+    src = rng.choice(sorted(p for p in CONFIG_DIR.rglob("*.yaml") if p.parent.name != "data"))  # run configs
     lines = src.read_text().splitlines()
-    keyed = [i for i, ln in enumerate(lines) if ":" in ln and not ln.lstrip().startswith(("#", "-"))
-             and ln.split(":", 1)[0].strip() and ln.split(":", 1)[1].strip() and ln.split(":", 1)[0].strip() != "base"]
+    keyed = [i for i, ln in enumerate(lines) if ":" in ln and not ln.lstrip().startswith(("#", "-"))  # leaves only:
+             and ln.split(":", 1)[0].strip() and ln.split(":", 1)[1].split("#")[0].strip()  # a value, not a comment
+             and ln.split(":", 1)[0].strip() != "base"]
     p = work / f"y{k}.yaml"
     if not keyed or rng.random() < 0.25:  # the same leaf name under two parents: an ordinary config
         p.write_text("train:\n  iterations: 10\nmodel:\n  iterations_note: 1\neval:\n  iterations: 3\n")

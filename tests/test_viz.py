@@ -61,6 +61,7 @@ def test_densified_cloud_png(densified, tmp_path):
     counts = [int((cloud["origin"] == k).sum()) for k in range(3)]
     assert counts == [len(existing), len(out.insertion.means), int(out.filter.removed.sum())]
     png = ARTIFACTS / "densified_cloud.png"
+    png.parent.mkdir(parents=True, exist_ok=True)  # viz writes into an existing folder only
     r = subprocess.run([sys.executable, "-m", "warpgs.viz", str(ply), "--png", str(png), "--size", "480x360",
                         "--point-size", "3"], cwd=REPO, capture_output=True, text=True, timeout=120)
     assert r.returncode == 0, r.stderr
