@@ -36,6 +36,8 @@ from warpgs.data import colmap as colmap_io
 SHARED = Path(os.environ.get("WARPGS_SHARED_DATA", Path(__file__).resolve().parents[1].parent / "shared" / "data"))
 needs_shared = pytest.mark.skipif(not SHARED.is_dir(), reason=f"shared data not found at {SHARED}")
 SEED = int(os.environ.get("WARPGS_FUZZ_SEED", "19"))
+# the run configs (methods, datasets, presets), not the loaders' files in configs/data/
+RUN_CONFIGS = sorted(p for p in CONFIG_DIR.rglob("*.yaml") if p.parent.name != "data")
 SCALE = float(os.environ.get("WARPGS_FUZZ_SCALE", "1"))
 # trials per input kind: 600 in all at scale 1 (about 15 s on one CPU core)
 TRIALS = {"nerfstudio": 120, "colmap_bin": 60, "colmap_txt": 60, "llff": 90, "blender": 60, "config_yaml": 120,
@@ -311,7 +313,7 @@ def _config_paths():
 
 
 def _fuzz_yaml(rng: random.Random, folder: Path, k: int) -> tuple[str, object, str]:
-    src = rng.choice(sorted(p for p in CONFIG_DIR.rglob("*.yaml") if p.parent.name != "data"))  # run configs
+    src = rng.choice(RUN_CONFIGS)
     text = src.read_text()
     lines = text.splitlines()
     keys = _config_paths()
@@ -582,7 +584,7 @@ def _ply_case(rng: random.Random, work: Path):
 
 
 def _yaml_case(rng: random.Random, work: Path, k: int):
-    src = rng.choice(sorted(p for p in CONFIG_DIR.rglob("*.yaml") if p.parent.name != "data"))  # run configs
+    src = rng.choice(RUN_CONFIGS)
     lines = src.read_text().splitlines()
     keyed = [i for i, ln in enumerate(lines) if ":" in ln and not ln.lstrip().startswith(("#", "-"))  # leaves only:
              and ln.split(":", 1)[0].strip() and ln.split(":", 1)[1].split("#")[0].strip()  # a value, not a comment

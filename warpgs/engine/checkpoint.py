@@ -128,7 +128,6 @@ def atomic_torch_save(obj, path: Path, keep_previous: bool = True) -> None:
     os.replace(tmp, path)
 
 
-
 def upgrade_format_1(ck: dict, sh_degree_interval: int) -> dict:
     """A checkpoint of format 1 (the same keys; the full method's under ``full``, no SH degree in use) as
     ``Trainer.state_dict`` writes it."""

@@ -365,12 +365,11 @@ def main(argv=None) -> int:
     """The command line. Bad input of any kind (config, scene, output folder, checkpoint) ends with one line,
     ``error: ...``, and exit code 2, before any training; Ctrl-C with 130, SIGTERM with 143."""
     from warpgs.data.scene import SceneError
-    from warpgs.pseudo.backends import SVDWeightsNotFound
-    from warpgs.runfolder import RunFolderError, open_run_folder
     from warpgs.engine.checkpoint import CheckpointError
     from warpgs.engine.init import prepare_geometry, resolve_device
-
     from warpgs.engine.signals import sigterm_as_interrupt
+    from warpgs.pseudo.backends import SVDWeightsNotFound
+    from warpgs.runfolder import RunFolderError, open_run_folder
 
     args = build_parser().parse_args(argv)
     restore_sigterm = sigterm_as_interrupt()  # SIGTERM ends a run as Ctrl-C does (exit code 143)
