@@ -9,7 +9,8 @@ PKG = Path(__file__).resolve().parents[1] / "warpgs"
 
 # lower layers may not import higher ones; one layer may import within itself
 LAYERS = [
-    ["console", "runfolder", "_warp", "kernels", "configio", "geometry", "guard", "losses", "ply", "viz"],
+    ["console", "runfolder", "_warp", "kernels", "configio", "geometry", "guard", "losses", "ply", "viz",
+     "wallclock"],
     ["render", "metrics", "farfield"],
     ["model", "data"],
     ["strategy"],

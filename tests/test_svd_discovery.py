@@ -166,6 +166,17 @@ def test_the_main_command_runs_the_full_method_with_svd_path(tiny_svd, tmp_path)
     assert c["pseudo_trajectories"] == 2 and c["pseudo_frames_per_trajectory"] == 4
     assert c["pseudo_denoise_s"] > 0 and c["pseudo_per_trajectory_s"] > 0
     assert c["pseudo_per_trajectory_s"] * 2 <= c["pseudo_views_s"] + 1e-6
+    # the model is loaded (and timed) at the first cycle and reused at the second
+    assert c["pseudo_model_load_s"] > m["cycles"][2]["pseudo_model_load_s"]
+    assert c["pseudo_model_load_s"] <= c["pseudo_views_s"] and c["pseudo_save_s"] >= 0
+    # where the whole command's time went: its stages add up to no more than the total, and training holds the
+    # pseudo views' generation
+    wall = m["wall_s"]
+    stages = [k for k in wall if k != "total"]
+    assert {"startup", "load", "geometry", "setup", "train", "finish"} <= set(stages)
+    assert sum(wall[k] for k in stages) <= wall["total"] + 0.05
+    assert wall["train"] >= sum(x.get("pseudo_views_s", 0) for x in m["cycles"]) - 0.05
+    assert set(m["outputs_s"]) == {"flythrough", "report"} and sum(m["outputs_s"].values()) <= wall["finish"] + 0.05
 
 
 def test_the_model_is_loaded_once_for_the_cycles(tiny_svd):

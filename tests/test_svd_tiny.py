@@ -80,6 +80,15 @@ def test_hf_layout_and_loading(svd_dir, backend):
     # without width and height: the frames' aspect at about pseudo.svd.area pixels, in multiples of 8 x 2
     sized = SVDBackend(backend.unet, backend.vae, backend.image_encoder, backend.scheduler, SVDConfig(area=64 * 64))
     assert sized.model_size(60, 120) == (48, 96)  # 60 x 120 x (4096 / 7200): 45.3 x 90.5, rounded to 16s
+    # match_frames: frames with fewer pixels than area keep their own (never fewer than min_area); off: area's
+    own = SVDBackend(backend.unet, backend.vae, backend.image_encoder, backend.scheduler,
+                     SVDConfig(area=64 * 64, min_area=32 * 32))
+    assert own.model_size(32, 64) == (32, 64)  # 2,048 pixels: kept
+    assert own.model_size(16, 16) == (32, 32)  # 256 < min_area: 1,024 pixels
+    assert own.model_size(60, 120) == (48, 96)  # more than area: area's, as without match_frames
+    upsampled = SVDBackend(backend.unet, backend.vae, backend.image_encoder, backend.scheduler,
+                           SVDConfig(area=64 * 64, min_area=32 * 32, match_frames=False))
+    assert upsampled.model_size(32, 64) == (48, 96)  # 4,096 pixels at the frames' 1:2
     # the scheduler's sigmas are EDM's Karras schedule between SVD's sigma_min and sigma_max
     assert torch.allclose(backend.sigmas(7, "cpu"), karras_sigmas(7, 0.002, 700.0), rtol=1e-5)
     assert backend.init_noise_sigma(backend.sigmas(7, "cpu")) == pytest.approx((700.0**2 + 1) ** 0.5, rel=1e-5)

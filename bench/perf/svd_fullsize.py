@@ -177,15 +177,17 @@ def run_one(scene: str, views: int, args) -> dict:
 
 
 def summarise_run(metrics: dict | None, wall_s: float) -> dict:
-    """What a run's metrics.json says of the video model: PSNR, Gaussians, peak memory, wall time, and per cycle the
-    pseudo views' seconds, their stages' and per trajectory."""
+    """What a run's metrics.json says of the video model: PSNR, Gaussians, peak memory, wall time, the command's
+    stages (``wall_s``: start-up, loading, geometry, set-up, training with the cycles, the final evaluation and
+    outputs), and per cycle the model's loading, the pseudo views' seconds, their stages' and per trajectory."""
     row = {"wall_s": round(wall_s, 1)}
     if metrics is None:
         return {**row, "metrics": False}
     row.update({"metrics": True, "psnr": metrics.get("psnr"), "num_gaussians": metrics.get("num_gaussians"),
-                "peak_mb": metrics.get("peak_cuda_allocated_mb"), "train_time_s": metrics.get("train_time_s")})
-    keys = ("pseudo_views_s", "pseudo_trajectories", "pseudo_per_trajectory_s",
-            *(f"pseudo_{s}_s" for s in STAGE_NAMES), "densify_s", "train_s")
+                "peak_mb": metrics.get("peak_cuda_allocated_mb"), "train_time_s": metrics.get("train_time_s"),
+                "stages_s": metrics.get("wall_s"), "outputs_s": metrics.get("outputs_s")})
+    keys = ("pseudo_model_load_s", "pseudo_views_s", "pseudo_trajectories", "pseudo_per_trajectory_s",
+            *(f"pseudo_{s}_s" for s in STAGE_NAMES), "pseudo_save_s", "densify_s", "train_s")
     row["cycles"] = [{k: c[k] for k in keys if k in c} for c in metrics.get("cycles", [])[1:]]
     return row
 

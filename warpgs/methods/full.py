@@ -207,14 +207,17 @@ class FullMethod(Method):
 
     def update_pseudo_views(self, cycle: int) -> dict:
         """Generates this cycle's pseudo views and densifies from them; returns stage times (s)."""
-        from warpgs.pseudo.views import generate_pseudo_views, model_renderer, pseudo_times, save_sequence
+        from warpgs.pseudo.views import (backend_from_config, generate_pseudo_views, model_renderer, pseudo_times,
+                                         save_sequence)
 
         tr = self.trainer
         times = {}
         t0 = time.perf_counter()
         pcfg = self.pseudo_config()
+        backend = backend_from_config(pcfg, tr.device)  # loaded once a process: the first cycle's load is timed
+        times["pseudo_model_load_s"] = time.perf_counter() - t0
         seqs = generate_pseudo_views(model_renderer(tr.model, tr.background_for), tr.train_cams, pcfg, device=tr.device,
-                                     should_stop=tr.context.stop_requested)
+                                     backend=backend, should_stop=tr.context.stop_requested)
         times["pseudo_views_s"] = time.perf_counter() - t0
         times.update(pseudo_times(seqs))  # the video model's stages, per cycle and per trajectory
         cams, reliable = [], {}
@@ -226,9 +229,11 @@ class FullMethod(Method):
                                  for c, r in zip(seq_cams, seq.interior_below(pcfg.sampler.delta), strict=True)})
             cams += seq_cams
         cycle_dir = tr.out / f"cycle_{cycle}" if tr.out is not None else None
+        t0 = time.perf_counter()
         if cycle_dir is not None:
             for seq in seqs:
                 save_sequence(seq, cycle_dir / "pseudo")
+        times["pseudo_save_s"] = time.perf_counter() - t0
         t0 = time.perf_counter()
         added = 0
         if self.settings.densify and cams:
@@ -450,8 +455,11 @@ class FullMethod(Method):
             # the method's records go into metrics.json before the slower fly-through and report, so a run
             # stopped while those are written keeps them
             write_metrics(tr.out, metrics)
+            t0 = time.perf_counter()
             write_flythrough(tr, tr.out / "flythrough.gif", self.settings.flythrough_frames)
+            t1 = time.perf_counter()
             write_report(tr.out, metrics, self.history, baseline)
+            metrics["outputs_s"] = {"flythrough": round(t1 - t0, 2), "report": round(time.perf_counter() - t1, 2)}
         return metrics
 
 

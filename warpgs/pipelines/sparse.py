@@ -235,7 +235,7 @@ class RunStopped(Exception):
 
 
 def run_method(method: str, cfg, scene, out: Path, resume: bool, baseline_metrics: dict | None = None,
-               resume_hint: str | None = None) -> dict:
+               resume_hint: str | None = None, clock=None) -> dict:
     """Trains one method into ``out``; returns its metrics (``stopped_early`` set when it diverged or the device
     ran out of memory, and the last good state's were written). Raises ``RunStopped`` when it ends without them: bad settings, Ctrl-C,
     a checkpoint that cannot be read or written, outputs that cannot be written (each said in one line)."""
@@ -245,11 +245,16 @@ def run_method(method: str, cfg, scene, out: Path, resume: bool, baseline_metric
                                           TrainingInterrupted)
     from warpgs.engine.signals import exit_code, interrupt_code
 
+    from warpgs.engine.evaluation import write_metrics
+    from warpgs.wallclock import WallClock
+
     cfg = copy.deepcopy(cfg)
     cfg.method = method
     resume_hint = resume_hint or f"--resume {out}"
+    clock = clock or WallClock(with_startup=False)
     try:
-        trainer = make_trainer(cfg, scene, out)
+        with clock("setup"):
+            trainer = make_trainer(cfg, scene, out)
     except (RuntimeError, ValueError) as e:
         print(f"error: {e}", file=sys.stderr)
         raise RunStopped(2) from e
@@ -262,7 +267,8 @@ def run_method(method: str, cfg, scene, out: Path, resume: bool, baseline_metric
             print(f"warpgs: {out} holds an earlier run; starting over (use --resume to continue it)", file=sys.stderr)
         out.mkdir(parents=True, exist_ok=True)
         save_config(cfg, out / "config.yaml")
-        trainer.run()
+        with clock("train"):
+            trainer.run()
     except TrainingInterrupted as e:
         try:  # the model as it stands, viewable now; metrics.json stays for the finished run (it marks one)
             ply = f"; the model so far {trainer.export_ply()}"
@@ -295,7 +301,11 @@ def run_method(method: str, cfg, scene, out: Path, resume: bool, baseline_metric
         print(f"error: {out}: cannot write {e.filename or 'the run folder'}: {e.strerror or e}", file=sys.stderr)
         raise RunStopped(2) from e
     try:
-        metrics = trainer.finish(baseline_metrics)
+        with clock("finish"):
+            metrics = trainer.finish(baseline_metrics)
+        if trainer.out is not None:  # where the whole command's time went (training's own split is in cycles)
+            metrics["wall_s"] = clock.as_dict()
+            write_metrics(trainer.out, metrics)
     except (CheckpointError, OSError) as e:
         what = str(e) if isinstance(e, CheckpointError) else f"cannot write {e.filename or out}: {e.strerror or e}"
         fix = "free space, then " if "space" in what.lower() else ""
@@ -370,10 +380,12 @@ def main(argv=None) -> int:
     from warpgs.engine.signals import sigterm_as_interrupt
     from warpgs.pseudo.backends import SVDWeightsNotFound
     from warpgs.runfolder import RunFolderError, open_run_folder
+    from warpgs.wallclock import WallClock
 
     args = build_parser().parse_args(argv)
     restore_sigterm = sigterm_as_interrupt()  # SIGTERM ends a run as Ctrl-C does (exit code 143)
     started = time.perf_counter()
+    clock = WallClock()  # metrics.json's wall_s: the command's stages
     folder = None
     try:
         try:
@@ -388,7 +400,8 @@ def main(argv=None) -> int:
             chosen = args.out is not None or resume or cfg.out != DEFAULT_OUT
             if chosen:  # the folder is checked and locked before the scene loads
                 folder = open_run_folder(cfg.out, resume=resume, overwrite=args.overwrite)
-            scene = load_scene_for(cfg)
+            with clock("load"):
+                scene = load_scene_for(cfg)
             if not chosen:
                 cfg.out = f"outputs/{cfg.method}{'-compact' if cfg.compact.enabled else ''}/{scene.name}_{len(scene.train)}v"
                 folder = open_run_folder(cfg.out, resume=resume, overwrite=args.overwrite)
@@ -396,12 +409,13 @@ def main(argv=None) -> int:
             print(f"warpgs: {scene.summary()}", file=sys.stderr)
             if cfg.method != "baseline":  # which video prior, once the scene is known to load
                 resolve_backend(cfg.pseudo, real_data=cfg.data.name != "synthetic")
-            prepare_geometry(cfg, scene)  # once for both methods of a compare run
+            with clock("geometry"):
+                prepare_geometry(cfg, scene)  # once for both methods of a compare run
         except (ConfigError, SceneError, RunFolderError, CheckpointError, ValueError, SVDWeightsNotFound) as e:
             print(f"error: {e}", file=sys.stderr)
             return 2
         if cfg.method != "compare":
-            stopped = run_method(cfg.method, cfg, scene, out, resume).get("stopped_early")
+            stopped = run_method(cfg.method, cfg, scene, out, resume, clock=clock).get("stopped_early")
             print_total_time(started)
             return 1 if stopped else 0
         out.mkdir(parents=True, exist_ok=True)

@@ -178,7 +178,11 @@ class SVDConfig:
     path: str | None = None  # local folder with the HF layout; None: $WARPGS_SVD_PATH, then the Hugging Face cache
     width: int | None = None  # model resolution; None: the frames' aspect at about ``area`` pixels, multiples of 64
     height: int | None = None
-    area: int = 576 * 1024  # the model's pixels when width and height are not given (SVD-xt's 1024 x 576)
+    area: int = 576 * 1024  # the most model pixels when width and height are not given (SVD-xt's 1024 x 576)
+    match_frames: bool = True  # true: the frames' own pixels when they have fewer than ``area`` (at least
+    #   ``min_area``): the model makes no pixels the training views cannot use (a 768x512 capture runs at 768x512,
+    #   0.64x the UNet's work at 1024x576's area); false: always about ``area`` pixels
+    min_area: int = 320 * 576  # the fewest model pixels with match_frames (SVD's first training resolution)
     fps: int = 7
     motion_bucket_id: int = 127
     noise_aug_strength: float = 0.02
@@ -200,7 +204,8 @@ class SVDConfig:
 
     LIMITS = {"encode_chunk_size": ">= 1", "decode_chunk_size": ">= 1", "unet_batch_frames": ">= 1",
               "offload": "{none, model, sequential}", "dtype": "{auto, float16, bfloat16, float32}",
-              "noise_aug_strength": ">= 0", "area": ">= 4096"}
+              "noise_aug_strength": ">= 0", "area": ">= 4096",
+              "min_area": ">= 4096"}
 
 
 class SVDWeightsNotFound(FileNotFoundError):
@@ -495,7 +500,10 @@ class SVDBackend:
     def model_size(self, height: int, width: int) -> tuple[int, int]:
         if self.cfg.height and self.cfg.width:
             return int(self.cfg.height), int(self.cfg.width)
-        return _auto_size(height, width, area=self.cfg.area, multiple=max(8, self.vae_scale * 8))
+        area = self.cfg.area
+        if self.cfg.match_frames:
+            area = min(area, max(height * width, self.cfg.min_area))
+        return _auto_size(height, width, area=area, multiple=max(8, self.vae_scale * 8))
 
     def latent_shape(self, height: int, width: int) -> tuple[int, int, int]:
         mh, mw = self.model_size(height, width)
