@@ -34,14 +34,21 @@ import numpy as np
 from warpgs.console import filtered_stderr
 from warpgs.ply import gaussian_fields, keep_finite, read_elements, require, write_vertices
 
-def save_image(path: str | Path, image) -> Path:
-    """Saves [H, W, 3] or [H, W] values in [0, 1] (numpy or torch) as an 8-bit PNG; NaN is written as 0."""
+def to_uint8(image) -> np.ndarray:
+    """[H, W, 3] or [H, W] values in [0, 1] (numpy or torch) as 8-bit values; NaN becomes 0."""
+    a = image.detach().float().cpu().numpy() if hasattr(image, "detach") else np.asarray(image, np.float32)
+    return (np.clip(np.nan_to_num(a), 0.0, 1.0) * 255.0 + 0.5).astype(np.uint8)
+
+
+def save_image(path: str | Path, image, compress_level: int = 6) -> Path:
+    """Saves [H, W, 3] or [H, W] values in [0, 1] (numpy or torch; uint8 as they are) as an 8-bit PNG; NaN is
+    written as 0. ``compress_level`` is zlib's (1: fastest, 9: smallest; PIL's default 6)."""
     from PIL import Image
 
-    a = image.detach().float().cpu().numpy() if hasattr(image, "detach") else np.asarray(image, np.float32)
+    a = image if isinstance(image, np.ndarray) and image.dtype == np.uint8 else to_uint8(image)
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    Image.fromarray((np.clip(np.nan_to_num(a), 0.0, 1.0) * 255.0 + 0.5).astype(np.uint8)).save(path)
+    Image.fromarray(a).save(path, compress_level=compress_level)
     return path
 
 

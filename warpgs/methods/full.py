@@ -208,7 +208,7 @@ class FullMethod(Method):
     def update_pseudo_views(self, cycle: int) -> dict:
         """Generates this cycle's pseudo views and densifies from them; returns stage times (s)."""
         from warpgs.pseudo.views import (backend_from_config, generate_pseudo_views, model_renderer, pseudo_times,
-                                         save_sequence)
+                                         save_sequences)
 
         tr = self.trainer
         times = {}
@@ -231,8 +231,7 @@ class FullMethod(Method):
         cycle_dir = tr.out / f"cycle_{cycle}" if tr.out is not None else None
         t0 = time.perf_counter()
         if cycle_dir is not None:
-            for seq in seqs:
-                save_sequence(seq, cycle_dir / "pseudo")
+            save_sequences(seqs, cycle_dir / "pseudo")
         times["pseudo_save_s"] = time.perf_counter() - t0
         t0 = time.perf_counter()
         added = 0
