@@ -473,7 +473,7 @@ def race_scale(name: str, args, strategy: dict) -> dict:
            "height": sc.height, "shrink": args.shrink, "iterations": args.iterations, "warmup": args.warmup,
            "init": sc.init, "initial_gaussians": sc.initial_gaussians, "scene_scale": sc.scene_scale,
            "scene_scale_train_and_test": sc.scene_scale_all, "background": sc.background.tolist(),
-           "commit": commit(), "date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds")}
+           "commit": args.commit, "date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds")}
     sides = {}  # kept for the profile
     for kind in kinds:
         out[kind], side = run_side(kind, sc, args)
@@ -520,6 +520,7 @@ class Args:
     profile_steps: int
     strategy_set: list
     out: Path
+    commit: str | None = None
 
 
 def parse_args(argv=None) -> Args:
@@ -539,6 +540,8 @@ def parse_args(argv=None) -> Args:
                     help="a DefaultStrategy threshold for both sides instead of gsplat's default (smoke runs: "
                          "refine_start_iter=10)")
     ap.add_argument("--out", type=Path, default=None, help="default bench/results/perf/race_gsplat_<gpu>.json")
+    ap.add_argument("--commit", default=None,
+                    help="the commit measured, where the tree has no git (default: git rev-parse --short HEAD)")
     a = ap.parse_args(argv)
     scales = list(SCALES) if a.all else a.scale
     if not scales:
@@ -552,7 +555,7 @@ def parse_args(argv=None) -> Args:
     return Args(scales=scales, iterations=a.iterations, device=a.device, shrink=a.shrink,
                 warmup=a.warmup if a.warmup is not None else (40 if a.device == "cuda" else 0), seed=a.seed,
                 data_root=a.data_root or data_root_default(), profile=a.profile, profile_steps=a.profile_steps,
-                strategy_set=a.strategy_set, out=out)
+                strategy_set=a.strategy_set, out=out, commit=a.commit or commit())
 
 
 def main(argv=None) -> dict:
@@ -563,7 +566,7 @@ def main(argv=None) -> dict:
     strategy.update({k: yaml.safe_load(v) for k, v in (s.split("=", 1) for s in args.strategy_set)})
     result = json.loads(args.out.read_text()) if args.out.is_file() else {}
     info = machine(args.device)
-    info.update(commit=commit(), date=datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"))
+    info.update(commit=args.commit, date=datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"))
     result.update(machine=info, goal=GOAL, seeds={"warpgs_train_seed": args.seed, "gsplat_seed": RECIPE["seed"]},
                   recipe={"simple_trainer": RECIPE, "strategy": strategy,
                           "warpgs_overrides": recipe_overrides(strategy)})

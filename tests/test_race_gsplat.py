@@ -1,0 +1,115 @@
+"""bench/perf/race_gsplat.py's pure parts: the recipe mapped into warpgs's config (every regulariser and every
+non-3D-GS dataset default off, the strategy's thresholds gsplat's DefaultStrategy's), the check of a built
+trainer against the plain recipe, and the CPU smoke path (the warpgs side alone) on a tiny shrink of fern."""
+
+import dataclasses
+import json
+import math
+import os
+import sys
+from pathlib import Path
+
+import pytest
+
+from tiny_scene import make_scene, tiny_config
+from warpgs.config import RegularizersConfig
+from warpgs.train import Trainer
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench" / "perf"))
+
+SHARED = Path(os.environ.get("WARPGS_SHARED_DATA", Path(__file__).resolve().parents[1].parent / "shared" / "data"))
+
+
+def gsplat_defaults() -> dict:
+    """DefaultStrategy's dataclass defaults from gsplat itself where it is installed, else gsplat 1.5.3's, as
+    gsplat/strategy/default.py lists them."""
+    try:
+        from gsplat.strategy import DefaultStrategy
+    except ImportError:
+        return {"prune_opa": 0.005, "grow_grad2d": 0.0002, "grow_scale3d": 0.01, "grow_scale2d": 0.05,
+                "prune_scale3d": 0.1, "prune_scale2d": 0.15, "refine_scale2d_stop_iter": 0,
+                "refine_start_iter": 500, "refine_stop_iter": 15_000, "reset_every": 3000, "refine_every": 100,
+                "pause_refine_after_reset": 0}
+    return {f.name: f.default for f in dataclasses.fields(DefaultStrategy)
+            if f.name not in ("absgrad", "revised_opacity", "verbose", "key_for_gradient")}
+
+
+@pytest.mark.parametrize("scale", ["fern3", "castle9", "lego8"])
+def test_the_recipe_in_warpgs_config(scale):
+    import race_gsplat as rg
+
+    strategy = rg.gsplat_strategy_defaults()
+    assert strategy == gsplat_defaults()
+    cfg = rg.make_config(scale, "../shared/data", 7000, "cpu", 0, strategy, scene_scale=2.5)
+    # the dataset's own config turns regularisers on (the binocular preset: dropout, opacity decay, the binocular
+    # term); the recipe turns every one off, and a default RegularizersConfig has every one off
+    assert cfg.regularizers == RegularizersConfig()
+    r = cfg.regularizers
+    assert (r.alpha_binary.weight, r.scale_reg.weight, r.dropout.rate, r.opacity_noise.sigma, r.opacity_decay.rate,
+            r.binocular.weight, r.path_consistency.weight) == (0, 0, 0, 0, 0, 0, 0)
+    t = cfg.train
+    assert (t.far_field, t.path_clearance, t.view_clearance, t.path_floaters, t.hold_geometry, t.random_background,
+            t.prune_unseen_at_end, t.co_reg) == ("none", 0, 0, 0, "off", False, False, False)
+    assert not cfg.compact.enabled and cfg.method == "baseline"
+    s = cfg.strategy
+    assert {k: getattr(s, k) for k in strategy} == strategy
+    assert s.refine_stop_fraction == 0 and s.max_gaussians == 0
+    # simple_trainer's learning rates, loss, SH schedule, initial opacity and scale, and the race's scene scale
+    o = cfg.optim
+    assert (o.means_lr, o.scales_lr, o.quats_lr, o.opacities_lr, o.sh0_lr, o.eps) == (1.6e-4, 5e-3, 1e-3, 5e-2, 2.5e-3, 1e-15)
+    assert math.isclose(o.shN_lr, 2.5e-3 / 20) and math.isclose(o.means_lr_final, 0.01 * o.means_lr)
+    assert o.means_lr_decay_steps is None and o.scene_scale == 2.5
+    assert (cfg.loss.l1_weight, cfg.loss.ssim_weight, cfg.loss.depth_weight, cfg.loss.alpha_weight) == (0.8, 0.2, 0, 0)
+    assert (t.sh_degree_interval, cfg.model.sh_degree, cfg.model.init_opacity, cfg.model.init_scale) == (1000, 3, 0.1, 1.0)
+    assert t.iterations == 7000
+
+
+def test_without_the_recipe_the_datasets_turn_regularisers_on():
+    """The overrides are needed: the same CLI layers without them switch on what the recipe turns off."""
+    import race_gsplat as rg
+    from warpgs.pipelines.sparse import build_parser, make_config
+
+    for scale in rg.SCALES:
+        cfg, _ = make_config(build_parser().parse_args(rg.scale_argv(scale, "../shared/data", 100, "cpu", 0)))
+        assert cfg.regularizers != RegularizersConfig()
+    cfg, _ = make_config(build_parser().parse_args(rg.scale_argv("castle9", "../shared/data", 100, "cpu", 0)))
+    assert cfg.train.hold_geometry == "stereo" and cfg.train.far_field != "none" and cfg.strategy.grow_grad2d != 0.0002
+
+
+def test_plain_problems_names_what_is_not_the_recipe():
+    import race_gsplat as rg
+
+    strategy = rg.gsplat_strategy_defaults()
+    cfg = tiny_config(20)
+    for k, v in strategy.items():
+        setattr(cfg.strategy, k, v)
+    cfg.strategy.max_gaussians = 0
+    assert rg.plain_problems(Trainer(cfg, make_scene()), strategy) == []
+    bad = tiny_config(20)  # its budget and thresholds are the tests', not gsplat's
+    bad.regularizers.dropout.rate = 0.2
+    bad.regularizers.opacity_decay.rate = 0.005
+    bad.train.hold_geometry = "on"
+    problems = rg.plain_problems(Trainer(bad, make_scene()), strategy)
+    text = "; ".join(problems)
+    assert "dropout" in text and "opacity_decay" in text and "geometry held" in text
+    assert "strategy.refine_start_iter" in text and "strategy.max_gaussians" in text
+
+
+@pytest.mark.skipif(not (SHARED / "llff_fern").is_dir(), reason=f"shared data not found at {SHARED}")
+def test_cpu_smoke_writes_the_warpgs_side(tmp_path):
+    import race_gsplat as rg
+
+    out = tmp_path / "race.json"
+    r = rg.main(["--device", "cpu", "--scale", "fern3", "--shrink", "16", "--iterations", "12",
+                 "--data-root", str(SHARED), "--strategy-set", "refine_start_iter=2", "--strategy-set", "refine_every=5",
+                 "--profile", "--profile-steps", "2", "--out", str(out)])
+    assert json.loads(out.read_text()) == json.loads(json.dumps(r))
+    s = r["scales"]["fern3"]
+    assert "gsplat" not in s and s["time_ratio"] is None and s["counts_within_5pct"] is None
+    w = s["warpgs"]
+    assert w["gaussians"] != s["initial_gaussians"]  # densified at steps 5 and 10
+    assert math.isfinite(w["test_psnr"]) and w["seconds"] > 0 and s["test_views"] == 3 and s["views"] == 3
+    assert w["profile"]["steps"] == 2 and w["profile"]["top_cpu_ops"]
+    assert s["iterations"] == 12 and r["recipe"]["strategy"]["refine_start_iter"] == 2
+    assert "regularizers.dropout.rate=0" in r["recipe"]["warpgs_overrides"]
+    assert r["machine"]["torch"] and r["machine"]["warp"]
