@@ -26,7 +26,10 @@ random background, no regulariser. Both sides train the views in one shuffled or
   ``DefaultStrategy.step_pre_backward / step_post_backward``), ``torch.optim.Adam`` per parameter as
   simple_trainer makes it, the strategy called after the optimisers and the scheduler, as there. Its D-SSIM is
   ``fused_ssim(..., padding="valid")`` where the ``fused_ssim`` package is importable (simple_trainer's), else
-  warpgs's own D-SSIM (``warpgs.losses.dssim``: the same loss code on both sides; the JSON says which).
+  warpgs's own D-SSIM (``warpgs.losses.dssim``: the same loss code on both sides; the JSON says which). Left out
+  of simple_trainer's loop: its per-step ``loss.item()`` (the progress bar), tensorboard every 100 steps, the
+  viewer, checkpoints and the DataLoader (the images sit on the GPU, as the trainer's do): host reads and I/O that
+  would only slow gsplat down, so its time here is a lower bound on simple_trainer's.
 - ``warpgs`` side: ``Trainer.train`` as ``python -m warpgs.pipelines.sparse --method baseline`` builds it (its
   step guard, deferred host reads, CUDA graphs), with ``recipe_overrides``: every regulariser and every dataset
   default that is not 3D-GS off (dropout, opacity noise and decay, the binocular term, the far field, path
@@ -56,9 +59,12 @@ Output: bench/results/perf/race_gsplat_<gpu>.json (``cpu`` on the CPU; the scale
 earlier file, so scales may be run one by one), with the machine (GPU, torch, Warp, gsplat, the commit, the date)
 and the seeds; one line per scale on stdout.
 
-Expected time on one H200 (``--all``, 7000 steps each side): about 6-8 minutes, most of it lego8 (800x800, a few
-hundred thousand Gaussians) and gsplat's first-use compilation (~1 minute); fern3 and castle9 take a minute or two
-each. The CPU smoke (``--device cpu --shrink 8 --iterations 60 --all``) takes a few minutes on 2 cores.
+Expected time on one H200 (``--all``, 7000 steps each side; estimated from train_speed.py's fern figures, not yet
+measured): 5-8 minutes: gsplat's first-use compilation (~1 minute), the initial points (seconds), then per scale
+1-3 minutes for both sides together, lego8 (800x800, a few hundred thousand Gaussians) the longest. Where a
+10-minute limit is near, run ``--scale fern3 --scale castle9`` and then ``--scale lego8``: both write into the same
+JSON (written after every scale). The CPU smoke (``--device cpu --shrink 8 --iterations 60 --all``) takes about a
+minute on 2 cores.
 """
 
 from __future__ import annotations
