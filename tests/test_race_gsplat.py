@@ -3,6 +3,7 @@ non-3D-GS dataset default off, the strategy's thresholds gsplat's DefaultStrateg
 trainer against the plain recipe, and the CPU smoke path (the warpgs side alone) on a tiny shrink of fern."""
 
 import dataclasses
+import importlib.util
 import json
 import math
 import os
@@ -10,6 +11,7 @@ import sys
 from pathlib import Path
 
 import pytest
+import torch
 
 from tiny_scene import make_scene, tiny_config
 from warpgs.config import RegularizersConfig
@@ -113,3 +115,67 @@ def test_cpu_smoke_writes_the_warpgs_side(tmp_path):
     assert s["iterations"] == 12 and r["recipe"]["strategy"]["refine_start_iter"] == 2
     assert "regularizers.dropout.rate=0" in r["recipe"]["warpgs_overrides"]
     assert r["machine"]["torch"] and r["machine"]["warp"]
+
+
+class _Means2d:
+    """gsplat's ``info["means2d"]`` [C, N, 2] over warpgs's [N, 2] (which ``rasterize`` retains the gradient of)."""
+
+    def __init__(self, t):
+        self.t = t
+
+    def retain_grad(self):
+        pass
+
+    @property
+    def grad(self):
+        return None if self.t.grad is None else self.t.grad[None]
+
+
+def warpgs_as_gsplat_rasterization(means, quats, scales, opacities, colors, viewmats, Ks, width, height, *,
+                                   near_plane, far_plane, sh_degree, packed, absgrad, backgrounds, rasterize_mode):
+    """``gsplat.rasterization``'s interface (one camera, packed=False) over warpgs's CPU rasterizer: gsplat's CUDA
+    kernels cannot run here, its loop, strategy, optimisers and scheduler can."""
+    from warpgs.render import rasterize
+
+    assert packed is False and absgrad is False and rasterize_mode == "classic"
+    out = rasterize(means, quats, scales, opacities, colors, viewmats[0], Ks[0], width, height, sh_degree=sh_degree,
+                    background=backgrounds[0], near_plane=near_plane, far_plane=far_plane)
+    info = {"means2d": _Means2d(out.means2d), "radii": out.radii[None], "width": width, "height": height,
+            "n_cameras": 1, "gaussian_ids": None}
+    return out.image[None], out.alpha[None], info
+
+
+@pytest.mark.skipif(importlib.util.find_spec("gsplat") is None, reason="gsplat is not installed")
+def test_the_gsplat_loop_and_the_trainer_train_alike_on_one_rasterizer(monkeypatch):
+    """The gsplat side (its DefaultStrategy, Adam per parameter, ExponentialLR) and the warpgs side (the trainer with
+    the recipe's overrides), on warpgs's rasterizer, from the same initial Gaussians in the same view order: the
+    same parameters, bit for bit, until the first refinement (learning rates, their decay, the loss, the SH
+    schedule, the order), then counts within 5% of each other (the split noise comes from different generators)."""
+    import gsplat
+    import race_gsplat as rg
+    from warpgs.config import load_config
+
+    monkeypatch.setattr(gsplat, "rasterization", warpgs_as_gsplat_rasterization)
+    strategy = {**rg.gsplat_strategy_defaults(), "refine_start_iter": 3, "refine_every": 6, "reset_every": 1000}
+    steps, interval = 20, 2
+
+    def build(scene_scale):
+        return load_config(overrides=rg.recipe_overrides(strategy, scene_scale) + [
+            "train.device=cpu", "train.progress=false", f"train.iterations={steps}", "train.checkpoint_every=0",
+            f"train.sh_degree_interval={interval}", "model.init=box", "model.init_box=[-1.2,-1.2,-1.2,1.2,1.2,1.2]",
+            "model.init_num=300"])
+
+    sc = rg.Scale("tiny", make_scene(), build, strategy, seed=0)
+    g, w = rg.GsplatSide(sc, steps, {"sh_degree_interval": interval}), rg.WarpgsSide(sc, steps)
+    g.train(6)  # steps 0-5: SH degrees 0, 1, 2; the first refinement is at step 6
+    w.train(6)
+    for name, p in g.splats.items():
+        assert torch.equal(p.detach(), w.tr.model.params[name].detach()), name
+    assert not torch.equal(g.splats["means"].detach(), sc.params()["means"])  # they did train
+    g.train(steps)
+    w.train(steps)
+    assert len(w) != sc.initial_gaussians  # densified
+    assert abs(len(g) - len(w)) <= 0.05 * len(w)
+    lr = g.optimizers["means"].param_groups[0]["lr"]
+    assert math.isclose(lr, 1.6e-4 * sc.scene_scale * 0.01, rel_tol=1e-6)  # simple_trainer's decay, to 0.01x
+    assert math.isclose(w.tr.means_lr(steps), lr, rel_tol=1e-6)

@@ -248,20 +248,18 @@ def commit() -> str | None:
 
 
 class Scale:
-    """What both sides of one scale share: the config, the scene, the scene scale, the initial Gaussians."""
+    """What both sides of one scale share: the config, the scene, the scene scale, the initial Gaussians.
+    ``build(scene_scale)``: the race's warpgs config for the scene with that scene scale."""
 
-    def __init__(self, name: str, args, strategy: dict):
+    def __init__(self, name: str, scene, build, strategy: dict, seed: int):
         from warpgs.engine.init import scene_scale_of
         from warpgs.pipelines.sparse import make_trainer
 
-        self.name, self.strategy, self.seed = name, strategy, args.seed
-        build = lambda scale=None: make_config(name, args.data_root, args.iterations, args.device, args.seed,  # noqa: E731
-                                               strategy, scale)
-        self.scene = load_scene(build(), args.shrink)
-        self.scene_scale = scene_scale_of(self.scene.train)
-        self.scene_scale_all = scene_scale_of(list(self.scene.train) + list(self.scene.test))
+        self.name, self.scene, self.strategy, self.seed = name, scene, strategy, seed
+        self.scene_scale = scene_scale_of(scene.train)
+        self.scene_scale_all = scene_scale_of(list(scene.train) + list(scene.test))
         self.cfg = build(self.scene_scale)
-        self.train_scene = dataclasses.replace(self.scene, test=[])  # the trainer evaluates nothing on its own
+        self.train_scene = dataclasses.replace(scene, test=[])  # the trainer evaluates nothing on its own
         base = make_trainer(self.cfg, self.train_scene)  # warpgs's initial points for the dataset
         problems = plain_problems(base, strategy)
         if problems:
@@ -274,10 +272,17 @@ class Scale:
         self.init_state["params"]["quats"] = torch.rand((n, 4), generator=g)
         self.initial_gaussians = n
         self.train_cams = base.train_cams
-        self.test_cams = [c.to_torch(self.device) for c in self.scene.test]
+        self.test_cams = [c.to_torch(self.device) for c in scene.test]
         self.background = base.background
         self.width, self.height = self.train_cams[0].width, self.train_cams[0].height
         del base
+
+    @classmethod
+    def load(cls, name: str, args, strategy: dict) -> "Scale":
+        """The scale ``name`` (``SCALES``) as ``args`` say: its scene through warpgs's loaders (at 1/``shrink``)."""
+        def build(scene_scale=None):
+            return make_config(name, args.data_root, args.iterations, args.device, args.seed, strategy, scene_scale)
+        return cls(name, load_scene(build(), args.shrink), build, strategy, args.seed)
 
     def params(self) -> dict[str, torch.Tensor]:
         return {k: v.to(self.device, copy=True) for k, v in self.init_state["params"].items()}
@@ -470,7 +475,7 @@ def run_side(kind: str, sc: Scale, args) -> tuple[dict, object]:
 
 
 def race_scale(name: str, args, strategy: dict) -> dict:
-    sc = Scale(name, args, strategy)
+    sc = Scale.load(name, args, strategy)
     kinds = (["gsplat"] if args.device == "cuda" else []) + ["warpgs"]
     print(f"{name}: {sc.scene.name}, {len(sc.train_cams)} train / {len(sc.test_cams)} test views at "
           f"{sc.width}x{sc.height}, {sc.initial_gaussians} initial Gaussians ({sc.init}), scene scale "
