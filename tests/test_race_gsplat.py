@@ -91,10 +91,11 @@ def test_plain_problems_names_what_is_not_the_recipe():
     bad.regularizers.dropout.rate = 0.2
     bad.regularizers.opacity_decay.rate = 0.005
     bad.train.hold_geometry = "on"
+    bad.loss.depth_weight = 0.5
     problems = rg.plain_problems(Trainer(bad, make_scene()), strategy)
     text = "; ".join(problems)
     assert "dropout" in text and "opacity_decay" in text and "geometry held" in text
-    assert "strategy.refine_start_iter" in text and "strategy.max_gaussians" in text
+    assert "strategy.refine_start_iter" in text and "strategy.max_gaussians" in text and "depth" in text
 
 
 @pytest.mark.skipif(not (SHARED / "llff_fern").is_dir(), reason=f"shared data not found at {SHARED}")

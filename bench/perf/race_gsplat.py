@@ -186,8 +186,8 @@ def make_config(scale: str, data_root: str | None, iterations: int, device: str,
 
 def plain_problems(tr, strategy: dict) -> list[str]:
     """What in a built trainer is not the plain recipe (empty: nothing): regularisers, held geometry, a far field,
-    path pruning, a second model, compact mode's stages, a random background, a strategy other than
-    ``DefaultStrategy`` with thresholds ``strategy``, a budget, a growth schedule cut short."""
+    path pruning, a second model, compact mode's stages, a random background, a loss other than simple_trainer's,
+    a strategy other than ``DefaultStrategy`` with thresholds ``strategy``, a budget, a growth schedule cut short."""
     from warpgs.strategy import DefaultStrategy
 
     out = []
@@ -209,6 +209,11 @@ def plain_problems(tr, strategy: dict) -> list[str]:
         out.append("a random background")
     if tr.cfg.train.prune_unseen_at_end:
         out.append("the final pruning")
+    lc = tr.cfg.loss
+    if (lc.l1_weight, lc.ssim_weight) != (1.0 - RECIPE["ssim_lambda"], RECIPE["ssim_lambda"]):
+        out.append(f"loss {lc.l1_weight} L1 + {lc.ssim_weight} D-SSIM")
+    if lc.depth_weight or lc.alpha_weight:
+        out.append("a depth or alpha term")
     if tr.method.name != "baseline":
         out.append(f"method {tr.method.name}")
     s = tr.strategy
