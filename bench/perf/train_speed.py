@@ -33,7 +33,8 @@ and each one's median run is reported. Reported per loop: seconds, it/s, the
 final Gaussian count, the mean PSNR over the training views and over the test views (each loop's model
 rendered by its own rasterizer), and the ratios warpgs_trainer / plain_gsplat and warpgs_trainer /
 plain_warpgs (time over time: below 1 is faster). The JSON records the machine (CPU model, GPU, torch,
-Warp, gsplat) and the settings.
+Warp, gsplat) and the settings. The loops share warpgs's config, not gsplat's own recipe: the like-for-like race
+against gsplat 1.5.3's simple_trainer recipe is bench/perf/race_gsplat.py.
 """
 
 from __future__ import annotations
