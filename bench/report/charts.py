@@ -119,13 +119,19 @@ def scene_key(run: dict) -> str:
     return run["scene"] + (f" {run['views']}v" if run.get("views") else "")
 
 
+def completed(run: dict) -> bool:
+    """A run that trained to its end and has a test PSNR (not one stopped early: its figures are an earlier
+    state's)."""
+    return run.get("status", "finished") == "finished" and not run.get("stopped_early") and _finite(run.get("psnr"))
+
+
 def points(runs: list[dict]) -> dict:
-    """{scene key: {series: medians}} over the finished runs (each method and switch one point): ``psnr``,
+    """{scene key: {series: medians}} over the completed runs (each method and switch one point): ``psnr``,
     ``train_time_s``, ``num_gaussians``, ``mb`` (float32 parameters) as ``spread``s, and ``n``, the seeds with a
     test PSNR."""
     out: dict = {}
     for r in runs:
-        if r.get("status", "finished") == "finished" and _finite(r.get("psnr")):
+        if completed(r):
             out.setdefault(scene_key(r), {}).setdefault(label(r), []).append(r)
     return {scene: {lab: {"psnr": spread(x["psnr"] for x in rs),
                           "train_time_s": spread(x.get("train_time_s") for x in rs),
@@ -143,7 +149,7 @@ def compact_verdicts(runs: list[dict]) -> list[dict]:
         return all(a.get(k) == b.get(k) for k in ("scene", "views", "method", "iterations", "resolution")
                    if a.get(k) is not None and b.get(k) is not None)
 
-    done = [r for r in runs if r.get("status", "finished") == "finished" and _finite(r.get("psnr"))]
+    done = [r for r in runs if completed(r)]
     groups: dict = {}
     for c in (r for r in done if r.get("variant") == "compact"):
         groups.setdefault((scene_key(c), c["method"]), {"compact": [], "default": []})["compact"].append(c)
@@ -286,7 +292,7 @@ def machine_tag(machine: str) -> str:
     """``NVIDIA H200`` -> ``h200``: the end of a results file's name."""
     words = re.findall(r"[A-Za-z0-9]+", machine.lower())
     gpu = [w for w in words if re.fullmatch(r"[a-z]+\d+[a-z]*|\d{3,4}[a-z]*", w) and w not in ("x86", "64")]
-    return gpu[-1] if gpu else ("cpu" if "cpu" in words else "_".join(words[:2]) or "unknown")
+    return gpu[0] if gpu else ("cpu" if "cpu" in words else "_".join(words[:2]) or "unknown")
 
 
 # ----------------------------------------------------------------------------------------------
