@@ -184,6 +184,7 @@ def test_one_command_collects_charts_and_writes_the_tables(tmp_path):
     # compact: median 12,500 against 31,000 Gaussians, 15.9 against 16.0 dB, over the 2 seeds both have
     row = next(ln for ln in text.splitlines() if ln.startswith("| castle_p30 3v | baseline | n=2 |"))
     assert f"{100 * (1 - 12500 / 31000):.1f}%" in row and "| -0.10 |" in row and "| met |" in row
+    assert "| fern 3v | - | 0 |" in text and "| castle_p30 3v | - |" not in text  # the goal's scenes without a verdict
     assert sorted(p.name for p in img.iterdir()) == ["compact.png", "speed_accuracy_size.png",
                                                       "speed_accuracy_time.png", "stability.png"]
 
