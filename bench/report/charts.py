@@ -348,8 +348,9 @@ def load_sources(results: Path = RESULTS) -> list[dict]:
             sources.append(_source(path, doc, "runs", doc["runs"], None))
         elif "stats" in doc and "info" in doc:
             info = doc["info"]
+            gpus = info.get("gpus") or 1
             sources.append(_source(path, {**doc, "date": info.get("date")}, "runs", _runs_of_switch_screen(doc),
-                                   info.get("device_name")))
+                                   f"{gpus} x {info['device_name']}" if gpus > 1 else info.get("device_name")))
     for path in sorted(results.glob("*/stability.json")):
         doc = json.loads(path.read_text())
         info = doc["info"]
