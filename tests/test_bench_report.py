@@ -136,9 +136,6 @@ def test_the_docs_tables_are_the_committed_results(tmp_path):
     trainer = doc["loops"]["warpgs_trainer"]
     assert any(f"| warpgs_trainer | {trainer['seconds']:.2f} | {trainer['it_per_s']:.1f} |" in ln
                and doc["machine"]["gpu"] in ln for ln in speed)
-    stab = json.loads((results / "quality" / "stability_cpu" / "stability.json").read_text())
-    assert sum(ln.startswith("| views_") or ln.startswith("| collinear") for ln in docs_tables.stability(results)) == \
-        sum(r["case"].startswith("views_") or r["case"] == "collinear" for r in stab["summary"])
     # --write fills every table's markers and leaves the rest of the file as it was
     md = tmp_path / "b.md"
     md.write_text("top\n" + "".join(f"{s}\nold\n{e}\nbetween\n" for s, e in map(docs_tables.markers, docs_tables.TABLES)))

@@ -1,28 +1,29 @@
-"""Stability bench (issue #8): seeds, sparsity and the cases where sparse-view methods fail.
+"""Stability bench: the cases where sparse-view methods fail, every method, seeds 0-2.
 
-    python bench/quality/stability.py --device cpu --preset small                  # every case, baseline and full
+    python bench/quality/stability.py --device cpu --preset small                  # every case, method and seed
     python bench/quality/stability.py --device cpu --preset small --cases views_3 exposure --methods baseline
-    python bench/quality/stability.py --device cuda --preset full                  # GPU-sized (256x192, 3000 it)
+    python bench/quality/stability.py --device cuda --preset full --jobs 8 --out bench/results/quality/stability_h200
 
-Cases (``warpgs.data.stress``, built from the embedded synthetic room; the test views are never
-corrupted): ``views_2`` / ``views_3`` / ``views_6`` / ``views_9`` (sparsity), ``collinear``,
-``wide_baseline``, ``textureless``, ``exposure``, ``wrong_pose``. ``views_3``, the default case, runs
-with every seed of ``--seeds`` (mean +- std); the others with the first seed.
+Cases (``warpgs.data.stress``, built in memory from the embedded synthetic room, so not a sweep of the batch
+runner; the test views are never corrupted): ``views_2`` / ``views_3`` / ``views_6`` / ``views_9`` (sparsity),
+``collinear``, ``wide_baseline``, ``textureless``, ``exposure``, ``wrong_pose``; each with every seed of
+``--seeds``, ``--jobs`` runs at a time (each in its own process).
 
 Each run is one method on one case, configured exactly as the main job configures it (the sparse CLI's
-``make_config``: configs/baseline.yaml, full.yaml, synthetic.yaml, then the preset's overrides), and is
+``make_config``: the method's, the synthetic data's config, then the preset's overrides), and is
 recorded, whatever happens, as
 
-- ``finished``: training and evaluation ran; test PSNR / SSIM, Gaussians, training time, recoveries
-  from divergence (``warpgs.train``) and the largest loss / running-median ratio seen;
+- ``finished``: training and evaluation ran; test PSNR / SSIM, the initial render's PSNR, Gaussians, training
+  time, recoveries from divergence (``warpgs.train``) and the largest loss / running-median ratio seen;
 - ``stopped``: warpgs stopped with its own clear error (``TrainingDiverged``, a scene or config error),
   with the message; the metrics are those of the last good state the trainer rolled back to;
-- ``crashed``: any other exception, with the traceback's last frames (these are bugs);
+- ``crashed``: any other exception (out of memory among them), with the traceback's last frames;
 
-and for every run whether the last checkpoint exists, loads and is finite. Writes ``stability.json``,
-``stability.md`` (tables) and ``stability_psnr.png`` (PSNR per case and method, error bars over the
-seeds) into ``--out`` (default bench/results/quality/stability_<device>); the run folders (checkpoints,
-renders) go to ``--work`` (default outputs/stability_<device>_<preset>, not kept in the repository).
+and for every run whether the last checkpoint exists, loads and is finite. Writes ``stability.json`` (with the
+machine and the commit) into ``--out`` (default bench/results/quality/stability_<device>), which
+``bench/report/charts.py`` charts (how runs end, per method) and tabulates in docs/benchmarks.md; the run
+folders (checkpoints, renders) go to ``--work`` (default outputs/stability_<device>_<preset>, not kept in the
+repository).
 
 ``run_stability(device, preset, out_dir, methods=..., cases=...)`` does the same from Python.
 """
@@ -33,7 +34,6 @@ import argparse
 import json
 import math
 import platform
-import statistics
 import sys
 import time
 import traceback
@@ -44,9 +44,8 @@ sys.path.insert(0, str(ROOT))
 
 from warpgs.data.stress import CASES  # noqa: E402
 
-METHODS = ("baseline", "full")
+METHODS = ("baseline", "full", "corgs")
 SEEDS = (0, 1, 2)
-DEFAULT_CASE = "views_3"
 
 # the synthetic config (configs/synthetic.yaml) sized for each preset
 PRESETS = {
@@ -54,7 +53,8 @@ PRESETS = {
     "small": {"downscale": 4, "iterations": 300, "set": [
         "model.init_num=1000", "strategy.max_gaussians=4000", "strategy.refine_start_iter=100",
         "strategy.refine_every=50", "train.sh_degree_interval=100", "train.checkpoint_every=100",
-        "full.n_frames=5", "full.flythrough_frames=6", "full.pseudo={sampler: {steps: 10}}", "eval.fps_repeats=1"]},
+        "full.n_frames=5", "full.flythrough_frames=6", "full.pseudo={sampler: {steps: 10}}", "eval.fps_repeats=1",
+        "train.co_reg_start=100", "train.co_prune_every=100"]},  # CoR-GS's pair from step 100 (its 500 is past the end)
     # GPU-sized: the capture's 256x192, 3000 steps, the synthetic config's numbers otherwise
     "full": {"downscale": 1, "iterations": 3000, "set": [
         "strategy.refine_start_iter=500", "train.checkpoint_every=500", "eval.fps_repeats=3"]},
@@ -164,115 +164,19 @@ def checkpoint_ok(row: dict) -> bool:
     return bool(ck["loads"] and ck["finite"]) if ck["exists"] or row["status"] == "finished" else True
 
 
-def _g(v):
-    """A measure for the table: floats to 3 significant digits, lists element by element."""
-    if isinstance(v, list):
-        return "[" + ", ".join(_g(x) for x in v) + "]"
-    return f"{v:.3g}" if isinstance(v, float) else str(v)
-
-
 def _f(v, fmt):
     return "n/a" if v is None or (isinstance(v, float) and not math.isfinite(v)) else format(v, fmt)
 
 
-def summarise(rows: list[dict]) -> list[dict]:
-    """Per (case, method): runs, finished count, PSNR / SSIM mean and std over the finished runs' seeds."""
-    out = []
-    keys = list(dict.fromkeys((r["case"], r["method"]) for r in rows))
-    for case, method in keys:
-        rs = [r for r in rows if r["case"] == case and r["method"] == method]
-        done = [r for r in rs if r["status"] == "finished" and r["metrics"].get("psnr") is not None]
-
-        def stat(k):
-            v = [r["metrics"][k] for r in done if r["metrics"].get(k) is not None]
-            return (statistics.fmean(v) if v else None, statistics.stdev(v) if len(v) > 1 else None)
-
-        p, s = stat("psnr"), stat("ssim")
-        out.append({"case": case, "method": method, "runs": len(rs), "finished": len(done),
-                    "statuses": sorted({r["status"] for r in rs}), "seeds": [r["seed"] for r in rs],
-                    "psnr_mean": p[0], "psnr_std": p[1], "ssim_mean": s[0], "ssim_std": s[1],
-                    "recoveries": sum(len(r["metrics"].get("recoveries") or []) for r in rs),
-                    "max_loss_ratio": max((r["metrics"].get("max_loss_ratio") or 0.0) for r in rs),
-                    "checkpoints_ok": all(checkpoint_ok(r) for r in rs)})
-    return out
-
-
-def write_markdown(path: Path, rows: list[dict], summary: list[dict], info: dict) -> None:
-    lines = [f"# Stability ({info['preset']} preset, {info['device']})", "",
-             f"{info['iterations']} iterations, inputs at {info['resolution']}, seeds {info['seeds']} on "
-             f"`{DEFAULT_CASE}`; {info['host']}, {info['date']}; total {info['total_s']:.0f} s.", "",
-             "PSNR / SSIM on the test views (mean ± std over the seeds where there are several). `textureless` "
-             "is a different world (plain walls), so its PSNR is not comparable with the others'. Recoveries: "
-             "rollbacks after a divergence (`warpgs.train`); max loss / median: the largest ratio of a step's loss "
-             "to the running median of its phase, which `train.explode_factor` (10) bounds.", "",
-             "| case | method | runs | finished | PSNR | SSIM | recoveries | max loss / median | checkpoints |",
-             "|---|---|---|---|---|---|---|---|---|"]
-    for s in summary:
-        pm = _f(s["psnr_mean"], ".2f") + (f" ± {s['psnr_std']:.2f}" if s["psnr_std"] is not None else "")
-        sm = _f(s["ssim_mean"], ".3f") + (f" ± {s['ssim_std']:.3f}" if s["ssim_std"] is not None else "")
-        lines.append(f"| {s['case']} | {s['method']} | {s['runs']} | {s['finished']} ({', '.join(s['statuses'])}) | "
-                     f"{pm} | {sm} | {s['recoveries']} | {s['max_loss_ratio']:.2f} | "
-                     f"{'ok' if s['checkpoints_ok'] else 'MISSING/BAD'} |")
-    lines += ["", "## Runs", "", "| case | method | seed | status | PSNR | SSIM | Gaussians | train s | checkpoint | "
-              "what the case measures |", "|---|---|---|---|---|---|---|---|---|---|"]
-    for r in rows:
-        m = r["metrics"]
-        ck = r["checkpoint"]
-        meas = r.get("scene", {}).get("measures", {})
-        shown = ", ".join(f"{k} {_g(v)}" for k, v in meas.items() if not isinstance(v, list) or len(v) <= 3)
-        lines.append(f"| {r['case']} | {r['method']} | {r['seed']} | {r['status']} | {_f(m.get('psnr'), '.2f')} | "
-                     f"{_f(m.get('ssim'), '.3f')} | {m.get('num_gaussians', 'n/a')} | {_f(m.get('train_time_s'), '.1f')} | "
-                     f"{'step %s, loads, finite' % ck['step'] if ck['loads'] and ck['finite'] else ('none written' if not ck['exists'] else 'BAD')} | "
-                     f"{shown} |")
-    notes = [r for r in rows if r["message"]]
-    if notes:
-        lines += ["", "## Messages", ""]
-        lines += [f"- `{r['case']}` {r['method']} seed {r['seed']} ({r['status']}): {r['message']}" for r in notes]
-    lines += ["", "![PSNR per case](stability_psnr.png)", ""]
-    path.write_text("\n".join(lines))
-
-
-def plot(path: Path, summary: list[dict]) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    import numpy as np
-
-    cases = list(dict.fromkeys(s["case"] for s in summary))
-    methods = list(dict.fromkeys(s["method"] for s in summary))
-    fig, ax = plt.subplots(figsize=(max(5.0, 1.1 * len(cases) + 1.5), 3.6))
-    width = 0.8 / max(len(methods), 1)
-    for j, method in enumerate(methods):
-        xs, ys, es = [], [], []
-        for i, case in enumerate(cases):
-            s = next((s for s in summary if s["case"] == case and s["method"] == method), None)
-            if s is None or s["psnr_mean"] is None:
-                continue
-            xs.append(i + (j - (len(methods) - 1) / 2) * width)
-            ys.append(s["psnr_mean"])
-            es.append(s["psnr_std"] if s["psnr_std"] is not None else np.nan)  # error bars only over seeds
-        ax.bar(xs, ys, width, yerr=es, capsize=4, label=method)
-    for i, case in enumerate(cases):  # runs that did not finish are marked
-        for j, method in enumerate(methods):
-            s = next((s for s in summary if s["case"] == case and s["method"] == method), None)
-            if s is not None and s["finished"] < s["runs"]:
-                ax.text(i + (j - (len(methods) - 1) / 2) * width, 0.5, "x", ha="center", color="red")
-    ax.set_xticks(np.arange(len(cases)), cases, rotation=30, ha="right")
-    ax.set_ylabel("test PSNR (dB)")
-    ax.set_title("test PSNR per case (error bars: std over seeds; x: a run that did not finish)", fontsize=9)
-    ax.grid(axis="y", alpha=0.3)
-    ax.legend()
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+def _run_one(job: tuple) -> dict:
+    return run_one(*job)
 
 
 def run_stability(device: str = "cpu", preset: str = "small", out_dir: str | Path | None = None,
                   methods=METHODS, cases=CASES, seeds=SEEDS, work_dir: str | Path | None = None,
-                  log=print) -> list[dict]:
-    """Runs every (case, method) (``DEFAULT_CASE`` once per seed, the others with ``seeds[0]``) and writes
-    the JSON, the markdown tables and the PSNR chart into ``out_dir``; returns the run records."""
+                  jobs: int = 1, log=print) -> list[dict]:
+    """Runs every (case, method, seed), ``jobs`` at a time (each in its own process when more than one), and
+    writes ``stability.json`` into ``out_dir``; returns the run records."""
     if preset not in PRESETS:
         raise ValueError(f"preset {preset!r}: use one of {', '.join(PRESETS)}")
     bad = [m for m in methods if m not in METHODS]
@@ -285,22 +189,26 @@ def run_stability(device: str = "cpu", preset: str = "small", out_dir: str | Pat
     work = Path(work_dir) if work_dir is not None else ROOT / "outputs" / f"stability_{dev_name}_{preset}"
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
-    rows = []
-    for case in cases:
-        for method in methods:
-            for seed in (seeds if case == DEFAULT_CASE else seeds[:1]):
-                rows.append(run_one(case, method, seed, device, preset, work, log=log))
-    summary = summarise(rows)
+    todo = [(case, method, seed, device, preset, work) for case in cases for method in methods for seed in seeds]
+    if jobs > 1:
+        import multiprocessing as mp
+        from concurrent.futures import ProcessPoolExecutor
+
+        with ProcessPoolExecutor(jobs, mp_context=mp.get_context("spawn")) as pool:
+            rows = list(pool.map(_run_one, todo))
+    else:
+        rows = [run_one(*job, log=log) for job in todo]
+    from bench.report.charts import git_commit, this_machine
+
     p = PRESETS[preset]
     res = next((r["scene"]["resolution"] for r in rows if "scene" in r), None)
-    info = {"device": device, "preset": preset, "iterations": p["iterations"], "overrides": p["set"],
+    info = {"device": device, "machine": this_machine() if dev_name == "cuda" else None, "commit": git_commit(ROOT),
+            "preset": preset, "iterations": p["iterations"], "overrides": p["set"],
             "resolution": f"{res[0]}x{res[1]}" if res else "n/a", "seeds": list(seeds), "methods": list(methods),
             "cases": list(cases), "host": platform.node() or platform.platform(),
             "date": time.strftime("%Y-%m-%d %H:%M"), "total_s": time.perf_counter() - t0}
-    (out / "stability.json").write_text(json.dumps({"info": info, "summary": summary, "runs": rows}, indent=2))
-    write_markdown(out / "stability.md", rows, summary, info)
-    plot(out / "stability_psnr.png", summary)
-    log(f"stability: wrote {out / 'stability.json'}, {out / 'stability.md'}, {out / 'stability_psnr.png'}")
+    (out / "stability.json").write_text(json.dumps({"info": info, "runs": rows}, indent=2))
+    log(f"stability: wrote {out / 'stability.json'} (charts and tables: python bench/report/charts.py)")
     return rows
 
 
@@ -311,12 +219,13 @@ def main(argv=None) -> int:
     ap.add_argument("--methods", nargs="+", default=list(METHODS), choices=list(METHODS))
     ap.add_argument("--cases", nargs="+", default=list(CASES), metavar="CASE",
                     help=f"stress cases ({', '.join(CASES)}; views_N for any N)")
-    ap.add_argument("--seeds", nargs="+", type=int, default=list(SEEDS), help=f"seeds of {DEFAULT_CASE}")
+    ap.add_argument("--seeds", nargs="+", type=int, default=list(SEEDS), help="seeds of every case and method")
+    ap.add_argument("--jobs", type=int, default=1, help="runs at a time, each in its own process (default 1)")
     ap.add_argument("--out", default=None, help="results folder (default bench/results/quality/stability_<device>)")
     ap.add_argument("--work", default=None, help="run folders (default outputs/stability_<device>_<preset>)")
     args = ap.parse_args(argv)
     rows = run_stability(args.device, args.preset, args.out, methods=args.methods, cases=args.cases,
-                         seeds=args.seeds, work_dir=args.work)
+                         seeds=args.seeds, work_dir=args.work, jobs=args.jobs)
     crashed = [r for r in rows if r["status"] == "crashed"]
     lost = [r for r in rows if not checkpoint_ok(r)]
     if crashed or lost:

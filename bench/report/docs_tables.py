@@ -10,11 +10,9 @@ Each table goes between ``<!-- NAME: start -->`` and ``<!-- NAME: end -->`` of t
   (``bench/perf/rasterizer.py``): random Gaussians, and a model trained on fern at 1x, 2x and 3x its test view;
 - ``train_speed``: the trainer against plain training loops, from ``perf/train_speed_*.json``
   (``bench/perf/train_speed.py``);
-- ``stability``: the stress cases, from ``quality/stability_cpu/stability.json`` (``bench/quality/stability.py``);
-- ``compact``: the default run against ``--compact``, from ``quality/compact_*/compact.json``
-  (``bench/quality/compact.py``).
 
-Every table names the machine each figure was measured on.
+Every table names the machine each figure was measured on. The tables beside the charts (speed against accuracy,
+stability, compact mode) are ``bench/report/charts.py``'s.
 """
 
 from __future__ import annotations
@@ -32,8 +30,6 @@ from readme_tables import rows as current_figures  # noqa: E402
 RASTERIZER = (("perf/rasterizer_vs_gsplat_random_h200.json", "random"),
               ("perf/rasterizer_vs_gsplat_fern_h200.json", "trained on fern"))
 TRAIN_SPEED = ("perf/train_speed_fern_h200.json", "perf/train_speed_cpu.json")
-STABILITY = "quality/stability_cpu/stability.json"
-COMPACT = ("quality/compact_lego_cuda/compact.json", "quality/compact_synthetic_cpu/compact.json")
 
 
 def _table(head: list[str], rows: list[list[str]]) -> list[str]:
@@ -71,33 +67,7 @@ def train_speed(results: Path) -> list[str]:
     return _table(["setting", "loop", "seconds", "it/s", "Gaussians", "test PSNR", "machine", "source"], rows)
 
 
-def stability(results: Path) -> list[str]:
-    doc = _load(results, STABILITY)
-    info = doc["info"]
-    machine = f"{info['device']} (host {info['host']}), {info['date'][:10]}"
-    rows = []
-    for r in doc["summary"]:
-        psnr = "-" if r["psnr_mean"] is None else f"{r['psnr_mean']:.2f}" + (
-            f" ± {r['psnr_std']:.2f}" if r.get("psnr_std") is not None else "")
-        rows.append([r["case"], r["method"], f"{r['finished']}/{r['runs']}", ",".join(map(str, r["seeds"])), psnr,
-                     str(r["recoveries"]), f"{r['max_loss_ratio']:.2f}", "ok" if r["checkpoints_ok"] else "FAILED"])
-    return [f"{info['iterations']} iterations at {info['resolution']}, {machine}; `{STABILITY}`", ""] + _table(
-        ["case", "method", "finished", "seeds", "test PSNR", "recoveries", "max loss / median", "checkpoints"], rows)
-
-
-def compact(results: Path) -> list[str]:
-    rows = []
-    for name in COMPACT:
-        d = _load(results, name)
-        rows.append([d["scene"], d["method"], f"{d['iterations']:,}", f"{d['default']['num_gaussians']:,}",
-                     f"{d['compact']['num_gaussians']:,}", f"{-100 * d['count_reduction']:+.1f}%",
-                     f"{-100 * d['bytes_reduction']:+.1f}%", f"{d['default']['psnr']:.2f}", f"{d['compact']['psnr']:.2f}",
-                     "cuda (GPU model not recorded)" if d["device"] == "cuda" else d["device"], f"`{name}`"])
-    return _table(["scene", "method", "iterations", "Gaussians", "compact", "count", "bytes", "PSNR", "compact PSNR",
-                   "device", "source"], rows)
-
-
-TABLES = {"current_figures": current_figures, "rasterizer": rasterizer, "train_speed": train_speed, "stability": stability, "compact": compact}
+TABLES = {"current_figures": current_figures, "rasterizer": rasterizer, "train_speed": train_speed}
 
 
 def main(argv=None) -> int:
