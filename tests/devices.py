@@ -1,7 +1,7 @@
 """The Warp devices the kernels' device-parametrised tests run on: the CPU, and CUDA where torch sees a GPU.
 
-``WARPGS_TEST_DEVICES`` (comma-separated, e.g. ``cuda``) restricts them: the GPU machine's packed Warp has no CPU
-compiler (``bench/gpu_one.sh`` session_env sets it there)."""
+``WARPGS_TEST_DEVICES`` (comma-separated, e.g. ``cuda``) restricts them: a GPU machine whose Warp has no CPU
+compiler runs the CUDA half with ``WARPGS_TEST_DEVICES=cuda python -m pytest tests/test_rasterizer.py ...``."""
 
 from __future__ import annotations
 
