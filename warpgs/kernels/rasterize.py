@@ -459,16 +459,13 @@ def _compositing_kernels(cuda: bool, fixed_variant: int = -1, depth_variant: int
         py = float(y) + 0.5
         start = tiles.ranges[tile, 0]
         end = tiles.ranges[tile, 1]
-        splats = tiles.splats
-        gauss_ids = tiles.gauss_ids
-        alpha_max = tiles.alpha_max
         T = float(1.0)
         C = wp.vec3(0.0)
         D = float(0.0)
         n = start
         if inside:
             for k in range(start, end):
-                status, T, C, D = composite_splat(splats[gauss_ids[k]], px, py, alpha_max, T, C, D)
+                status, T, C, D = composite_splat(tiles.splats[tiles.gauss_ids[k]], px, py, tiles.alpha_max, T, C, D)
                 if status == SATURATED:
                     break
                 if status == COMPOSITED:

@@ -48,9 +48,6 @@ def rasterize_fwd_cpu(tiles: Tiles, image: Image, part: int, n_parts: int):
         return
     width = tiles.width
     py = float(y) + 0.5
-    splats = tiles.splats
-    gauss_ids = tiles.gauss_ids
-    alpha_max = tiles.alpha_max
     T = rowf(1.0)
     R = rowf(0.0)
     G = rowf(0.0)
@@ -67,10 +64,10 @@ def rasterize_fwd_cpu(tiles: Tiles, image: Image, part: int, n_parts: int):
     for k in range(start, end):
         if n_live == 0:
             break
-        s = splats[gauss_ids[k]]
+        s = tiles.splats[tiles.gauss_ids[k]]
         for i in range(TILE_SIZE_CPU):
             if live[i] != 0:
-                status, t, c, d = composite_splat(s, float(x0 + i) + 0.5, py, alpha_max, T[i],
+                status, t, c, d = composite_splat(s, float(x0 + i) + 0.5, py, tiles.alpha_max, T[i],
                                                   wp.vec3(R[i], G[i], B[i]), D[i])
                 if status == SATURATED:
                     live[i] = 0
@@ -95,10 +92,6 @@ def rasterize_bwd_cpu(tiles: Tiles, pixels: PixelGrads, grads: SplatGrads, part:
         return
     width = tiles.width
     py = float(y) + 0.5
-    gauss_ids = tiles.gauss_ids
-    splats = tiles.splats
-    alpha_max = tiles.alpha_max
-    with_depth = grads.with_depth
     bg = tiles.background[0]
     last = rowi(start)
     T_final = rowf(1.0)
@@ -127,16 +120,16 @@ def rasterize_bwd_cpu(tiles: Tiles, pixels: PixelGrads, grads: SplatGrads, part:
             k_end = wp.max(k_end, li)
     for j in range(k_end - start):
         k = k_end - 1 - j
-        g = gauss_ids[k]
-        s = splats[g]
+        g = tiles.gauss_ids[k]
+        s = tiles.splats[g]
         total = grad10()  # the row's sum of this Gaussian's gradient
         any_valid = int(0)
         for i in range(TILE_SIZE_CPU):
             if k < last[i]:
-                valid, t, sc, sd, gi = splat_backward(s, float(x0 + i) + 0.5, py, alpha_max, T[i],
+                valid, t, sc, sd, gi = splat_backward(s, float(x0 + i) + 0.5, py, tiles.alpha_max, T[i],
                                                       wp.vec3(SR[i], SG[i], SB[i]), SD[i],
                                                       wp.vec3(vR[i], vG[i], vB[i]), vD[i], vA_bg[i], T_final[i],
-                                                      with_depth)
+                                                      grads.with_depth)
                 if valid != 0:
                     T[i] = t
                     SR[i] = sc[0]
