@@ -75,7 +75,8 @@ def pixel_of_thread(tid: int, tiles_x: int, tile_size: int):
 splat = kb.splat
 
 
-# The compositing kernels' arguments, one struct per role, shared by every one of them (the CPU's and CUDA's).
+# The compositing kernels' arguments, one struct per role, shared by all of them (the CPU's and CUDA's); a launch
+# passes each as the tuple of its fields, torch tensors for the arrays (``warpgs._warp.Launcher``: no copies).
 @wp.struct
 class Tiles:
     """What every compositing kernel reads of a render: each tile's [start, end) in ``gauss_ids`` (``ranges``
@@ -640,9 +641,9 @@ def int_bits(v: int) -> float: ...
 @wp.kernel
 def rasterize_fwd_cuda(keys: wp.array(dtype=wp.int64), count: int, shift: int, tiles: Tiles, image: Image):
     """The CUDA forward: one 256-thread block per tile. Each thread finds its tile's [start, end) in the sorted
-    ``keys[:count]`` (``binning.tile_range``; the block's first thread writes it to ``ranges`` for the backward, so
-    no kernel of its own and no cleared buffer are needed for them); the block loads the tile's Gaussians in
-    batches of 256, one per thread, and each batch is composited by ``composite_batch``."""
+    ``keys[:count]`` (``binning.tile_range``; the block's first thread writes it to ``tiles.ranges`` for the
+    backward, so no kernel of its own and no cleared buffer are needed for them); the block loads the tile's
+    Gaussians in batches of 256, one per thread, and each batch is composited by ``composite_batch``."""
     tid = wp.tid()
     tile, x, y = pixel_of_thread(tid, tiles.tiles_x, TILE_SIZE)
     width = tiles.width
