@@ -338,13 +338,13 @@ class _Composite(torch.autograd.Function):
         gauss_ids, keys, shift, total = _bin_gaussians(means2d, radii, depths, conics, opac_eff, colors, splats,
                                                        offsets, ranges, tiles_x, tiles_y, near, capacity, dev, stream)
         info.append(total)
-        outputs = (color.view(-1, 3), depth.view(-1), alpha.view(-1), last.view(-1))
+        # the kernels' struct arguments as field tuples (kr.Tiles, kr.Image)
+        tiles = (ranges, gauss_ids, splats, background.reshape(1, 3), width, height, tiles_x, alpha_max)
+        image = (color.view(-1, 3), depth.view(-1), alpha.view(-1), last.view(-1))
         if dev == "cpu":  # the parts write disjoint pixels
-            args = (ranges, gauss_ids, splats, background.reshape(1, 3), width, height, tiles_x, alpha_max) + outputs
-            launch_parts(krc.rasterize_fwd_cpu, n_threads, dev, CPU_PARTS, lambda p: args)
+            launch_parts(krc.rasterize_fwd_cpu, n_threads, dev, CPU_PARTS, lambda p: (tiles, image))
         else:
-            fast_launch(kr.rasterize_fwd_cuda, n_threads, dev, stream, keys, total, shift, gauss_ids, splats,
-                        background.reshape(1, 3), width, height, tiles_x, alpha_max, ranges, *outputs)
+            fast_launch(kr.rasterize_fwd_cuda, n_threads, dev, stream, keys, total, shift, tiles, image)
         ctx.save_for_backward(splats, background, ranges, gauss_ids, depth, alpha, last)
         ctx.cfg = (width, height, alpha_max, deterministic, dev, stream)
         # an output the loss does not use gets None in backward, not a zero tensor: no allocation, and a
@@ -369,17 +369,19 @@ class _Composite(torch.autograd.Function):
             return (torch.zeros(n if fixed else 0, 10, device=splats.device, dtype=torch.int64),) + float_grads(make)
 
         with_depth = int(v_depth is not None)  # a loss without the depth skips its (zero) terms
-        args = (ranges, gauss_ids, splats, background.reshape(1, 3), width, height, tiles_x, alpha_max,
-                depth.view(-1), alpha.view(-1), last.view(-1),
-                _grad_or_zeros(v_color, (height, width, 3), alpha.device).view(-1, 3),
-                _grad_or_zeros(v_depth, alpha.shape, alpha.device).view(-1),
-                _grad_or_zeros(v_alpha, alpha.shape, alpha.device).view(-1), int(fixed), with_depth)
+        # the kernels' struct arguments as field tuples (kr.Tiles, kr.PixelGrads; kr.SplatGrads: flags + buffers)
+        tiles = (ranges, gauss_ids, splats, background.reshape(1, 3), width, height, tiles_x, alpha_max)
+        pixels = (depth.view(-1), alpha.view(-1), last.view(-1),
+                  _grad_or_zeros(v_color, (height, width, 3), alpha.device).view(-1, 3),
+                  _grad_or_zeros(v_depth, alpha.shape, alpha.device).view(-1),
+                  _grad_or_zeros(v_alpha, alpha.shape, alpha.device).view(-1))
+        flags = (int(fixed), with_depth)
         n_threads = kr.compositing_threads(dev, ranges.shape[0])
         if dev == "cpu":
             # each part adds into buffers of its own (a CPU "atomic" add is a plain one), summed in part order
             parts = [grad_buffers(torch.empty if fixed else torch.zeros)]
             parts += [grad_buffers(torch.zeros) for _ in range(CPU_PARTS - 1)]
-            launch_parts(krc.rasterize_bwd_cpu, n_threads, dev, CPU_PARTS, lambda p: args + parts[p])
+            launch_parts(krc.rasterize_bwd_cpu, n_threads, dev, CPU_PARTS, lambda p: (tiles, pixels, flags + parts[p]))
             for extra in parts[1:]:
                 for total, t in zip(parts[0], extra):
                     total += t
@@ -388,14 +390,15 @@ class _Composite(torch.autograd.Function):
             # the fixed-point variant writes v_fixed alone: its float outputs are empty views, and the float
             # gradients are made after the launch, while the GPU runs it
             v_fixed = torch.zeros(n, 10, device=splats.device, dtype=torch.int64)
-            fast_launch(kr.rasterize_bwd_cuda[1][with_depth], n_threads, dev, stream, *args, v_fixed,
-                        *_unused_grads(splats.device), 0, 1)
+            fast_launch(kr.rasterize_bwd_cuda[1][with_depth], n_threads, dev, stream, tiles, pixels,
+                        flags + (v_fixed,) + _unused_grads(splats.device), 0, 1)
             grads = float_grads(torch.empty)
         else:
             v_fixed, *grads = grad_buffers(torch.zeros)
-            fast_launch(kr.rasterize_bwd_cuda[0][with_depth], n_threads, dev, stream, *args, v_fixed, *grads, 0, 1)
+            fast_launch(kr.rasterize_bwd_cuda[0][with_depth], n_threads, dev, stream, tiles, pixels,
+                        (*flags, v_fixed, *grads), 0, 1)
         if fixed and n:
-            fast_launch(kr.fixed_to_grads, n, dev, stream, v_fixed, *grads)
+            fast_launch(kr.fixed_to_grads, n, dev, stream, (*flags, v_fixed, *grads))
         return tuple(grads) + (None,) * 12
 
 

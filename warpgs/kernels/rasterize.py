@@ -75,6 +75,64 @@ def pixel_of_thread(tid: int, tiles_x: int, tile_size: int):
 splat = kb.splat
 
 
+# The compositing kernels' arguments, one struct per role, shared by all of them (the CPU's and CUDA's); a launch
+# passes each as the tuple of its fields, torch tensors for the arrays (``warpgs._warp.Launcher``: no copies).
+@wp.struct
+class Tiles:
+    """What every compositing kernel reads of a render: each tile's [start, end) in ``gauss_ids`` (``ranges``
+    [n_tiles, 2]; the CUDA forward writes them), the tiles' depth-sorted Gaussian ids, the packed splats [N], the
+    background colour (a one-element array), the image size in pixels, the tiles across, and the alpha clamp."""
+
+    ranges: wp.array2d(dtype=wp.int32)
+    gauss_ids: wp.array(dtype=wp.int32)
+    splats: wp.array(dtype=splat)
+    background: wp.array(dtype=wp.vec3)
+    width: int
+    height: int
+    tiles_x: int
+    alpha_max: float
+
+
+@wp.struct
+class Image:
+    """The forward's outputs per pixel [H * W] (``store_pixel``)."""
+
+    color: wp.array(dtype=wp.vec3)
+    depth: wp.array(dtype=float)
+    alpha: wp.array(dtype=float)
+    last_count: wp.array(dtype=wp.int32)
+
+
+@wp.struct
+class PixelGrads:
+    """What the backward reads per pixel [H * W]: the forward's depth, alpha and count composited, and the loss's
+    gradients of the colour, depth and alpha (``pixel_grad_inputs``)."""
+
+    depth: wp.array(dtype=float)
+    alpha: wp.array(dtype=float)
+    last_count: wp.array(dtype=wp.int32)
+    v_color: wp.array(dtype=wp.vec3)
+    v_depth: wp.array(dtype=float)
+    v_alpha: wp.array(dtype=float)
+
+
+@wp.struct
+class SplatGrads:
+    """The backward's per-Gaussian gradients [N], accumulated with atomics (zero-initialised by the caller): floats,
+    or with ``fixed`` fixed-point integers in ``v_fixed`` [N, 10] (``accumulate_grad``). ``with_depth`` = 0: the
+    loss does not use the depth (``splat_backward``). The CUDA backward's variants fix both flags when their code is
+    generated and ignore these."""
+
+    fixed: int
+    with_depth: int
+    v_fixed: wp.array2d(dtype=wp.int64)
+    v_means2d: wp.array(dtype=wp.vec2)
+    v_conics: wp.array(dtype=wp.vec3)
+    v_opacities: wp.array(dtype=float)
+    v_colors: wp.array(dtype=wp.vec3)
+    v_depths: wp.array(dtype=float)
+
+
 @wp.func
 def splat_sigma(s: splat, px: float, py: float) -> float:
     dx = s[0] - px
@@ -116,10 +174,7 @@ grad10 = wp.types.vector(length=10, dtype=wp.float32)
 
 
 @wp.func
-def pixel_grad_inputs(inside: bool, pix: int, start: int, last_count: wp.array(dtype=wp.int32),
-                      out_depth: wp.array(dtype=float), out_alpha: wp.array(dtype=float),
-                      v_out_color: wp.array(dtype=wp.vec3), v_out_depth: wp.array(dtype=float),
-                      v_out_alpha: wp.array(dtype=float)):
+def pixel_grad_inputs(inside: bool, pix: int, start: int, pixels: PixelGrads):
     """-> (Gaussians composited, final T, dL/dcolour, dL/d(accumulated depth D = sum w_i z_i), dL/dalpha)."""
     last = start
     T_final = float(1.0)
@@ -127,16 +182,16 @@ def pixel_grad_inputs(inside: bool, pix: int, start: int, last_count: wp.array(d
     vD = float(0.0)
     vA = float(0.0)
     if inside:
-        last = last_count[pix]
-        A = out_alpha[pix]
+        last = pixels.last_count[pix]
+        A = pixels.alpha[pix]
         T_final = 1.0 - A
-        vC = v_out_color[pix]
-        vA = v_out_alpha[pix]
+        vC = pixels.v_color[pix]
+        vA = pixels.v_alpha[pix]
         if A > DEPTH_ALPHA_MIN:
             # expected depth E = D / A: dL/dD = v_E / A, dL/dA += -v_E E / A
-            vE = v_out_depth[pix]
+            vE = pixels.v_depth[pix]
             vD = vE / A
-            vA = vA - vE * out_depth[pix] / A
+            vA = vA - vE * pixels.depth[pix] / A
     return last, T_final, vC, vD, vA
 
 
@@ -195,25 +250,22 @@ def to_fixed(v: float) -> wp.int64:
 
 
 @wp.func
-def accumulate_grad(valid: int, gid: int, g: grad10, fixed: int, with_depth: int, v_fixed: wp.array2d(dtype=wp.int64),
-                    v_means2d: wp.array(dtype=wp.vec2), v_conics: wp.array(dtype=wp.vec3),
-                    v_opacities: wp.array(dtype=float), v_colors: wp.array(dtype=wp.vec3),
-                    v_depths: wp.array(dtype=float)):
+def accumulate_grad(valid: int, gid: int, g: grad10, grads: SplatGrads):
     """Adds a Gaussian's gradient from a CPU kernel (one thread: nothing to sum over a warp; the CUDA backward's
     is ``accumulate_grad_scattered``), as floats or (``fixed``) as fixed-point integers into ``v_fixed`` [N, 10]."""
     if valid != 0:
-        if fixed != 0:
+        if grads.fixed != 0:
             for c in range(9):
-                wp.atomic_add(v_fixed, gid, c, to_fixed(g[c]))
-            if with_depth != 0:
-                wp.atomic_add(v_fixed, gid, 9, to_fixed(g[9]))
+                wp.atomic_add(grads.v_fixed, gid, c, to_fixed(g[c]))
+            if grads.with_depth != 0:
+                wp.atomic_add(grads.v_fixed, gid, 9, to_fixed(g[9]))
         else:
-            wp.atomic_add(v_means2d, gid, wp.vec2(g[0], g[1]))
-            wp.atomic_add(v_conics, gid, wp.vec3(g[2], g[3], g[4]))
-            wp.atomic_add(v_opacities, gid, g[5])
-            wp.atomic_add(v_colors, gid, wp.vec3(g[6], g[7], g[8]))
-            if with_depth != 0:
-                wp.atomic_add(v_depths, gid, g[9])
+            wp.atomic_add(grads.v_means2d, gid, wp.vec2(g[0], g[1]))
+            wp.atomic_add(grads.v_conics, gid, wp.vec3(g[2], g[3], g[4]))
+            wp.atomic_add(grads.v_opacities, gid, g[5])
+            wp.atomic_add(grads.v_colors, gid, wp.vec3(g[6], g[7], g[8]))
+            if grads.with_depth != 0:
+                wp.atomic_add(grads.v_depths, gid, g[9])
 
 
 # The CUDA backward's accumulation, as one native function: the warp's ten sums by a reduce-scatter instead of
@@ -250,54 +302,51 @@ def accumulate_grad(valid: int, gid: int, g: grad10, fixed: int, with_depth: int
     a[0] = a[0] + __shfl_xor_sync(0xffffffff, a[0], 1);
     const int idx = (int)(lane >> 1);  // which of the ten sums this lane holds (each is held by two lanes)
     if ((lane & 1) == 0 && idx < (with_depth != 0 ? 10 : 9)) {
+        // the byte address of Gaussian gid's row of gradient array A
+#define WARPGS_ROW(A) ((char*)grads.A.data + (size_t)gid * grads.A.strides[0])
         if (fixed != 0) {
             const float v = fminf(fmaxf(a[0], -FIXED_CLAMP), FIXED_CLAMP) * FIXED_SCALE;  // to_fixed
-            long long* row = (long long*)((char*)v_fixed.data + (size_t)gid * v_fixed.strides[0]);
+            long long* row = (long long*)WARPGS_ROW(v_fixed);
             atomicAdd((unsigned long long*)(row + idx), (unsigned long long)(long long)roundf(v));
         } else {
             float* dst;
-            if (idx < 2) dst = (float*)((char*)v_means2d.data + (size_t)gid * v_means2d.strides[0]) + idx;
-            else if (idx < 5) dst = (float*)((char*)v_conics.data + (size_t)gid * v_conics.strides[0]) + (idx - 2);
-            else if (idx == 5) dst = (float*)((char*)v_opacities.data + (size_t)gid * v_opacities.strides[0]);
-            else if (idx < 9) dst = (float*)((char*)v_colors.data + (size_t)gid * v_colors.strides[0]) + (idx - 6);
-            else dst = (float*)((char*)v_depths.data + (size_t)gid * v_depths.strides[0]);
+            if (idx < 2) dst = (float*)WARPGS_ROW(v_means2d) + idx;
+            else if (idx < 5) dst = (float*)WARPGS_ROW(v_conics) + (idx - 2);
+            else if (idx == 5) dst = (float*)WARPGS_ROW(v_opacities);
+            else if (idx < 9) dst = (float*)WARPGS_ROW(v_colors) + (idx - 6);
+            else dst = (float*)WARPGS_ROW(v_depths);
             atomicAdd(dst, a[0]);
         }
+#undef WARPGS_ROW
     }
 #endif
 """.replace("FIXED_CLAMP", f"{float(FIXED_CLAMP)!r}f").replace("FIXED_SCALE", f"{float(FIXED_SCALE)!r}f")
 )
-def accumulate_grad_scattered(gid: int, g: grad10, fixed: int, with_depth: int, v_fixed: wp.array2d(dtype=wp.int64),
-                              v_means2d: wp.array(dtype=wp.vec2), v_conics: wp.array(dtype=wp.vec3),
-                              v_opacities: wp.array(dtype=float), v_colors: wp.array(dtype=wp.vec3),
-                              v_depths: wp.array(dtype=float)): ...
+def accumulate_grad_scattered(gid: int, g: grad10, fixed: int, with_depth: int, grads: SplatGrads): ...
 
 
 @wp.kernel
-def fixed_to_grads(v_fixed: wp.array2d(dtype=wp.int64), v_means2d: wp.array(dtype=wp.vec2),
-                   v_conics: wp.array(dtype=wp.vec3), v_opacities: wp.array(dtype=float),
-                   v_colors: wp.array(dtype=wp.vec3), v_depths: wp.array(dtype=float)):
-    """The fixed-point sums of ``accumulate_grad`` as float gradients (one thread per Gaussian)."""
+def fixed_to_grads(grads: SplatGrads):
+    """The fixed-point sums of ``accumulate_grad`` (``v_fixed``) as the float gradients (one thread per Gaussian)."""
     i = wp.tid()
     inv = 1.0 / FIXED_SCALE
-    v_means2d[i] = wp.vec2(float(v_fixed[i, 0]) * inv, float(v_fixed[i, 1]) * inv)
-    v_conics[i] = wp.vec3(float(v_fixed[i, 2]) * inv, float(v_fixed[i, 3]) * inv, float(v_fixed[i, 4]) * inv)
-    v_opacities[i] = float(v_fixed[i, 5]) * inv
-    v_colors[i] = wp.vec3(float(v_fixed[i, 6]) * inv, float(v_fixed[i, 7]) * inv, float(v_fixed[i, 8]) * inv)
-    v_depths[i] = float(v_fixed[i, 9]) * inv
+    v = grads.v_fixed
+    grads.v_means2d[i] = wp.vec2(float(v[i, 0]) * inv, float(v[i, 1]) * inv)
+    grads.v_conics[i] = wp.vec3(float(v[i, 2]) * inv, float(v[i, 3]) * inv, float(v[i, 4]) * inv)
+    grads.v_opacities[i] = float(v[i, 5]) * inv
+    grads.v_colors[i] = wp.vec3(float(v[i, 6]) * inv, float(v[i, 7]) * inv, float(v[i, 8]) * inv)
+    grads.v_depths[i] = float(v[i, 9]) * inv
 
 
 @wp.func
-def store_pixel(pix: int, C: wp.vec3, D: float, T: float, n: int, background: wp.vec3,
-                out_color: wp.array(dtype=wp.vec3), out_depth: wp.array(dtype=float),
-                out_alpha: wp.array(dtype=float), last_count: wp.array(dtype=wp.int32)):
+def store_pixel(pix: int, C: wp.vec3, D: float, T: float, n: int, background: wp.vec3, image: Image):
     """Colour over the background, expected depth D / A (0 where A <= 1e-6), alpha A = 1 - T, and the
     count of Gaussians composited (where the backward pass starts)."""
     A = 1.0 - T
-    out_color[pix] = C + T * background
-    out_depth[pix] = wp.where(A > DEPTH_ALPHA_MIN, D / A, 0.0)
-    out_alpha[pix] = A
-    last_count[pix] = n
+    image.color[pix] = C + T * background
+    image.depth[pix] = wp.where(A > DEPTH_ALPHA_MIN, D / A, 0.0)
+    image.alpha[pix] = A
+    image.last_count[pix] = n
 
 
 # ----------------------------------------------------------------------------------------------------
@@ -396,96 +445,59 @@ def _compositing_kernels(cuda: bool, fixed_variant: int = -1, depth_variant: int
     """The CPU's per-pixel forward kernel (colour, depth, alpha and the count composited per pixel) and the CPU or
     CUDA backward kernel (per-Gaussian gradients from the pixels' output gradients); on CUDA the backward for
     ``fixed_variant`` / ``depth_variant`` (0 or 1: the backward's ``fixed`` / ``with_depth``, fixed when the code is
-    generated; the arguments are then ignored), and no forward (the CUDA forward is ``rasterize_fwd_cuda``)."""
+    generated; ``SplatGrads``'s flags are then ignored), and no forward (the CUDA forward is ``rasterize_fwd_cuda``)."""
     tile_size = TILE_SIZE if cuda else TILE_SIZE_CPU
     static_flags = fixed_variant >= 0
 
-    def rasterize_fwd(
-        ranges: wp.array2d(dtype=wp.int32),
-        gauss_ids: wp.array(dtype=wp.int32),
-        splats: wp.array(dtype=splat),
-        background: wp.array(dtype=wp.vec3),
-        width: int,
-        height: int,
-        tiles_x: int,
-        alpha_max: float,
-        out_color: wp.array(dtype=wp.vec3),
-        out_depth: wp.array(dtype=float),
-        out_alpha: wp.array(dtype=float),
-        last_count: wp.array(dtype=wp.int32),
-        part: int,
-        n_parts: int,
-    ):
+    def rasterize_fwd(tiles: Tiles, image: Image, part: int, n_parts: int):
         tid = wp.tid() * n_parts + part  # the CPU's interleaved parts (see PARTS_NOTE)
-        if tid >= ranges.shape[0] * wp.static(tile_size * tile_size):
+        if tid >= tiles.ranges.shape[0] * wp.static(tile_size * tile_size):
             return
-        tile, x, y = pixel_of_thread(tid, tiles_x, wp.static(tile_size))
-        inside = x < width and y < height
+        tile, x, y = pixel_of_thread(tid, tiles.tiles_x, wp.static(tile_size))
+        width = tiles.width
+        inside = x < width and y < tiles.height
         px = float(x) + 0.5
         py = float(y) + 0.5
-        start = ranges[tile, 0]
-        end = ranges[tile, 1]
+        start = tiles.ranges[tile, 0]
+        end = tiles.ranges[tile, 1]
         T = float(1.0)
         C = wp.vec3(0.0)
         D = float(0.0)
         n = start
         if inside:
             for k in range(start, end):
-                status, T, C, D = composite_splat(splats[gauss_ids[k]], px, py, alpha_max, T, C, D)
+                status, T, C, D = composite_splat(tiles.splats[tiles.gauss_ids[k]], px, py, tiles.alpha_max, T, C, D)
                 if status == SATURATED:
                     break
                 if status == COMPOSITED:
                     n = k + 1
         if inside:
-            store_pixel(y * width + x, C, D, T, n, background[0], out_color, out_depth, out_alpha, last_count)
+            store_pixel(y * width + x, C, D, T, n, tiles.background[0], image)
 
-    def rasterize_bwd(
-        ranges: wp.array2d(dtype=wp.int32),
-        gauss_ids: wp.array(dtype=wp.int32),
-        splats: wp.array(dtype=splat),
-        background: wp.array(dtype=wp.vec3),
-        width: int,
-        height: int,
-        tiles_x: int,
-        alpha_max: float,
-        out_depth: wp.array(dtype=float),
-        out_alpha: wp.array(dtype=float),
-        last_count: wp.array(dtype=wp.int32),
-        v_out_color: wp.array(dtype=wp.vec3),
-        v_out_depth: wp.array(dtype=float),
-        v_out_alpha: wp.array(dtype=float),
-        # gradients, accumulated with atomics (zero-initialised by the caller): floats, or with ``fixed``
-        # fixed-point integers in v_fixed [N, 10] (see accumulate_grad)
-        fixed: int,
-        with_depth: int,  # 0: the loss does not use the depth (see splat_backward)
-        v_fixed: wp.array2d(dtype=wp.int64),
-        v_means2d: wp.array(dtype=wp.vec2),
-        v_conics: wp.array(dtype=wp.vec3),
-        v_opacities: wp.array(dtype=float),
-        v_colors: wp.array(dtype=wp.vec3),
-        v_depths: wp.array(dtype=float),
-        part: int,
-        n_parts: int,
-    ):
+    def rasterize_bwd(tiles: Tiles, pixels: PixelGrads, grads: SplatGrads, part: int, n_parts: int):
         # No early return on CUDA: every lane of a warp must reach the shuffles below.
+        fixed = grads.fixed
+        with_depth = grads.with_depth
         if wp.static(static_flags):
             fixed = wp.static(fixed_variant)
             with_depth = wp.static(depth_variant)
         tid = wp.tid()
         if not wp.static(cuda):  # the CPU's interleaved parts (see PARTS_NOTE)
             tid = tid * n_parts + part
-            if tid >= ranges.shape[0] * wp.static(tile_size * tile_size):
+            if tid >= tiles.ranges.shape[0] * wp.static(tile_size * tile_size):
                 return
-        tile, x, y = pixel_of_thread(tid, tiles_x, wp.static(tile_size))
+        tile, x, y = pixel_of_thread(tid, tiles.tiles_x, wp.static(tile_size))
+        width = tiles.width
+        height = tiles.height
         inside = x < width and y < height
-        start = ranges[tile, 0]
+        start = tiles.ranges[tile, 0]
         pix = wp.min(y, height - 1) * width + wp.min(x, width - 1)
         px = float(x) + 0.5
         py = float(y) + 0.5
+        alpha_max = tiles.alpha_max
 
-        last, T_final, vC, vD, vA = pixel_grad_inputs(inside, pix, start, last_count, out_depth, out_alpha,
-                                                      v_out_color, v_out_depth, v_out_alpha)
-        vA_bg = vA - wp.dot(background[0], vC)
+        last, T_final, vC, vD, vA = pixel_grad_inputs(inside, pix, start, pixels)
+        vA_bg = vA - wp.dot(tiles.background[0], vC)
         T = T_final
         S_c = wp.vec3(0.0)
         S_d = float(0.0)
@@ -493,14 +505,14 @@ def _compositing_kernels(cuda: bool, fixed_variant: int = -1, depth_variant: int
 
         if wp.static(cuda):
             lane = tid % BLOCK
-            end = ranges[tile, 1]
+            end = tiles.ranges[tile, 1]
             n_batches = (end - start + BLOCK - 1) / BLOCK
             for b in range(n_batches):
                 block_sync()
                 k_hi = end - 1 - b * BLOCK  # batches run back to front
                 if k_hi - lane >= start:
-                    g = gauss_ids[k_hi - lane]
-                    batch_splat(1, lane, splats[g], g)
+                    g = tiles.gauss_ids[k_hi - lane]
+                    batch_splat(1, lane, tiles.splats[g], g)
                 block_sync()
                 count = wp.min(BLOCK, k_hi - start + 1)
                 t0 = wp.max(0, k_hi - warp_last + 1)  # skip Gaussians behind every pixel of this warp
@@ -515,28 +527,26 @@ def _compositing_kernels(cuda: bool, fixed_variant: int = -1, depth_variant: int
                         valid, T, S_c, S_d, grad = splat_backward(s, px, py, alpha_max, T, S_c, S_d, vC, vD, vA_bg,
                                                                   T_final, with_depth)
                     if warp_any(valid) != 0:  # the same for every lane of the warp
-                        accumulate_grad_scattered(g, grad, fixed, with_depth, v_fixed, v_means2d, v_conics, v_opacities,
-                                                  v_colors, v_depths)
+                        accumulate_grad_scattered(g, grad, fixed, with_depth, grads)
         else:
             g_nxt = int(0)
             s_nxt = splat()
             if warp_last > start:
-                g_nxt = gauss_ids[warp_last - 1]
-                s_nxt = splats[g_nxt]
+                g_nxt = tiles.gauss_ids[warp_last - 1]
+                s_nxt = tiles.splats[g_nxt]
             for j in range(warp_last - start):
                 k = warp_last - 1 - j
                 g = g_nxt
                 s = s_nxt
                 if k > start:  # prefetch the next (nearer) Gaussian
-                    g_nxt = gauss_ids[k - 1]
-                    s_nxt = splats[g_nxt]
+                    g_nxt = tiles.gauss_ids[k - 1]
+                    s_nxt = tiles.splats[g_nxt]
                 valid = int(0)
                 grad = grad10()
                 if inside and k < last:
                     valid, T, S_c, S_d, grad = splat_backward(s, px, py, alpha_max, T, S_c, S_d, vC, vD, vA_bg, T_final,
                                                               with_depth)
-                accumulate_grad(valid, g, grad, fixed, with_depth, v_fixed, v_means2d, v_conics, v_opacities, v_colors,
-                                v_depths)
+                accumulate_grad(valid, g, grad, grads)
 
     if not cuda:
         return wp.kernel(rasterize_fwd, name="rasterize_fwd"), wp.kernel(rasterize_bwd, name="rasterize_bwd")
@@ -629,35 +639,20 @@ def int_bits(v: int) -> float: ...
 
 
 @wp.kernel
-def rasterize_fwd_cuda(
-    keys: wp.array(dtype=wp.int64),
-    count: int,
-    shift: int,
-    gauss_ids: wp.array(dtype=wp.int32),
-    splats: wp.array(dtype=splat),
-    background: wp.array(dtype=wp.vec3),
-    width: int,
-    height: int,
-    tiles_x: int,
-    alpha_max: float,
-    ranges: wp.array2d(dtype=wp.int32),
-    out_color: wp.array(dtype=wp.vec3),
-    out_depth: wp.array(dtype=float),
-    out_alpha: wp.array(dtype=float),
-    last_count: wp.array(dtype=wp.int32),
-):
+def rasterize_fwd_cuda(keys: wp.array(dtype=wp.int64), count: int, shift: int, tiles: Tiles, image: Image):
     """The CUDA forward: one 256-thread block per tile. Each thread finds its tile's [start, end) in the sorted
-    ``keys[:count]`` (``binning.tile_range``; the block's first thread writes it to ``ranges`` for the backward, so
-    no kernel of its own and no cleared buffer are needed for them); the block loads the tile's Gaussians in
-    batches of 256, one per thread, and each batch is composited by ``composite_batch``."""
+    ``keys[:count]`` (``binning.tile_range``; the block's first thread writes it to ``tiles.ranges`` for the
+    backward, so no kernel of its own and no cleared buffer are needed for them); the block loads the tile's
+    Gaussians in batches of 256, one per thread, and each batch is composited by ``composite_batch``."""
     tid = wp.tid()
-    tile, x, y = pixel_of_thread(tid, tiles_x, TILE_SIZE)
-    inside = x < width and y < height
+    tile, x, y = pixel_of_thread(tid, tiles.tiles_x, TILE_SIZE)
+    width = tiles.width
+    inside = x < width and y < tiles.height
     start, end = kb.tile_range(keys, count, shift, tile)
     lane = tid % BLOCK
     if lane == 0:
-        ranges[tile, 0] = start
-        ranges[tile, 1] = end
+        tiles.ranges[tile, 0] = start
+        tiles.ranges[tile, 1] = end
     state = fwd_state(1.0, 0.0, 0.0, 0.0, 0.0, int_bits(start), 0.0, 0.0)
     if not inside:
         state[6] = 1.0
@@ -670,12 +665,12 @@ def rasterize_fwd_cuda(
         s = splat()
         if k0 + lane < end:
             load = 1
-            s = splats[gauss_ids[k0 + lane]]
-        state = composite_batch(load, lane, s, wp.min(BLOCK, end - k0), k0, float(x) + 0.5, float(y) + 0.5, alpha_max,
-                                state)
+            s = tiles.splats[tiles.gauss_ids[k0 + lane]]
+        state = composite_batch(load, lane, s, wp.min(BLOCK, end - k0), k0, float(x) + 0.5, float(y) + 0.5,
+                                tiles.alpha_max, state)
     if inside:
         store_pixel(y * width + x, wp.vec3(state[1], state[2], state[3]), state[4], state[0],
-                    float_bits(state[5]), background[0], out_color, out_depth, out_alpha, last_count)
+                    float_bits(state[5]), tiles.background[0], image)
 
 
 def tile_size_for(device: str) -> int:

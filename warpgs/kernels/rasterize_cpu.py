@@ -5,8 +5,9 @@ Only Warp code lives here.
 
 import warp as wp
 
-from warpgs.kernels.rasterize import (COMPOSITED, SATURATED, TILE_SIZE_CPU, accumulate_grad, composite_splat, grad10,
-                                      pixel_grad_inputs, splat, splat_backward, store_pixel)
+from warpgs.kernels.rasterize import (COMPOSITED, SATURATED, TILE_SIZE_CPU, Image, PixelGrads, SplatGrads, Tiles,
+                                      accumulate_grad, composite_splat, grad10, pixel_grad_inputs, splat_backward,
+                                      store_pixel)
 
 # the module options of warpgs.kernels.rasterize, which these kernels were built with
 wp.set_module_options({"enable_backward": False, "fast_math": True})
@@ -23,40 +24,30 @@ rowi = wp.types.vector(length=TILE_SIZE_CPU, dtype=wp.int32)
 
 
 @wp.func
-def row_of_thread(tid: int, tiles_x: int):
-    """-> (tile, x of the row's first pixel, y) for CPU thread ``tid`` (TILE_SIZE_CPU threads per tile)."""
+def row_of_thread(tiles: Tiles, tid: int):
+    """-> (whether CPU thread ``tid``, TILE_SIZE_CPU threads per tile, has a row of pixels in the image; x of the
+    row's first pixel, y, and its tile's [start, end) in ``gauss_ids``, the last three 0 where it has none)."""
     tile = tid / TILE_SIZE_CPU
-    ty = tile / tiles_x
-    tx = tile - ty * tiles_x
-    return tile, tx * TILE_SIZE_CPU, ty * TILE_SIZE_CPU + tid - tile * TILE_SIZE_CPU
+    ty = tile / tiles.tiles_x
+    tx = tile - ty * tiles.tiles_x
+    x0 = tx * TILE_SIZE_CPU
+    y = ty * TILE_SIZE_CPU + tid - tile * TILE_SIZE_CPU
+    inside = tile < tiles.ranges.shape[0] and y < tiles.height and x0 < tiles.width
+    start = int(0)
+    end = int(0)
+    if inside:
+        start = tiles.ranges[tile, 0]
+        end = tiles.ranges[tile, 1]
+    return inside, x0, y, start, end
 
 
 @wp.kernel
-def rasterize_fwd_cpu(
-    ranges: wp.array2d(dtype=wp.int32),
-    gauss_ids: wp.array(dtype=wp.int32),
-    splats: wp.array(dtype=splat),
-    background: wp.array(dtype=wp.vec3),
-    width: int,
-    height: int,
-    tiles_x: int,
-    alpha_max: float,
-    out_color: wp.array(dtype=wp.vec3),
-    out_depth: wp.array(dtype=float),
-    out_alpha: wp.array(dtype=float),
-    last_count: wp.array(dtype=wp.int32),
-    part: int,
-    n_parts: int,
-):
-    tid = wp.tid() * n_parts + part  # see PARTS_NOTE
-    if tid >= ranges.shape[0] * TILE_SIZE_CPU:
+def rasterize_fwd_cpu(tiles: Tiles, image: Image, part: int, n_parts: int):
+    inside, x0, y, start, end = row_of_thread(tiles, wp.tid() * n_parts + part)  # see PARTS_NOTE
+    if not inside:
         return
-    tile, x0, y = row_of_thread(tid, tiles_x)
-    if y >= height or x0 >= width:
-        return
+    width = tiles.width
     py = float(y) + 0.5
-    start = ranges[tile, 0]
-    end = ranges[tile, 1]
     T = rowf(1.0)
     R = rowf(0.0)
     G = rowf(0.0)
@@ -73,10 +64,10 @@ def rasterize_fwd_cpu(
     for k in range(start, end):
         if n_live == 0:
             break
-        s = splats[gauss_ids[k]]
+        s = tiles.splats[tiles.gauss_ids[k]]
         for i in range(TILE_SIZE_CPU):
             if live[i] != 0:
-                status, t, c, d = composite_splat(s, float(x0 + i) + 0.5, py, alpha_max, T[i],
+                status, t, c, d = composite_splat(s, float(x0 + i) + 0.5, py, tiles.alpha_max, T[i],
                                                   wp.vec3(R[i], G[i], B[i]), D[i])
                 if status == SATURATED:
                     live[i] = 0
@@ -88,49 +79,20 @@ def rasterize_fwd_cpu(
                     B[i] = c[2]
                     D[i] = d
                     n[i] = k + 1
-    bg = background[0]
+    bg = tiles.background[0]
     for i in range(TILE_SIZE_CPU):
         if x0 + i < width:
-            store_pixel(y * width + x0 + i, wp.vec3(R[i], G[i], B[i]), D[i], T[i], n[i], bg, out_color, out_depth,
-                        out_alpha, last_count)
+            store_pixel(y * width + x0 + i, wp.vec3(R[i], G[i], B[i]), D[i], T[i], n[i], bg, image)
 
 
 @wp.kernel
-def rasterize_bwd_cpu(
-    ranges: wp.array2d(dtype=wp.int32),
-    gauss_ids: wp.array(dtype=wp.int32),
-    splats: wp.array(dtype=splat),
-    background: wp.array(dtype=wp.vec3),
-    width: int,
-    height: int,
-    tiles_x: int,
-    alpha_max: float,
-    out_depth: wp.array(dtype=float),
-    out_alpha: wp.array(dtype=float),
-    last_count: wp.array(dtype=wp.int32),
-    v_out_color: wp.array(dtype=wp.vec3),
-    v_out_depth: wp.array(dtype=float),
-    v_out_alpha: wp.array(dtype=float),
-    fixed: int,
-    with_depth: int,
-    v_fixed: wp.array2d(dtype=wp.int64),
-    v_means2d: wp.array(dtype=wp.vec2),
-    v_conics: wp.array(dtype=wp.vec3),
-    v_opacities: wp.array(dtype=float),
-    v_colors: wp.array(dtype=wp.vec3),
-    v_depths: wp.array(dtype=float),
-    part: int,
-    n_parts: int,
-):
-    tid = wp.tid() * n_parts + part  # see PARTS_NOTE
-    if tid >= ranges.shape[0] * TILE_SIZE_CPU:
+def rasterize_bwd_cpu(tiles: Tiles, pixels: PixelGrads, grads: SplatGrads, part: int, n_parts: int):
+    inside, x0, y, start, end = row_of_thread(tiles, wp.tid() * n_parts + part)  # see PARTS_NOTE
+    if not inside:
         return
-    tile, x0, y = row_of_thread(tid, tiles_x)
-    if y >= height or x0 >= width:
-        return
+    width = tiles.width
     py = float(y) + 0.5
-    start = ranges[tile, 0]
-    bg = background[0]
+    bg = tiles.background[0]
     last = rowi(start)
     T_final = rowf(1.0)
     T = rowf(1.0)
@@ -146,8 +108,7 @@ def rasterize_bwd_cpu(
     k_end = start
     for i in range(TILE_SIZE_CPU):
         if x0 + i < width:
-            li, tf, vc, vd, va = pixel_grad_inputs(True, y * width + x0 + i, start, last_count, out_depth, out_alpha,
-                                                   v_out_color, v_out_depth, v_out_alpha)
+            li, tf, vc, vd, va = pixel_grad_inputs(True, y * width + x0 + i, start, pixels)
             last[i] = li
             T_final[i] = tf
             T[i] = tf
@@ -159,16 +120,16 @@ def rasterize_bwd_cpu(
             k_end = wp.max(k_end, li)
     for j in range(k_end - start):
         k = k_end - 1 - j
-        g = gauss_ids[k]
-        s = splats[g]
+        g = tiles.gauss_ids[k]
+        s = tiles.splats[g]
         total = grad10()  # the row's sum of this Gaussian's gradient
         any_valid = int(0)
         for i in range(TILE_SIZE_CPU):
             if k < last[i]:
-                valid, t, sc, sd, gi = splat_backward(s, float(x0 + i) + 0.5, py, alpha_max, T[i],
+                valid, t, sc, sd, gi = splat_backward(s, float(x0 + i) + 0.5, py, tiles.alpha_max, T[i],
                                                       wp.vec3(SR[i], SG[i], SB[i]), SD[i],
                                                       wp.vec3(vR[i], vG[i], vB[i]), vD[i], vA_bg[i], T_final[i],
-                                                      with_depth)
+                                                      grads.with_depth)
                 if valid != 0:
                     T[i] = t
                     SR[i] = sc[0]
@@ -177,6 +138,5 @@ def rasterize_bwd_cpu(
                     SD[i] = sd
                     total = total + gi
                     any_valid = 1
-        accumulate_grad(any_valid, g, total, fixed, with_depth, v_fixed, v_means2d, v_conics, v_opacities, v_colors,
-                        v_depths)
+        accumulate_grad(any_valid, g, total, grads)
 
