@@ -44,6 +44,12 @@ def test_gpu_shares_and_the_plan_need_no_ray(tmp_path, capsys):
     assert "48x48" in rows["scene_2v_baseline_s0"] and "0.125 GPU" in rows["scene_3v_full_s1"]
     assert "size unknown" in rows["missing_3v_baseline_s0"] and "128x96" in rows["synthetic_2v_full_s1"]
     assert batch.main(args + ["--device", "cpu"]) == 0 and "GPU" not in capsys.readouterr().out
+    # every method of the main command; CoR-GS's pair is one run
+    assert batch.main(["--data", "synthetic", "--views", "2", "--method", "corgs", "--out", str(tmp_path / "c"),
+                       "--list"]) == 0
+    assert capsys.readouterr().out.splitlines()[1].split()[0] == "synthetic_2v_corgs_s0"
+    assert batch.main(["--data", "synthetic", "--method", "nerf", "--list"]) == 2
+    assert "available methods are baseline, full, corgs, compare" in capsys.readouterr().err
     # a bad setting of every run is one line before anything starts
     assert batch.main(["--data", str(data), "--set", "train.iterations=0", "--list"]) == 2
     err = capsys.readouterr().err.strip().splitlines()

@@ -474,7 +474,7 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--dataset", default="dl3dv", help="the dataset a bare scene name belongs to (default: dl3dv)")
     g.add_argument("--data-root", default=None, help="folder holding the datasets (as for warpgs.pipelines.sparse)")
     g.add_argument("--views", default=None, help="comma-separated training view counts (default: the dataset's)")
-    g.add_argument("--method", default="compare", help="baseline, full or compare (both; default)")
+    g.add_argument("--method", default="compare", help="baseline, full, corgs or compare (baseline and full; default)")
     g.add_argument("--seeds", default="0", help="comma-separated seeds (default: 0)")
     g.add_argument("--iterations", type=int, default=None, help="training steps of every run")
     g.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="config override of every run (repeatable)")

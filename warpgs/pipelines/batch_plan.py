@@ -155,11 +155,12 @@ def plan(args) -> list[RunSpec]:
     run itself will (``BatchError`` naming the run on a bad value), with its resources: a GPU share unless
     ``--device cpu``."""
     from warpgs.config import ConfigError
-    from warpgs.pipelines.sparse import build_parser, make_config
+    from warpgs.pipelines.sparse import METHODS, build_parser, make_config
 
-    methods = {"compare": ["baseline", "full"], "baseline": ["baseline"], "full": ["full"]}.get(args.method)
+    # compare: the baseline and the full method as two runs; every other method one run
+    methods = {"compare": ["baseline", "full"], **{m: [m] for m in METHODS if m != "compare"}}.get(args.method)
     if methods is None:
-        raise BatchError(f"--method {args.method!r}: available methods are baseline, full, compare")
+        raise BatchError(f"--method {args.method!r}: available methods are {', '.join(METHODS)}")
     common = []
     for f in args.config:
         common += ["--config", str(Path(f).resolve())]
