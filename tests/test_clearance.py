@@ -1,4 +1,4 @@
-"""The camera path's clearance (warpgs/clearance.py, train.path_clearance): segment distances against a dense
+"""The camera path's clearance (warpgs/strategy/clearance.py, train.path_clearance): segment distances against a dense
 sampling of the segments, which Gaussians count as on the path, segments that pass the scene's geometry, and
 the trainer removing what lies on the path (and nothing when it is off)."""
 
@@ -7,7 +7,7 @@ import pytest
 import torch
 
 from test_rasterizer import DEVICES
-from warpgs.clearance import PathClearance, segment_distance
+from warpgs.strategy.clearance import PathClearance, segment_distance
 
 
 def look_at_viewmat(eye, target=(0.0, 0.0, 10.0)):
@@ -114,7 +114,7 @@ def test_path_floaters_are_what_a_pose_of_the_path_sees_and_no_input_does():
     Gaussian the inputs see as much as the path does is not either."""
     from types import SimpleNamespace
 
-    from warpgs.clearance import PathFloaters
+    from warpgs.strategy.clearance import PathFloaters
 
     xs = (0.0, 2.0, 4.0)
     V = np.stack([look_at_viewmat((x, 0.0, 0.0), (x, 0.0, 10.0)) for x in xs])
@@ -143,7 +143,7 @@ def test_path_floaters_on_both_paths_find_what_stands_before_the_line_where_the_
     (``"both"``) see it straight ahead. No input sees it, and the wall is found by neither. A bad value is named."""
     from types import SimpleNamespace
 
-    from warpgs.clearance import PathFloaters
+    from warpgs.strategy.clearance import PathFloaters
     from warpgs.geometry import camera_centres
     from warpgs.pseudo.trajectory import path_trajectories
 
@@ -170,7 +170,7 @@ def test_path_floaters_on_both_paths_find_what_stands_before_the_line_where_the_
 @pytest.mark.skipif("cpu" not in DEVICES, reason="trains on the CPU (the GPU machine's packed Warp has no CPU compiler)")
 def test_trainer_removes_the_path_floaters_on_its_schedule(tmp_path):
     from tiny_scene import make_scene, tiny_config
-    from warpgs.clearance import PathFloaters
+    from warpgs.strategy.clearance import PathFloaters
     from warpgs.methods.full import append_gaussians
     from warpgs.train import Trainer
 

@@ -1,4 +1,4 @@
-"""Compact mode (warpgs/compact.py): importance pruning, the search's tolerance on the training views,
+"""Compact mode (warpgs/strategy/compact.py): importance pruning, the search's tolerance on the training views,
 SH-degree reduction, PLY at a reduced degree, byte counts, the schedule during training, the CLI flag."""
 
 import copy
@@ -12,7 +12,7 @@ import torch
 
 import reference
 from tiny_scene import camera_ring, make_scene, tiny_config, write_nerfstudio
-from warpgs.compact import (CompactConfig, ScheduledPruning, attach, check_config, importance, lowest_mask, param_bytes,
+from warpgs.strategy.compact import (CompactConfig, ScheduledPruning, attach, check_config, importance, lowest_mask, param_bytes,
                             ply_bytes, prune_lowest, search, size_report, truncate_sh, virtual_cameras)
 from warpgs.config import Config
 from warpgs.model import GaussianModel

@@ -35,7 +35,8 @@ from warpgs.points import GeometryConfig
 from warpgs.pseudo.views import PseudoConfig
 from warpgs.runfolder import atomic_write
 from warpgs.regularizers import LEGACY_TRAIN_KEYS, RegularizersConfig
-from warpgs.strategy import DefaultStrategy
+from warpgs.strategy.config import CompactConfig
+from warpgs.strategy.default import DefaultStrategy
 
 
 FAR_FIELD_RULE = "{" + ", ".join(FAR_FIELDS) + "}"  # train.far_field, full.far_field
@@ -124,15 +125,15 @@ class TrainConfig:
     #   leaves a vertical cylinder around the capture, its centre and radius chosen leave-one-out over the inputs
     #   among candidates from the initial points (or no cylinder when none predicts better; warpgs/farfield.py)
     path_clearance: float = 0.0  # > 0: every strategy.refine_every steps, remove the Gaussians whose centre lies
-    #   within this x the scene's near depth of the camera path (warpgs/clearance.py: the photographer's space,
+    #   within this x the scene's near depth of the camera path (warpgs/strategy/clearance.py: the photographer's space,
     #   where floaters in front of novel views sit); 0: off
     view_clearance: float = 0.0  # > 0: with the path clearance's schedule, also remove the Gaussians nearer than
     #   this x the near depth in front of any pose of the camera path (the inputs and the poses between them),
-    #   inside its image (warpgs/clearance.py); 0: off
+    #   inside its image (warpgs/strategy/clearance.py); 0: off
     path_floaters: float = 0.0  # > 0: every path_floaters_every steps and before the final evaluation, remove
     #   the Gaussians that a pose of the camera path between neighbouring inputs sees with more than this x
     #   their blending weight in all the inputs together (and with at least 0.1% of that pose's weight):
-    #   floaters no input constrains, in front of novel views taken from the path (warpgs/clearance.py
+    #   floaters no input constrains, in front of novel views taken from the path (warpgs/strategy/clearance.py
     #   ``PathFloaters``; bench/diagnostics/floaters.py's test, which used 10 with the test views); 0: off
     path_floaters_every: int = 500
     path_floaters_final: bool = True  # also the pass before the final evaluation (no training after it)
@@ -307,44 +308,6 @@ class FullConfig:
               "path_consistency": ">= 0", "reliable_weight": "> 0", "flythrough_frames": ">= 0"}
 
 
-IMPORTANCE_VIEWS = ("train", "virtual", "pseudo")
-
-
-@dataclass
-class CompactConfig:
-    """Compact mode (``--compact``, warpgs/compact.py): importance pruning during training and a search for
-    the smallest model within a tolerance of the best training-view PSNR."""
-
-    enabled: bool = False
-    importance: str = "weight"  # weight (total blending weight) | weight_volume (x volume^volume_power, LightGaussian)
-    volume_power: float = 0.1
-    importance_views: list = field(default_factory=lambda: ["train", "pseudo"])  # of train, virtual, pseudo
-    virtual_frames: int = 3  # virtual: poses interpolated between each pair of neighbouring training views
-    prune_at: list = field(default_factory=lambda: [0.5, 0.65, 0.8])  # fractions of the run; [] = none
-    prune_ratio: float = 0.3  # share of the Gaussians pruned at each of prune_at
-    cap_after_prune: bool = False  # densification may not grow the count back above what each pruning left
-    stop_densify_at: float | None = None  # fraction of train.iterations after which densification stops (None: the strategy's)
-    tolerance_db: float = 0.1  # training-view PSNR the final model may lose against the best evaluated
-    ratios: list = field(default_factory=lambda: [0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9])  # searched; [] = no search
-    finetune_steps: int = 300  # per point of the search
-    sh_search: bool = True  # try lower SH degrees (0 first)
-    report_test: bool = True  # record each point's test PSNR (reported only; never used to choose)
-    seed: int = 0
-
-    LIMITS = {"importance": "{weight, weight_volume}", "volume_power": ">= 0",
-              "importance_views": "{" + ", ".join(IMPORTANCE_VIEWS) + "}", "virtual_frames": ">= 0",
-              "prune_at": "(0, 1)", "prune_ratio": "[0, 1)", "stop_densify_at": "(0, 1]", "tolerance_db": ">= 0",
-              "ratios": "(0, 1)", "finetune_steps": ">= 0", "seed": ">= 0"}
-
-
-def check_compact_config(c: CompactConfig) -> CompactConfig:
-    """The ranges of ``CompactConfig.LIMITS`` (for options built in code) and a non-empty list of views."""
-    check_limits(c, "compact mode's options", "compact.")
-    if not c.importance_views:
-        raise ConfigError("compact.importance_views is empty: a non-empty list of " + ", ".join(IMPORTANCE_VIEWS))
-    return c
-
-
 @dataclass
 class Config:
     method: str = "baseline"  # baseline | full | corgs (warpgs.methods); the command's compare runs baseline and full
@@ -359,7 +322,7 @@ class Config:
     regularizers: RegularizersConfig = field(default_factory=RegularizersConfig)  # warpgs/regularizers, one each
     eval: EvalConfig = field(default_factory=EvalConfig)
     full: FullConfig = field(default_factory=FullConfig)
-    compact: CompactConfig = field(default_factory=CompactConfig)  # compact mode (warpgs/compact.py, --compact)
+    compact: CompactConfig = field(default_factory=CompactConfig)  # compact mode (warpgs/strategy/compact.py)
     geometry: GeometryConfig = field(default_factory=GeometryConfig)  # model.init sfm / stereo (warpgs/points)
     pseudo: PseudoConfig = field(default_factory=PseudoConfig)  # the full method's pseudo views (warpgs/pseudo)
     densify: DensifyConfig = field(default_factory=DensifyConfig)  # its densification from them (warpgs/densify)

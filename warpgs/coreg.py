@@ -38,7 +38,7 @@ from warpgs.densify import within_radius
 from warpgs.model import PARAM_NAMES, GaussianModel
 from warpgs.optim import STATE_PARTS, load_model_state, make_optimizer, model_state
 from warpgs.pseudo.trajectory import virtual_cameras
-from warpgs.strategy import remove
+from warpgs.strategy.ops import remove
 
 SEED_OFFSETS = {"split": 11, "drop": 12, "views": 13}  # the partner's random streams: train.seed + these
 

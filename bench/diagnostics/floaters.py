@@ -10,7 +10,7 @@ inputs barely use them (``--ratio``: test weight over input weight) are the susp
 worst view's top suspects (distance to the test camera, size, opacity, colour, weights) and the PSNR of every
 test view with the suspects of *all* views removed, and with every Gaussian the inputs use less than
 ``--min-input`` pixels removed, and how far the worst view's suspects and every test camera lie from the camera
-path (``warpgs/clearance.py``; ``path_near``: in the run's near depths, as ``train.path_clearance`` counts).
+path (``warpgs/strategy/clearance.py``; ``path_near``: in the run's near depths, as ``train.path_clearance`` counts).
 ``--unseen-sweep 0.05,1,5``: also each view's PSNR without the Gaussians below each of those input weights
 (what ``train.prune_unseen_at_end`` with that ``strategy.unseen_min_weight`` would leave).
 Writes ``floaters.json`` in each run folder (or ``--out``).
@@ -77,7 +77,7 @@ def render_view(model, cam, far_field, background: torch.Tensor, keep: torch.Ten
 def diagnose(run: Path, device: str, data_root: str | None, ratio: float, min_input: float, top: int,
              sweep: tuple[float, ...] = ()) -> dict:
     from warpgs.strategy import contribution
-    from warpgs.clearance import PathClearance, segment_distance
+    from warpgs.strategy.clearance import PathClearance, segment_distance
 
     cfg, scene, model, ff, bgc, train, test = load_run(run, device, data_root)
 

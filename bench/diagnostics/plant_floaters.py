@@ -1,4 +1,4 @@
-"""Which test cameras the path-floater pass (``train.path_floaters``, ``warpgs/clearance.py`` ``PathFloaters``)
+"""Which test cameras the path-floater pass (``train.path_floaters``, ``warpgs/strategy/clearance.py`` ``PathFloaters``)
 protects: plant an opaque, dark Gaussian on each test camera's optical axis at several distances in front of it,
 in a trained model, and report for each whether the pass finds it with N poses per pair of inputs (on the pseudo
 views' spline, and on it and the straight line between the inputs: ``train.path_floaters_paths``), and whether
@@ -46,7 +46,7 @@ def planted(params: dict, points: np.ndarray, radius: np.ndarray, max_sh_degree:
 
 
 def main(argv=None) -> int:
-    from warpgs.clearance import PathFloaters
+    from warpgs.strategy.clearance import PathFloaters
     from warpgs.config import build_config
     from warpgs.configio import read_yaml
     from warpgs.pipelines.sparse import load_scene_for

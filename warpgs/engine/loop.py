@@ -9,7 +9,7 @@ terms, among them extra views, keeps its part of the training state, runs its ph
 training. One input view per iteration (3D-GS's shuffled order); loss = 0.8 L1 + 0.2 D-SSIM (+ a Pearson depth
 term when ``loss.depth_weight`` > 0 and the view has a depth prior); Adam with 3D-GS's learning rates and an
 exponentially decaying position rate; densification by ``DefaultStrategy``, then the pruning on the camera path
-(``warpgs.clearance.PathPruning``). The regularisers (``warpgs.regularizers``: dropout, opacity noise and decay,
+(``warpgs.strategy.clearance.PathPruning``). The regularisers (``warpgs.regularizers``: dropout, opacity noise and decay,
 the parameter priors, the binocular term, the path consistency) add their terms in their registry's order.
 
 The trainer's parts: ``warpgs.engine.init`` (the initial model and the configuration derived for the run),
@@ -40,7 +40,7 @@ import numpy as np
 import torch
 
 from warpgs import losses
-from warpgs.clearance import PathPruning
+from warpgs.strategy.clearance import PathPruning
 from warpgs.config import Config
 from warpgs.engine import state as training_state
 from warpgs.engine.background import Background
@@ -139,8 +139,8 @@ class Trainer:
         self.resumed = False  # a checkpoint of the middle of a phase was loaded: the next train() continues it
         self.compact_report: dict | None = None
         self.stopped_early: dict | None = None  # set by the caller when training stopped before the end
-        self.reserved_steps = 0  # compact mode: the last steps, taken by the search's fine-tunes (warpgs/compact.py)
-        # stages above training (compact mode, warpgs/compact.py): objects with ``before_evaluation(trainer)``
+        self.reserved_steps = 0  # compact mode: the last steps, taken by the search's fine-tunes (warpgs/strategy/compact.py)
+        # stages above training (compact mode, warpgs/strategy/compact.py): objects with ``before_evaluation(trainer)``
         # that ``finish`` calls in order, after training and before the test metrics. They are attached by
         # whoever builds the trainer (warpgs.pipelines.sparse.make_trainer), so this module imports none of them.
         self.stages: list = []

@@ -2,7 +2,7 @@
 in three parts: ``model`` (parameters, Adam's moments, densification statistics), ``progress`` (step, RNGs,
 view order) and ``history`` (times, losses, recoveries, curve). Checkpoints hold all three, the in-memory
 snapshot of a divergence rollback (``warpgs.engine.stepguard``) ``model`` and ``progress``, compact mode's
-search (``warpgs.compact``) ``model``. A checkpoint of format 1 (the layout before the method's share moved
+search (``warpgs.strategy.compact``) ``model``. A checkpoint of format 1 (the layout before the method's share moved
 under ``method``) is upgraded when read (``upgrade_format_1``)."""
 
 from __future__ import annotations

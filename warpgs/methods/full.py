@@ -64,7 +64,7 @@ def check_settings(s: FullConfig) -> FullConfig:
 def append_gaussians(trainer: Trainer, means, colors, scales, opacity: float) -> int:
     """Adds Gaussians (centres, RGB colours, isotropic std devs) to the trainer's model, with zero Adam
     moments and zero densification statistics."""
-    from warpgs.strategy import update_params
+    from warpgs.strategy.ops import update_params
 
     n = int(means.shape[0])
     if n == 0:

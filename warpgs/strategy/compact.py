@@ -4,7 +4,7 @@ Three parts, in the spirit of LightGaussian (global significance pruning, SH dis
 Mini-Splatting (pruning by blending weight):
 
 1. **Importance.** A Gaussian's importance is its total blending weight ``sum_pixels alpha_i T_i`` over
-   the importance views (``warpgs.strategy.contribution``: the training views, optionally poses
+   the importance views (``warpgs.strategy.ops.contribution``: the training views, optionally poses
    interpolated between them and, for the full method, its pseudo views), optionally multiplied by its
    volume ``prod(scales) ** volume_power`` (LightGaussian's global significance; ``importance:
    weight_volume``). A Gaussian that covers no pixel of any of those views has importance 0.
@@ -49,10 +49,10 @@ import copy
 import numpy as np
 import torch
 
-from warpgs.config import CompactConfig, check_compact_config as check_config
 from warpgs.model import GaussianModel, num_sh_coeffs, param_bytes, ply_bytes, size_report  # sizes: re-exported
 from warpgs.pseudo.trajectory import virtual_cameras  # noqa: F401  (re-exported: compact mode's "virtual" views)
-from warpgs.strategy import contribution, remove, update_params
+from warpgs.strategy.config import CompactConfig, check_compact_config as check_config
+from warpgs.strategy.ops import contribution, remove, update_params
 
 # ----------------------------------------------------------------------------------------------
 # importance and pruning

@@ -30,6 +30,8 @@ from __future__ import annotations
 import numpy as np
 import torch
 
+from warpgs.strategy.ops import contribution, remove
+
 
 def _pairwise(points: torch.Tensor, a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
     """[n, K] distance of each of ``points`` [n, 3] to each segment ``a[k]``-``b[k]`` ([K, 3])."""
@@ -161,8 +163,6 @@ class PathFloaters:
         least ``min_share`` of that pose's total weight."""
         from types import SimpleNamespace
 
-        from warpgs.strategy import contribution
-
         found = torch.zeros(len(model), dtype=torch.bool, device=model.device)
         if len(self.poses) == 0 or len(model) == 0:
             return found
@@ -232,8 +232,6 @@ class PathPruning:
     def after_densify(self, ctx, step: int, refine_every: int, info: dict) -> None:
         """After the strategy's densification of the trained model at ``step``: the Gaussians on the path go
         (``pruned_on_path`` in ``info``), and the floaters when due (``pruned_floaters``)."""
-        from warpgs.strategy import remove
-
         model = ctx.model
         if self.clearance is not None and step % refine_every == 0:
             on_path = self.clearance.inside(model.means)
@@ -248,8 +246,6 @@ class PathPruning:
         """Removes the Gaussians that poses of the camera path see and no input does (``PathFloaters.find``);
         returns how many."""
         import time
-
-        from warpgs.strategy import remove
 
         if self.floaters is None:
             return 0
