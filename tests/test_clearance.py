@@ -65,7 +65,7 @@ def test_trainer_removes_gaussians_on_the_camera_path(tmp_path):
             assert probe.radius > 0 and len(probe.a) > 0
             planted = ((probe.a + probe.b) / 2)[::3]
         n0 = len(tr.model)
-        append_gaussians(tr, planted, torch.full((len(planted), 3), 0.5), torch.full((len(planted), 3), 0.05), 0.9)
+        append_gaussians(tr.context, planted, torch.full((len(planted), 3), 0.5), torch.full((len(planted), 3), 0.05), 0.9)
         assert len(tr.model) == n0 + len(planted)
         tr.train(21)  # refinement steps at 0 and 20 (tiny_config: refine_every 20)
         on_path = PathClearance.build(np.stack([c.viewmat for c in scene.train]), 0.2 * near, order="nearest")
@@ -185,7 +185,7 @@ def test_trainer_removes_the_path_floaters_on_its_schedule(tmp_path):
         probe = PathFloaters.build(V, scene.train[0].K, (48, 48), 10.0, per_pair=3, order=cfg.pseudo.trajectory.order)
         c2w = torch.linalg.inv(probe.poses)
         planted = c2w[:, :3, 3] + 0.3 * float(scene.bounds[0]) * c2w[:, :3, 2]
-        append_gaussians(tr, planted, torch.full((len(planted), 3), 0.1), torch.full((len(planted), 3), 0.05), 0.9)
+        append_gaussians(tr.context, planted, torch.full((len(planted), 3), 0.1), torch.full((len(planted), 3), 0.05), 0.9)
         assert not tr.densify_only_updates_state(20) or ratio == 0
         tr.train(21)  # the floaters' step is 20
         d = torch.cdist(tr.model.means.detach(), planted).min(0).values
@@ -197,7 +197,7 @@ def test_trainer_removes_the_path_floaters_on_its_schedule(tmp_path):
         cfg = tiny_config(21, str(tmp_path / "none.pth"), path_floaters=10.0, path_floaters_every=1000,
                           path_floaters_final=final)
         tr = Trainer(cfg, scene, out_dir=tmp_path / f"final_{final}")
-        append_gaussians(tr, planted, torch.full((len(planted), 3), 0.1), torch.full((len(planted), 3), 0.05), 0.9)
+        append_gaussians(tr.context, planted, torch.full((len(planted), 3), 0.1), torch.full((len(planted), 3), 0.05), 0.9)
         tr.train(21)
         assert int((torch.cdist(tr.model.means.detach(), planted).min(0).values < 0.02).sum()) == len(planted)
         stages = tr.finish()["stage_times_s"]

@@ -137,20 +137,17 @@ class Trainer:
         self.saved_step: int | None = None  # the step of the checkpoint last written or read (messages)
         self.in_phase = False  # inside train()'s loop: a checkpoint written now is in the middle of a phase
         self.resumed = False  # a checkpoint of the middle of a phase was loaded: the next train() continues it
-        self.compact_report: dict | None = None
+        self.stage_records: dict = {}  # each stage's record by its name (metrics.json's ``compact``)
         self.stopped_early: dict | None = None  # set by the caller when training stopped before the end
-        self.reserved_steps = 0  # compact mode: the last steps, taken by the search's fine-tunes (warpgs/strategy/compact.py)
-        # stages above training (compact mode, warpgs/strategy/compact.py): objects with ``before_evaluation(trainer)``
-        # that ``finish`` calls in order, after training and before the test metrics. They are attached by
-        # whoever builds the trainer (warpgs.pipelines.sparse.make_trainer), so this module imports none of them.
-        self.stages: list = []
+        self.reserved_steps = 0  # the run's last steps, trained by a stage (compact mode's search's fine-tunes)
+        self.stages: list = []  # stages above training (``add_stage``; warpgs.engine.stage)
         # CoR-GS (--method corgs, or train.co_reg with any method): the second model of the co-regularised pair,
         # its optimiser and strategy
         self.pair = None
         if cfg.train.co_reg or getattr(method, "pair", False):
             from warpgs.coreg import CoRegPair
 
-            self.pair = CoRegPair(self)
+            self.pair = CoRegPair(self.context)
         self.method = method if method is not None else Method()
         self.method.attach(self)
         # train.cuda_graph: deferred steps replayed as one CUDA graph (warpgs/engine/graphstep.py)
@@ -417,6 +414,15 @@ class Trainer:
         self.curve.append(row)
         return row
 
+    def add_stage(self, stage) -> None:
+        """A stage above training (``warpgs.engine.stage.Stage``, before training or resuming): the run's last
+        steps it reserves, its wrap of the strategy; ``finish`` runs it. A stage of a kind already added: nothing."""
+        if any(type(s) is type(stage) for s in self.stages):
+            return
+        self.stages.append(stage)
+        self.reserved_steps = max(self.reserved_steps, stage.reserve_steps(self.cfg.train.iterations))
+        self.strategy = stage.wrap_strategy(self.strategy, self.context)
+
     def request_stop(self) -> None:
         """Stop after the current step, saving a checkpoint (what Ctrl-C and SIGTERM do)."""
         self.stop.request()
@@ -450,18 +456,6 @@ class Trainer:
                               masked=bool(self.scene.eval_masked), scene_name=self.scene.name,
                               lpips_weights=self.cfg.eval.lpips_weights, device=self.device, save_dir=save_dir,
                               lpips=lpips)
-
-    def remove_path_floaters(self, step: int) -> int:
-        """``train.path_floaters``: removes the Gaussians that poses of the camera path see and no input does
-        (``PathPruning.remove_floaters``); returns how many. Runs on its schedule in ``densify`` and once more
-        before the final evaluation."""
-        return self.path_pruning.remove_floaters(self.context, step)
-
-    def prune_unseen(self) -> int:
-        """The final pruning (``train.prune_unseen_at_end``): drops what no training view uses."""
-        if self.n_before_compaction is None:
-            self.n_before_compaction = len(self.model)
-        return self.strategy.prune_unseen(self.model, self.optimizer, self.state, self.train_cams, self.background)
 
     def export_ply(self, path: str | Path | None = None) -> Path:
         return self.model.save_ply(Path(path) if path is not None else self.out / "point_cloud.ply")
