@@ -1,4 +1,4 @@
-"""The camera path's clearance (warpgs/strategy/clearance.py, train.path_clearance): segment distances against a dense
+"""The camera path's clearance (warpgs/strategy/clearance.py, clearance.path): segment distances against a dense
 sampling of the segments, which Gaussians count as on the path, segments that pass the scene's geometry, and
 the trainer removing what lies on the path (and nothing when it is off)."""
 
@@ -163,7 +163,7 @@ def test_path_floaters_on_both_paths_find_what_stands_before_the_line_where_the_
     assert len(spline.poses) == 3 * 3 and len(both.poses) == 2 * 3 * 3
     assert spline.find(model, inputs).tolist() == [False] * (len(wall) + 1)
     assert both.find(model, inputs).tolist() == [False] * len(wall) + [True]
-    with pytest.raises(ValueError, match="path_floaters_paths"):
+    with pytest.raises(ValueError, match="clearance.floaters_paths"):
         PathFloaters.build(V, K, (50, 40), ratio=10.0, paths="curve")
 
 

@@ -35,7 +35,7 @@ from warpgs.points import GeometryConfig
 from warpgs.pseudo.views import PseudoConfig
 from warpgs.runfolder import atomic_write
 from warpgs.regularizers import LEGACY_TRAIN_KEYS, RegularizersConfig
-from warpgs.strategy.config import CompactConfig
+from warpgs.strategy.config import ClearanceConfig, CompactConfig
 from warpgs.strategy.default import DefaultStrategy
 
 
@@ -124,62 +124,42 @@ class TrainConfig:
     far_field_proxy: str = "none"  # none: bands by the ray's elevation | auto: by the elevation of where the ray
     #   leaves a vertical cylinder around the capture, its centre and radius chosen leave-one-out over the inputs
     #   among candidates from the initial points (or no cylinder when none predicts better; warpgs/farfield.py)
-    path_clearance: float = 0.0  # > 0: every strategy.refine_every steps, remove the Gaussians whose centre lies
-    #   within this x the scene's near depth of the camera path (warpgs/strategy/clearance.py: the photographer's space,
-    #   where floaters in front of novel views sit); 0: off
-    view_clearance: float = 0.0  # > 0: with the path clearance's schedule, also remove the Gaussians nearer than
-    #   this x the near depth in front of any pose of the camera path (the inputs and the poses between them),
-    #   inside its image (warpgs/strategy/clearance.py); 0: off
-    path_floaters: float = 0.0  # > 0: every path_floaters_every steps and before the final evaluation, remove
-    #   the Gaussians that a pose of the camera path between neighbouring inputs sees with more than this x
-    #   their blending weight in all the inputs together (and with at least 0.1% of that pose's weight):
-    #   floaters no input constrains, in front of novel views taken from the path (warpgs/strategy/clearance.py
-    #   ``PathFloaters``; bench/diagnostics/floaters.py's test, which used 10 with the test views); 0: off
-    path_floaters_every: int = 500
-    path_floaters_final: bool = True  # also the pass before the final evaluation (no training after it)
-    path_floaters_poses: int = 3  # poses of the path between each pair of neighbouring inputs
-    path_floaters_paths: str = "spline"  # spline: those poses on the pseudo views' path | both: also as many on the
-    #   straight line between the two inputs (bench/diagnostics/plant_floaters.py: castle_p30 9 views' test frame 16 stands
-    #   1.5 m from that line and 4.4 m from the spline, which bulges across the 22.6 m gap between its inputs)
-    hold_geometry: str = "off"  # off | on | stereo: train the colours and opacities at full rate and hold the initial
-    #   geometry: no densification or pruning by the strategy (strategy.refine_stop_iter 0) and the means', scales'
-    #   and rotations' learning rates x the hold_* factors below; stereo: only when the initial points came from
-    #   plane-sweep stereo alone (model.init sfm falling back to stereo on wide baselines, or stereo): a dense
-    #   cloud that growth would only bend towards the few inputs (warpgs.engine.init.hold_geometry)
-    hold_means_lr: float = 0.1
-    hold_scales_lr: float = 0.2
-    hold_quats_lr: float = 0.1
-    prune_unseen_at_end: bool = False  # at the end, drop Gaussians no training view needs (the captures' default:
-    #   a Gaussian no input sees can only stand in front of a novel view; on scenes whose test views see what the
-    #   inputs do not, it can cost novel-view PSNR)
-    # CoR-GS (Zhang et al., ECCV 2024; warpgs/coreg.py): a second model trained beside the first from the same
-    # initial Gaussians, on the same views, with its own random streams; twice the training cost. The first model
-    # is the one evaluated and exported
-    co_reg: bool = False
-    co_prune_every: int = 500  # co-pruning every this many steps after strategy.refine_start_iter (CoR-GS: 500,
-    #   at a densification step); 0: no co-pruning
-    co_prune_dist: float = 0.75  # co-pruning drops a Gaussian with no centre of the other model within this x the
-    #   scene scale (optim.scene_scale: the training cameras' extent). CoR-GS's tau = 5 on LLFF 3 views is in
-    #   COLMAP's units, where the middle 80% of the 20 camera centres span 10: the 3 training views, at both ends
-    #   and the middle, have an extent of about 6.5, so tau is about 0.75 of it
-    co_reg_weight: float = 1.0  # x (l1_weight L1 + ssim_weight D-SSIM) between the two models' renders of a pose
-    #   between two neighbouring training views, each against the other's detached render (CoR-GS: 1); 0: off
-    co_reg_start: int = 500  # first step of the co-regularisation (CoR-GS's LLFF script: 500)
-    co_reg_frames: int = 24  # pseudo poses between each pair of neighbouring training views, drawn in turn
     progress: bool = True
 
     def __post_init__(self):
-        # the sections keys of earlier versions moved to (a Config links its own here: Config.__post_init__);
-        # cfg.train.<old key> reads and sets them there (_moved_key)
-        self._sections = {"guard": GuardConfig(), "regularizers": RegularizersConfig()}
+        # the sections keys of earlier versions moved to, defaults for a TrainConfig of its own (a Config links its
+        # own: link_sections); cfg.train.<old key> reads and sets them there (_moved_key)
+        self.link_sections({name: cls() for name, cls in MOVED_SECTIONS.items()})
+
+    def link_sections(self, sections: dict) -> None:
+        """The sections (by name) that ``train.<key>`` of an earlier version reads and sets (``TRAIN_MOVED``)."""
+        self._sections = dict(sections)
+
+    def moved_section(self, name: str):
+        return self._sections[name]
 
     LIMITS = {"iterations": ">= 1", "seed": ">= 0", "sh_degree_interval": ">= 0", "checkpoint_every": ">= 0",
               "eval_every": ">= 0", "background": "[0, 1]", "far_field": FAR_FIELD_RULE, "far_field_bins": ">= 1",
-              "far_field_blur": ">= 0 or {auto}", "far_field_proxy": "{none, auto}", "hold_geometry": "{off, on, stereo}",
-              "hold_means_lr": "> 0", "hold_scales_lr": "> 0", "hold_quats_lr": "> 0", "path_clearance": ">= 0",
-              "view_clearance": ">= 0", "path_floaters": ">= 0", "path_floaters_every": ">= 1", "path_floaters_poses": ">= 1",
-              "path_floaters_paths": "{spline, both}", "co_prune_every": ">= 0", "co_prune_dist": "> 0",
-              "co_reg_weight": ">= 0", "co_reg_start": ">= 0", "co_reg_frames": ">= 1"}
+              "far_field_blur": ">= 0 or {auto}", "far_field_proxy": "{none, auto}"}
+
+
+@dataclass
+class HoldConfig:
+    """Holding the initial geometry (``hold``; warpgs.engine.init.hold_geometry): the colours and opacities train
+    at full rate, the geometry slowly and without densification."""
+
+    geometry: str = "off"  # off | on | stereo: train the colours and opacities at full rate and hold the initial
+    #   geometry: no densification or pruning by the strategy (strategy.refine_stop_iter 0) and the means', scales'
+    #   and rotations' learning rates x the factors below; stereo: only when the initial points came from
+    #   plane-sweep stereo alone (model.init sfm falling back to stereo on wide baselines, or stereo): a dense
+    #   cloud that growth would only bend towards the few inputs
+    means_lr: float = 0.1
+    scales_lr: float = 0.2
+    quats_lr: float = 0.1
+
+    LIMITS = {"geometry": "{off, on, stereo}", "means_lr": "> 0", "scales_lr": "> 0", "quats_lr": "> 0"}
+    LEGACY = {"hold_geometry": "geometry", "hold_means_lr": "means_lr", "hold_scales_lr": "scales_lr",
+              "hold_quats_lr": "quats_lr"}  # train.<key> of earlier versions (MOVED)
 
 
 @dataclass
@@ -219,29 +199,6 @@ class GuardConfig:
     LIMITS = {"max_nan_steps": ">= 1", "explode_factor": ">= 0", "explode_window": ">= 1", "explode_patience": ">= 1",
               "snapshot_every": ">= 0", "max_recoveries": ">= 0", "recovery_lr_factor": "(0, 1]", "cpu_threads": ">= 0",
               "sync_every": ">= 1"}
-
-
-GUARD_KEYS = tuple(f.name for f in dataclasses.fields(GuardConfig))
-# keys of ``train`` before the sections existed -> where they live now (MOVED; TrainConfig reads and sets them)
-TRAIN_MOVED = {**{k: ("guard", k) for k in GUARD_KEYS},
-               **{old: ("regularizers", name, new) for old, (name, new) in LEGACY_TRAIN_KEYS.items()}}
-
-
-def _moved_key(path: tuple) -> property:
-    """``TrainConfig.<old key>``: the key at ``path`` (a section, its subsections, the key), for scripts that set
-    it on ``cfg.train`` as before the sections existed."""
-    def owner(train):
-        node = train._sections[path[0]]
-        for name in path[1:-1]:
-            node = getattr(node, name)
-        return node
-
-    return property(lambda self: getattr(owner(self), path[-1]), lambda self, v: setattr(owner(self), path[-1], v),
-                    doc=f"{'.'.join(path)} (read and set through train as before)")
-
-
-for _old, _path in TRAIN_MOVED.items():
-    setattr(TrainConfig, _old, _moved_key(_path))
 
 
 @dataclass
@@ -309,6 +266,58 @@ class FullConfig:
 
 
 @dataclass
+class CoRGSConfig:
+    """CoR-GS (Zhang et al., ECCV 2024; ``method: corgs``, warpgs/coreg.py): a second model trained beside the first
+    from the same initial Gaussians, on the same views, with its own random streams; twice the training cost. The
+    first model is the one evaluated and exported. Keys of ``train`` before this section existed (``train.co_reg``,
+    ``train.co_prune_every``, ...) load through ``MOVED``."""
+
+    pair: bool = False  # the co-regularised pair with any method (--method corgs: always)
+    prune_every: int = 500  # co-pruning every this many steps after strategy.refine_start_iter (CoR-GS: 500, at a
+    #   densification step); 0: no co-pruning
+    prune_dist: float = 0.75  # co-pruning drops a Gaussian with no centre of the other model within this x the
+    #   scene scale (optim.scene_scale: the training cameras' extent). CoR-GS's tau = 5 on LLFF 3 views is in
+    #   COLMAP's units, where the middle 80% of the 20 camera centres span 10: the 3 training views, at both ends
+    #   and the middle, have an extent of about 6.5, so tau is about 0.75 of it
+    weight: float = 1.0  # x (l1_weight L1 + ssim_weight D-SSIM) between the two models' renders of a pose between
+    #   two neighbouring training views, each against the other's detached render (CoR-GS: 1); 0: off
+    start: int = 500  # first step of the co-regularisation (CoR-GS's LLFF script: 500)
+    frames: int = 24  # pseudo poses between each pair of neighbouring training views, drawn in turn
+
+    LIMITS = {"prune_every": ">= 0", "prune_dist": "> 0", "weight": ">= 0", "start": ">= 0", "frames": ">= 1"}
+    LEGACY = {"co_reg": "pair", "co_prune_every": "prune_every", "co_prune_dist": "prune_dist",
+              "co_reg_weight": "weight", "co_reg_start": "start", "co_reg_frames": "frames"}  # train.<key> (MOVED)
+
+
+GUARD_KEYS = tuple(f.name for f in dataclasses.fields(GuardConfig))
+# the sections that took keys of ``train``, each with its ``LEGACY`` {old train key: its key}
+LEGACY_SECTIONS = {"clearance": ClearanceConfig, "hold": HoldConfig, "strategy": DefaultStrategy,
+                   "corgs": CoRGSConfig}
+MOVED_SECTIONS = {"guard": GuardConfig, "regularizers": RegularizersConfig, **LEGACY_SECTIONS}
+# keys of ``train`` before the sections existed -> where they live now (MOVED; TrainConfig reads and sets them)
+TRAIN_MOVED = {**{k: ("guard", k) for k in GUARD_KEYS},
+               **{old: ("regularizers", name, new) for old, (name, new) in LEGACY_TRAIN_KEYS.items()},
+               **{old: (section, new) for section, cls in LEGACY_SECTIONS.items() for old, new in cls.LEGACY.items()}}
+
+
+def _moved_key(path: tuple) -> property:
+    """``TrainConfig.<old key>``: the key at ``path`` (a section, its subsections, the key), for scripts that set
+    it on ``cfg.train`` as before the sections existed."""
+    def owner(train):
+        node = train.moved_section(path[0])
+        for name in path[1:-1]:
+            node = getattr(node, name)
+        return node
+
+    return property(lambda self: getattr(owner(self), path[-1]), lambda self, v: setattr(owner(self), path[-1], v),
+                    doc=f"{'.'.join(path)} (read and set through train as before)")
+
+
+for _old, _path in TRAIN_MOVED.items():
+    setattr(TrainConfig, _old, _moved_key(_path))
+
+
+@dataclass
 class Config:
     method: str = "baseline"  # baseline | full | corgs (warpgs.methods); the command's compare runs baseline and full
     out: str = "outputs/sparse"  # the run folder
@@ -320,15 +329,18 @@ class Config:
     train: TrainConfig = field(default_factory=TrainConfig)
     guard: GuardConfig = field(default_factory=GuardConfig)  # the step guard and the loop's performance
     regularizers: RegularizersConfig = field(default_factory=RegularizersConfig)  # warpgs/regularizers, one each
+    clearance: ClearanceConfig = field(default_factory=ClearanceConfig)  # the capture path's pruning
+    hold: HoldConfig = field(default_factory=HoldConfig)  # holding the initial geometry
     eval: EvalConfig = field(default_factory=EvalConfig)
     full: FullConfig = field(default_factory=FullConfig)
+    corgs: CoRGSConfig = field(default_factory=CoRGSConfig)  # CoR-GS's co-regularised pair (warpgs/coreg.py)
     compact: CompactConfig = field(default_factory=CompactConfig)  # compact mode (warpgs/strategy/compact.py)
     geometry: GeometryConfig = field(default_factory=GeometryConfig)  # model.init sfm / stereo (warpgs/points)
     pseudo: PseudoConfig = field(default_factory=PseudoConfig)  # the full method's pseudo views (warpgs/pseudo)
     densify: DensifyConfig = field(default_factory=DensifyConfig)  # its densification from them (warpgs/densify)
 
     def __post_init__(self):
-        self.train._sections = {"guard": self.guard, "regularizers": self.regularizers}  # (TrainConfig.__post_init__)
+        self.train.link_sections({name: getattr(self, name) for name in MOVED_SECTIONS})  # (TrainConfig.__post_init__)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -344,7 +356,7 @@ MOVED = {("full", "n_frames"): ("pseudo", "trajectory", "n_frames"),
          ("full", "photometric"): ("pseudo", "uncertainty", "photometric"),
          ("full", "pseudo"): ("pseudo",),
          ("full", "densify_config"): ("densify",),
-         ("train", "compact"): ("train", "prune_unseen_at_end"),
+         ("train", "compact"): ("strategy", "prune_unseen_at_end"),
          ("strategy", "compact_when_full"): ("strategy", "prune_unseen_when_full"),
          ("strategy", "compact_min_weight"): ("strategy", "unseen_min_weight"),
          **{("train", old): new for old, new in TRAIN_MOVED.items()}}

@@ -119,9 +119,9 @@ def finish_run(tr, baseline: dict | None = None) -> dict:
         # the trained state, before the final pruning changes it: an interrupt while the results are written
         # loses no training (--resume writes them from here, as an uninterrupted run would)
         tr.save_checkpoint()
-    if tr.cfg.train.path_floaters_final:  # the camera path's floaters (warpgs.strategy.clearance.PathPruning)
+    if tr.cfg.clearance.floaters_final:  # the camera path's floaters (warpgs.strategy.clearance.PathPruning)
         tr.path_pruning.remove_floaters(tr.context, tr.step)
-    if tr.cfg.train.prune_unseen_at_end:  # what no training view uses
+    if tr.cfg.strategy.prune_unseen_at_end:  # what no training view uses
         if tr.n_before_compaction is None:
             tr.n_before_compaction = len(tr.model)
         removed = tr.strategy.prune_unseen(tr.model, tr.optimizer, tr.state, tr.train_cams, tr.background)

@@ -17,7 +17,7 @@ The trainer's parts: ``warpgs.engine.init`` (the initial model and the configura
 ``warpgs.engine.state`` (the training state and checkpoints), ``warpgs.engine.signals`` (graceful stops),
 ``warpgs.engine.context`` (the narrow view the collaborators get).
 
-With ``train.co_reg`` (CoR-GS, ``warpgs.coreg``) a second model trains beside the first on the same views, with
+With ``corgs.pair`` (CoR-GS, ``warpgs.coreg``) a second model trains beside the first on the same views, with
 its own optimiser, strategy and random streams; the two are co-pruned and co-regularised on poses between the
 training views. Each step adds its loss to the first model's before the one backward, both optimisers step on the
 guard's one verdict (``optimizers``; the guard checks both models' ``trained_parameters``), and its state goes
@@ -97,7 +97,7 @@ class Trainer:
         seed = cfg.train.seed
         torch.manual_seed(seed)
         np.random.seed(seed % 2**32)
-        # the initial points (found here or earlier, then kept on the scene) decide train.hold_geometry
+        # the initial points (found here or earlier, then kept on the scene) decide hold.geometry
         geo = prepare_geometry(cfg, scene, self.log)
         cfg = growth_schedule(cfg, method.name if method is not None else "baseline")
         cfg, self.held = hold_geometry(cfg, geo)  # the same cfg when not held
@@ -117,7 +117,7 @@ class Trainer:
         self.stop = StopRequest(lambda msg: self.log(msg))
         # the regularisers on for this run, in the registry's order (warpgs.regularizers)
         self.regularizers = Regularizers.build(cfg, self.context)
-        self.path_pruning = PathPruning.build(cfg, scene, self.cameras, self.device)
+        self.path_pruning = PathPruning.build(cfg.clearance, scene, self.cameras, self.device)
         self.view_rng = np.random.default_rng(seed + 2)
         self.order: list[int] = []
         self.optimizer = make_optimizer(self.model, cfg, self.scene_scale)
@@ -141,10 +141,10 @@ class Trainer:
         self.stopped_early: dict | None = None  # set by the caller when training stopped before the end
         self.reserved_steps = 0  # the run's last steps, trained by a stage (compact mode's search's fine-tunes)
         self.stages: list = []  # stages above training (``add_stage``; warpgs.engine.stage)
-        # CoR-GS (--method corgs, or train.co_reg with any method): the second model of the co-regularised pair,
+        # CoR-GS (--method corgs, or corgs.pair with any method): the second model of the co-regularised pair,
         # its optimiser and strategy
         self.pair = None
-        if cfg.train.co_reg or getattr(method, "pair", False):
+        if cfg.corgs.pair or getattr(method, "pair", False):
             from warpgs.coreg import CoRegPair
 
             self.pair = CoRegPair(self.context)
@@ -203,11 +203,11 @@ class Trainer:
 
     @property
     def optimizers(self) -> list[torch.optim.Optimizer]:
-        """The optimisers of the models being trained: the model's, then (``train.co_reg``) its partner's."""
+        """The optimisers of the models being trained: the model's, then (``corgs.pair``) its partner's."""
         return [self.optimizer] + ([self.pair.optimizer] if self.pair is not None else [])
 
     def trained_parameters(self) -> dict[str, torch.Tensor]:
-        """The parameters being trained, by name: the model's, then (``train.co_reg``) its partner's as
+        """The parameters being trained, by name: the model's, then (``corgs.pair``) its partner's as
         ``partner.<name>``. The divergence guard checks them all."""
         params = dict(self.model.params)
         if self.pair is not None:
@@ -312,7 +312,7 @@ class Trainer:
 
     def after_update(self, step: int, out, cam, apply: torch.Tensor | None = None) -> dict:
         """What follows a step's update: densification (``densify``), the co-regularised partner's and the
-        co-pruning (``train.co_reg``), and a new statistic after an opacity reset (whose jump in the loss is
+        co-pruning (``corgs.pair``), and a new statistic after an opacity reset (whose jump in the loss is
         expected). ``apply``: a deferred step's verdict (``out``'s radii are already masked with it)."""
         info = self.densify(self.strategy, self.model, self.optimizer, self.state, step, out, cam, self.split_gen)
         if self.pair is not None:

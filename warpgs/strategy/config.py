@@ -1,5 +1,5 @@
 """The settings of the strategy package's stages that are not the strategy itself (``DefaultStrategy`` is its own
-dataclass, gsplat's way): compact mode's (``compact``). A leaf: ``warpgs.config`` imports it, and the modules
+dataclass, gsplat's way): the capture path's pruning (``clearance``) and compact mode (``compact``). A leaf: ``warpgs.config`` imports it, and the modules
 that act on these settings (``warpgs.strategy.compact``) get them passed in, never the run's config module."""
 
 from __future__ import annotations
@@ -9,6 +9,36 @@ from dataclasses import dataclass, field
 from warpgs.configio import ConfigError, check_limits
 
 IMPORTANCE_VIEWS = ("train", "virtual", "pseudo")
+
+
+@dataclass
+class ClearanceConfig:
+    """The pruning on the capture path after the strategy's densification (``clearance``;
+    warpgs/strategy/clearance.py). Keys of ``train`` before this section existed (``train.path_clearance``,
+    ``train.path_floaters``, ...) load through ``MOVED``."""
+
+    path: float = 0.0  # > 0: every strategy.refine_every steps, remove the Gaussians whose centre lies within this x
+    #   the scene's near depth of the camera path (the photographer's space, where floaters in front of novel views
+    #   sit); 0: off
+    view: float = 0.0  # > 0: with the path clearance's schedule, also remove the Gaussians nearer than this x the near
+    #   depth in front of any pose of the camera path (the inputs and the poses between them), inside its image; 0: off
+    floaters: float = 0.0  # > 0: every floaters_every steps and before the final evaluation, remove the Gaussians that
+    #   a pose of the camera path between neighbouring inputs sees with more than this x their blending weight in all
+    #   the inputs together (and with at least 0.1% of that pose's weight): floaters no input constrains, in front of
+    #   novel views taken from the path (``PathFloaters``; bench/diagnostics/floaters.py's test, which used 10 with
+    #   the test views); 0: off
+    floaters_every: int = 500
+    floaters_final: bool = True  # also the pass before the final evaluation (no training after it)
+    floaters_poses: int = 3  # poses of the path between each pair of neighbouring inputs
+    floaters_paths: str = "spline"  # spline: those poses on the pseudo views' path | both: also as many on the
+    #   straight line between the two inputs (bench/diagnostics/plant_floaters.py: castle_p30 9 views' test frame 16
+    #   stands 1.5 m from that line and 4.4 m from the spline, which bulges across the 22.6 m gap between its inputs)
+
+    LIMITS = {"path": ">= 0", "view": ">= 0", "floaters": ">= 0", "floaters_every": ">= 1", "floaters_poses": ">= 1",
+              "floaters_paths": "{spline, both}"}
+    LEGACY = {"path_clearance": "path", "view_clearance": "view", "path_floaters": "floaters",
+              "path_floaters_every": "floaters_every", "path_floaters_final": "floaters_final",
+              "path_floaters_poses": "floaters_poses", "path_floaters_paths": "floaters_paths"}  # train.<key> (MOVED)
 
 
 @dataclass
@@ -46,4 +76,4 @@ def check_compact_config(c: CompactConfig) -> CompactConfig:
     return c
 
 
-__all__ = ["CompactConfig", "IMPORTANCE_VIEWS", "check_compact_config"]
+__all__ = ["ClearanceConfig", "CompactConfig", "IMPORTANCE_VIEWS", "check_compact_config"]

@@ -13,7 +13,7 @@ Every ``refine_every`` steps between ``refine_start_iter`` and ``refine_stop_ite
 gradients grow. ``prune_unseen`` removes what the training views do not need: Gaussians whose total
 blending weight over all training views is below ``unseen_min_weight`` pixels, and transparent ones.
 The trainer does so whenever a refinement finds the budget spent (``prune_unseen_when_full``), so growth
-goes on where the views need it, and optionally once more at the end (``train.prune_unseen_at_end``).
+goes on where the views need it, and optionally once more at the end (``prune_unseen_at_end``).
 (Compact mode, ``warpgs/strategy/compact.py``, is something else: importance pruning and a size search.)
 Note that in sparse-view training the Gaussians no input view sees still fill the novel views: dropping them at
 the end lowered test PSNR by 0.4 dB on the synthetic scene, so the final pruning is off by default.
@@ -53,6 +53,9 @@ class DefaultStrategy:
     max_gaussians: int = 0  # 0 = no budget
     prune_unseen_when_full: bool = True  # prune_unseen when a refinement finds the budget spent
     unseen_min_weight: float = 0.05  # prune_unseen keeps Gaussians with at least this total weight (pixels)
+    prune_unseen_at_end: bool = False  # prune_unseen before the final evaluation, with the training views (the
+    #   captures' default: a Gaussian no input sees can only stand in front of a novel view; on scenes whose test
+    #   views see what the inputs do not, it can cost novel-view PSNR)
     verbose: bool = False
 
     LIMITS = {"prune_opa": "[0, 1]", "grow_grad2d": ">= 0", "grow_scale3d": ">= 0", "grow_scale2d": ">= 0",
@@ -60,6 +63,7 @@ class DefaultStrategy:
               "refine_start_iter": ">= 0", "refine_stop_iter": ">= 0", "refine_stop_fraction": "[0, 1]",
               "reset_every": ">= 1", "refine_every": ">= 1",
               "pause_refine_after_reset": ">= 0", "max_gaussians": ">= 0", "unseen_min_weight": ">= 0"}
+    LEGACY = {"prune_unseen_at_end": "prune_unseen_at_end"}  # train.<key> of earlier versions (warpgs.config.MOVED)
 
     # ------------------------------------------------------------------------------------------
 
