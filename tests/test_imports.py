@@ -10,12 +10,12 @@ PKG = Path(__file__).resolve().parents[1] / "warpgs"
 # lower layers may not import higher ones; one layer may import within itself. A package's modules share its
 # layer unless one is named on its own ("strategy.compact"): the longest name that matches decides
 LAYERS = [
-    ["console", "runfolder", "_warp", "kernels", "configio", "geometry", "guard", "losses", "ply", "viz"],
+    ["console", "runfolder", "_warp", "kernels", "configio", "registry", "geometry", "guard", "losses", "ply", "viz"],
     ["render", "metrics", "farfield"],
     ["model", "data"],
     ["strategy"],  # the package, DefaultStrategy, its ops and the leaf of its stages' settings
     ["pseudo", "densify"],
-    ["points", "strategy.clearance", "regularizers"],
+    ["points", "strategy.clearance", "regularizers", "backgrounds"],
     ["config"],
     ["optim"],
     ["engine", "coreg"],

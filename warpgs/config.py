@@ -29,17 +29,16 @@ import yaml
 
 from warpgs.configio import (  # noqa: F401  (re-exported: the config API in one place)
     CONFIG_DIR, REPO_ROOT, ConfigError, apply_values, check_limits, merge, parse_override, read_yaml)
+from warpgs.backgrounds import LEGACY_TRAIN_KEYS as BACKGROUND_KEYS, BackgroundsConfig
+from warpgs.backgrounds.far_field import FAR_FIELD_RULE
 from warpgs.densify import DensifyConfig
-from warpgs.farfield import FAR_FIELDS
 from warpgs.points import GeometryConfig
 from warpgs.pseudo.views import PseudoConfig
 from warpgs.runfolder import atomic_write
-from warpgs.regularizers import LEGACY_TRAIN_KEYS, RegularizersConfig
+from warpgs.regularizers import LEGACY_TRAIN_KEYS as REGULARIZER_KEYS, RegularizersConfig
 from warpgs.strategy.config import ClearanceConfig, CompactConfig
 from warpgs.strategy.default import DefaultStrategy
 
-
-FAR_FIELD_RULE = "{" + ", ".join(FAR_FIELDS) + "}"  # train.far_field, full.far_field
 
 
 @dataclass
@@ -116,14 +115,6 @@ class TrainConfig:
     background: list | None = None  # [r, g, b]; None: white if the scene says so, else black
     random_background: bool = False  # views with an alpha channel: a random background each step (no floaters
                                      # that mimic the background colour); evaluation keeps ``background``
-    far_field: str = "none"  # none | elevation: behind the Gaussians, a colour per elevation band fitted on the
-    #   inputs instead of ``background`` (warpgs/farfield.py; captures without alpha)
-    far_field_bins: int = 16  # elevation bands of the far field
-    far_field_blur: float | str = 0.0  # width (in bands) of the Gaussian over the elevation that each band averages
-    #   the inputs' pixels with; auto: the width that best predicts each input from the others (leave-one-out)
-    far_field_proxy: str = "none"  # none: bands by the ray's elevation | auto: by the elevation of where the ray
-    #   leaves a vertical cylinder around the capture, its centre and radius chosen leave-one-out over the inputs
-    #   among candidates from the initial points (or no cylinder when none predicts better; warpgs/farfield.py)
     progress: bool = True
 
     def __post_init__(self):
@@ -139,8 +130,7 @@ class TrainConfig:
         return self._sections[name]
 
     LIMITS = {"iterations": ">= 1", "seed": ">= 0", "sh_degree_interval": ">= 0", "checkpoint_every": ">= 0",
-              "eval_every": ">= 0", "background": "[0, 1]", "far_field": FAR_FIELD_RULE, "far_field_bins": ">= 1",
-              "far_field_blur": ">= 0 or {auto}", "far_field_proxy": "{none, auto}"}
+              "eval_every": ">= 0", "background": "[0, 1]"}
 
 
 @dataclass
@@ -246,7 +236,8 @@ class FullConfig:
     drop_rate: float | None = None  # DropGaussian's final rate for this method (train.drop_rate); None: train's
     pseudo_depth_smooth: float = 0.0  # weight of an edge-aware smoothness of the pseudo views' rendered depth
     #   (Monodepth's, Godard et al. CVPR 2017, on depth / its mean; edges from the pseudo view's image); 0: off
-    far_field: str | None = None  # the far field for this method (train.far_field: none | elevation); None: train's
+    far_field: str | None = None  # the far field for this method (backgrounds.far_field.kind: none | elevation |
+    #   sky); None: that one
     refine_stop_fraction: float | None = None  # strategy.refine_stop_fraction for this method; None: the strategy's
     path_consistency: float = 0.0  # weight of the two inputs' agreement at each pseudo view trained on: the photos of
     #   the inputs it lies between, warped into it with its rendered depth (warpgs.regularizers.binocular.pose_warp), compared
@@ -293,10 +284,14 @@ GUARD_KEYS = tuple(f.name for f in dataclasses.fields(GuardConfig))
 # the sections that took keys of ``train``, each with its ``LEGACY`` {old train key: its key}
 LEGACY_SECTIONS = {"clearance": ClearanceConfig, "hold": HoldConfig, "strategy": DefaultStrategy,
                    "corgs": CoRGSConfig}
-MOVED_SECTIONS = {"guard": GuardConfig, "regularizers": RegularizersConfig, **LEGACY_SECTIONS}
+# the registries' sections, each with the keys of ``train`` its modules took {old: (module's name, its key)}
+REGISTRY_KEYS = {"regularizers": REGULARIZER_KEYS, "backgrounds": BACKGROUND_KEYS}
+MOVED_SECTIONS = {"guard": GuardConfig, "regularizers": RegularizersConfig, "backgrounds": BackgroundsConfig,
+                  **LEGACY_SECTIONS}
 # keys of ``train`` before the sections existed -> where they live now (MOVED; TrainConfig reads and sets them)
 TRAIN_MOVED = {**{k: ("guard", k) for k in GUARD_KEYS},
-               **{old: ("regularizers", name, new) for old, (name, new) in LEGACY_TRAIN_KEYS.items()},
+               **{old: (section, name, new) for section, keys in REGISTRY_KEYS.items()
+                  for old, (name, new) in keys.items()},
                **{old: (section, new) for section, cls in LEGACY_SECTIONS.items() for old, new in cls.LEGACY.items()}}
 
 
@@ -329,6 +324,7 @@ class Config:
     train: TrainConfig = field(default_factory=TrainConfig)
     guard: GuardConfig = field(default_factory=GuardConfig)  # the step guard and the loop's performance
     regularizers: RegularizersConfig = field(default_factory=RegularizersConfig)  # warpgs/regularizers, one each
+    backgrounds: BackgroundsConfig = field(default_factory=BackgroundsConfig)  # warpgs/backgrounds, one each
     clearance: ClearanceConfig = field(default_factory=ClearanceConfig)  # the capture path's pruning
     hold: HoldConfig = field(default_factory=HoldConfig)  # holding the initial geometry
     eval: EvalConfig = field(default_factory=EvalConfig)

@@ -213,7 +213,8 @@ class CoRegPair:
                "partner_gaussians": len(self.model), "co_pruned": copy.deepcopy(self.co_pruned)}
         if ctx.cameras.test:
             def render(cam):
-                return self.model.render(cam.viewmat, cam.K, cam.width, cam.height, background=ctx.background.for_cam(cam))
+                bg = ctx.background.for_cam(cam)
+                return self.model.render(cam.viewmat, cam.K, cam.width, cam.height, background=bg)
 
             ev = ctx.evaluate(lpips=False, render=render)["mean"]
             rec.update(partner_psnr=ev["psnr"], partner_ssim=ev["ssim"])

@@ -53,6 +53,12 @@ class Context:
         return self._trainer.reserved_steps
 
     @property
+    def geometry(self):
+        """The initial points found between the training views (``warpgs.engine.init.prepare_geometry``; None:
+        the initialisation found none)."""
+        return self._trainer.geometry
+
+    @property
     def scene_scale(self) -> float:
         return self._trainer.scene_scale
 

@@ -91,8 +91,7 @@ def run_metrics(trainer, ev: dict, train_ev: dict, fps: float) -> dict:
         metrics["init"] = geo.summary()
     metrics["stage_times_s"] = {**{f"init_{k}": round(v, 2) for k, v in (geo.times.items() if geo else [])},
                                 "train_s": round(tr.train_time, 2)}
-    if getattr(tr, "far_field_time", None) is not None:
-        metrics["stage_times_s"]["far_field_s"] = round(tr.far_field_time, 2)
+    metrics["stage_times_s"].update({k: round(v, 2) for k, v in tr.bg.components.times().items()})  # far_field_s
     if getattr(tr, "path_floaters_time", None) is not None:
         metrics["stage_times_s"]["path_floaters_s"] = round(tr.path_floaters_time, 2)
     if getattr(tr, "held", None):
@@ -160,8 +159,7 @@ def write_run_outputs(trainer, metrics: dict) -> None:
     if geo is not None and len(geo.xyz):
         save_origin_ply(out / "init_points.ply", geo.xyz, geo.rgb)
     trainer.save_checkpoint()
-    if trainer.far_field is not None:
-        trainer.far_field.save(out / "far_field.json")
+    trainer.bg.components.save(out)  # far_field.json
     save_config(trainer.requested_cfg, out / "config.yaml")  # as requested; what the run derived from it is recorded
     #   in metrics.json (hold_geometry) and derived again on --resume
     write_metrics(out, metrics)

@@ -1,5 +1,5 @@
 """Model initialisation: the device, the background colour, the scene's scale, the initial points and the
-configuration a run derives from them (``growth_schedule``, ``hold_geometry``), and the initial Gaussians."""
+configuration a run derives from them (``growth_schedule``, ``method_far_field``, ``hold_geometry``), and the initial Gaussians."""
 
 from __future__ import annotations
 
@@ -87,6 +87,17 @@ def growth_schedule(cfg: Config, method: str = "baseline") -> Config:
         return cfg
     stop = min(cfg.strategy.refine_stop_iter, int(round(frac * cfg.train.iterations)))
     return dataclasses.replace(cfg, strategy=dataclasses.replace(cfg.strategy, refine_stop_iter=stop))
+
+
+def method_far_field(cfg: Config, method: str = "baseline") -> Config:
+    """The run's configuration with ``full.far_field`` (when set, for the full method) as its far field's kind
+    (``backgrounds.far_field.kind``)."""
+    kind = cfg.full.far_field if method == "full" else None
+    if kind is None:
+        return cfg
+    bg = cfg.backgrounds
+    return dataclasses.replace(cfg, backgrounds=dataclasses.replace(bg, far_field=dataclasses.replace(bg.far_field,
+                                                                                                     kind=kind)))
 
 
 def hold_geometry(cfg: Config, geo) -> tuple[Config, dict | None]:

@@ -48,8 +48,8 @@ from warpgs.engine.cameras import SceneCameras
 from warpgs.engine.checkpoint import CHECKPOINT, TrainingInterrupted
 from warpgs.engine.context import Context
 from warpgs.engine.evaluation import evaluate_views, finish_run
-from warpgs.engine.init import (background_colour, growth_schedule, hold_geometry, init_model, prepare_geometry,
-                                resolve_device, scene_scale_of)
+from warpgs.engine.init import (background_colour, growth_schedule, hold_geometry, init_model, method_far_field,
+                                prepare_geometry, resolve_device, scene_scale_of)
 from warpgs.engine.signals import StopRequest
 from warpgs.engine.stepguard import StepGuard
 from warpgs.engine.method import Method
@@ -98,13 +98,12 @@ class Trainer:
         torch.manual_seed(seed)
         np.random.seed(seed % 2**32)
         # the initial points (found here or earlier, then kept on the scene) decide hold.geometry
-        geo = prepare_geometry(cfg, scene, self.log)
-        cfg = growth_schedule(cfg, method.name if method is not None else "baseline")
+        self.geometry = geo = prepare_geometry(cfg, scene, self.log)
+        name = method.name if method is not None else "baseline"
+        cfg = method_far_field(growth_schedule(cfg, name), name)
         cfg, self.held = hold_geometry(cfg, geo)  # the same cfg when not held
         self.cfg = cfg
-        self.bg = Background(colour, self.cameras.train, cfg.train, lambda msg: self.log(msg))
-        # fitted on the training views (and their points) only, deterministic: a resumed run computes the same one
-        self.bg.far_field = self.bg.fit(cfg.train.far_field, geo)
+        self.bg = Background(colour, cfg.train)
         if self.held is not None:
             self.log(f"warpgs: geometry held ({self.held['why']}): no densification; means / scales / rotations "
                      f"learning rates x {self.held['means_lr']:g} / {self.held['scales_lr']:g} / {self.held['quats_lr']:g}")
@@ -114,6 +113,9 @@ class Trainer:
         self.split_gen = torch.Generator(device=self.device).manual_seed(seed + 1)
         self.drop_gen = torch.Generator(device=self.device).manual_seed(seed + 5)
         self.context = Context(self)
+        # the background components (warpgs.backgrounds: the far field), fitted on the training views (and their
+        # points) only, deterministic: a resumed run computes the same ones
+        self.bg.build(cfg, self.context)
         self.stop = StopRequest(lambda msg: self.log(msg))
         # the regularisers on for this run, in the registry's order (warpgs.regularizers)
         self.regularizers = Regularizers.build(cfg, self.context)
@@ -163,21 +165,12 @@ class Trainer:
     train_cams = property(lambda self: self.cameras.train)
     test_cams = property(lambda self: self.cameras.test)
     background = property(lambda self: self.bg.colour)  # the [3] colour behind the Gaussians
-    far_field_time = property(lambda self: self.bg.far_field_time)
     guard = property(lambda self: self.stepguard.guard)  # warpgs.guard.DivergenceGuard: the verdicts' counts
     clearance = property(lambda self: self.path_pruning.clearance)
     floaters = property(lambda self: self.path_pruning.floaters)
     path_floaters_time = property(lambda self: self.path_pruning.time)
     stop_requested = property(lambda self: self.stop.requested)
     sync_every = property(lambda self: self.stepguard.sync_every)
-
-    @property
-    def far_field(self):
-        return self.bg.far_field
-
-    @far_field.setter
-    def far_field(self, ff) -> None:
-        self.bg.far_field = ff
 
     @property
     def drop_rate(self) -> float:
@@ -251,10 +244,6 @@ class Trainer:
         """``loss`` plus the regularisers' priors on ``model``'s parameters (``Regularizer.model_term``), each
         recorded in ``parts``; the divergence guard's ``inputs`` part leaves them out."""
         return self.regularizers.model_term(model, loss, parts)
-
-    def fit_far_field(self, kind: str, geo=None):
-        """``Background.fit``: a far field of ``kind`` on the training views (None: none)."""
-        return self.bg.fit(kind, geo)
 
     def background_for(self, cam, keep: bool = True) -> torch.Tensor:
         """What ``cam`` sees behind the Gaussians (``Background.for_cam``)."""

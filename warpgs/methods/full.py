@@ -101,8 +101,6 @@ class FullMethod(Method):
         self.settings = check_settings(cfg.full)
         if self.settings.drop_rate is not None:
             trainer.drop_rate = self.settings.drop_rate
-        if self.settings.far_field is not None:
-            trainer.far_field = trainer.fit_far_field(self.settings.far_field, getattr(trainer.scene, "geometry", None))
         if self.settings.path_consistency > 0:  # the pseudo views carry their start input's intrinsics and size
             check_one_camera(trainer.train_cams, "full.path_consistency")
         self.pseudo_cams: list = []

@@ -1,6 +1,7 @@
 """The settings of the strategy package's stages that are not the strategy itself (``DefaultStrategy`` is its own
-dataclass, gsplat's way): the capture path's pruning (``clearance``) and compact mode (``compact``). A leaf: ``warpgs.config`` imports it, and the modules
-that act on these settings (``warpgs.strategy.compact``) get them passed in, never the run's config module."""
+dataclass, gsplat's way): the capture path's pruning (``clearance``) and compact mode (``compact``). A leaf:
+``warpgs.config`` imports it, and the modules that act on these settings (``warpgs.strategy.clearance``,
+``warpgs.strategy.compact``) get them passed in, never the run's config module."""
 
 from __future__ import annotations
 
