@@ -292,7 +292,7 @@ def test_pose_warp_of_a_move_along_x_is_shift_warp_and_no_depth_warps_nothing():
 def test_path_partners_lie_on_the_capture_path_within_the_reach():
     """Three inputs on a line (x = 0, 1, 3): input 0's partners run from it a share of the way to input 1, input 1's
     to both sides, none farther than ``reach`` of the way; the first is the trajectory's second pose."""
-    from warpgs.clearance import path_partners
+    from warpgs.strategy.clearance import path_partners
     from warpgs.geometry import camera_centres
     from warpgs.pseudo.trajectory import path_trajectories
 

@@ -8,6 +8,7 @@ opacity noise on, so every random stream of the ``progress`` part is in it) afte
 
 from pathlib import Path
 
+import pytest
 import torch
 
 from tiny_scene import make_scene, param_copy, same_params, tiny_config
@@ -48,9 +49,10 @@ def test_a_checkpoint_of_the_old_engine_resumes_to_the_uninterrupted_run(tmp_pat
 
 
 def test_keys_of_the_single_train_section_load_where_they_live_now():
-    """``train.<key>`` of the layout before the ``guard`` and ``regularizers`` sections (config files, --set, the
+    """``train.<key>`` of the layout before the ``guard``, ``regularizers``, ``clearance``, ``hold`` and ``corgs``
+    sections (and ``strategy.prune_unseen_at_end``) (config files, --set, the
     configs inside checkpoints) lands in them through ``MOVED``; ``cfg.train.<key>`` still reads and sets them."""
-    from warpgs.config import config_from_dict, load_config
+    from warpgs.config import ConfigError, config_from_dict, load_config
 
     cfg = load_config([], ["train.binocular=0.5", "train.binocular_start=0.25", "train.drop_rate=0.1",
                            "train.sync_every=3", "train.explode_factor=7"])
@@ -59,6 +61,15 @@ def test_keys_of_the_single_train_section_load_where_they_live_now():
     assert cfg.train.binocular == 0.5 and cfg.train.sync_every == 3
     cfg.train.opacity_noise = 0.2
     assert cfg.regularizers.opacity_noise.sigma == 0.2
+    moved = load_config([], ["train.path_clearance=0.2", "train.path_floaters_paths=both", "train.hold_geometry=stereo",
+                             "train.hold_means_lr=0.3", "train.prune_unseen_at_end=true", "train.co_reg=true",
+                             "train.co_reg_weight=0.5", "train.co_prune_dist=0.4"])
+    assert moved.clearance.path == 0.2 and moved.clearance.floaters_paths == "both"
+    assert moved.hold.geometry == "stereo" and moved.hold.means_lr == 0.3 and moved.strategy.prune_unseen_at_end
+    assert moved.corgs.pair and moved.corgs.weight == 0.5 and moved.corgs.prune_dist == 0.4
+    assert moved.train.co_reg and moved.train.hold_geometry == "stereo" and moved.train.path_clearance == 0.2
+    with pytest.raises(ConfigError, match=r"corgs\.frames = 0 \(from --set train\.co_reg_frames=0\): must be >= 1"):
+        load_config([], ["train.co_reg_frames=0"])
     saved = config_from_dict(read_checkpoint(FIXTURE)["config"])
     assert saved.regularizers.binocular.weight == 0.5 and saved.regularizers.path_consistency.start == 0.3
     assert saved.regularizers.dropout.rate == 0.2 and saved.regularizers.opacity_noise.sigma == 0.3

@@ -1,4 +1,4 @@
-"""The camera path's clearance (warpgs/clearance.py, train.path_clearance): segment distances against a dense
+"""The camera path's clearance (warpgs/strategy/clearance.py, clearance.path): segment distances against a dense
 sampling of the segments, which Gaussians count as on the path, segments that pass the scene's geometry, and
 the trainer removing what lies on the path (and nothing when it is off)."""
 
@@ -7,7 +7,7 @@ import pytest
 import torch
 
 from test_rasterizer import DEVICES
-from warpgs.clearance import PathClearance, segment_distance
+from warpgs.strategy.clearance import PathClearance, segment_distance
 
 
 def look_at_viewmat(eye, target=(0.0, 0.0, 10.0)):
@@ -65,7 +65,7 @@ def test_trainer_removes_gaussians_on_the_camera_path(tmp_path):
             assert probe.radius > 0 and len(probe.a) > 0
             planted = ((probe.a + probe.b) / 2)[::3]
         n0 = len(tr.model)
-        append_gaussians(tr, planted, torch.full((len(planted), 3), 0.5), torch.full((len(planted), 3), 0.05), 0.9)
+        append_gaussians(tr.context, planted, torch.full((len(planted), 3), 0.5), torch.full((len(planted), 3), 0.05), 0.9)
         assert len(tr.model) == n0 + len(planted)
         tr.train(21)  # refinement steps at 0 and 20 (tiny_config: refine_every 20)
         on_path = PathClearance.build(np.stack([c.viewmat for c in scene.train]), 0.2 * near, order="nearest")
@@ -114,7 +114,7 @@ def test_path_floaters_are_what_a_pose_of_the_path_sees_and_no_input_does():
     Gaussian the inputs see as much as the path does is not either."""
     from types import SimpleNamespace
 
-    from warpgs.clearance import PathFloaters
+    from warpgs.strategy.clearance import PathFloaters
 
     xs = (0.0, 2.0, 4.0)
     V = np.stack([look_at_viewmat((x, 0.0, 0.0), (x, 0.0, 10.0)) for x in xs])
@@ -143,7 +143,7 @@ def test_path_floaters_on_both_paths_find_what_stands_before_the_line_where_the_
     (``"both"``) see it straight ahead. No input sees it, and the wall is found by neither. A bad value is named."""
     from types import SimpleNamespace
 
-    from warpgs.clearance import PathFloaters
+    from warpgs.strategy.clearance import PathFloaters
     from warpgs.geometry import camera_centres
     from warpgs.pseudo.trajectory import path_trajectories
 
@@ -163,14 +163,14 @@ def test_path_floaters_on_both_paths_find_what_stands_before_the_line_where_the_
     assert len(spline.poses) == 3 * 3 and len(both.poses) == 2 * 3 * 3
     assert spline.find(model, inputs).tolist() == [False] * (len(wall) + 1)
     assert both.find(model, inputs).tolist() == [False] * len(wall) + [True]
-    with pytest.raises(ValueError, match="path_floaters_paths"):
+    with pytest.raises(ValueError, match="clearance.floaters_paths"):
         PathFloaters.build(V, K, (50, 40), ratio=10.0, paths="curve")
 
 
 @pytest.mark.skipif("cpu" not in DEVICES, reason="trains on the CPU (the GPU machine's packed Warp has no CPU compiler)")
 def test_trainer_removes_the_path_floaters_on_its_schedule(tmp_path):
     from tiny_scene import make_scene, tiny_config
-    from warpgs.clearance import PathFloaters
+    from warpgs.strategy.clearance import PathFloaters
     from warpgs.methods.full import append_gaussians
     from warpgs.train import Trainer
 
@@ -185,7 +185,7 @@ def test_trainer_removes_the_path_floaters_on_its_schedule(tmp_path):
         probe = PathFloaters.build(V, scene.train[0].K, (48, 48), 10.0, per_pair=3, order=cfg.pseudo.trajectory.order)
         c2w = torch.linalg.inv(probe.poses)
         planted = c2w[:, :3, 3] + 0.3 * float(scene.bounds[0]) * c2w[:, :3, 2]
-        append_gaussians(tr, planted, torch.full((len(planted), 3), 0.1), torch.full((len(planted), 3), 0.05), 0.9)
+        append_gaussians(tr.context, planted, torch.full((len(planted), 3), 0.1), torch.full((len(planted), 3), 0.05), 0.9)
         assert not tr.densify_only_updates_state(20) or ratio == 0
         tr.train(21)  # the floaters' step is 20
         d = torch.cdist(tr.model.means.detach(), planted).min(0).values
@@ -197,7 +197,7 @@ def test_trainer_removes_the_path_floaters_on_its_schedule(tmp_path):
         cfg = tiny_config(21, str(tmp_path / "none.pth"), path_floaters=10.0, path_floaters_every=1000,
                           path_floaters_final=final)
         tr = Trainer(cfg, scene, out_dir=tmp_path / f"final_{final}")
-        append_gaussians(tr, planted, torch.full((len(planted), 3), 0.1), torch.full((len(planted), 3), 0.05), 0.9)
+        append_gaussians(tr.context, planted, torch.full((len(planted), 3), 0.1), torch.full((len(planted), 3), 0.05), 0.9)
         tr.train(21)
         assert int((torch.cdist(tr.model.means.detach(), planted).min(0).values < 0.02).sum()) == len(planted)
         stages = tr.finish()["stage_times_s"]

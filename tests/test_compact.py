@@ -1,4 +1,4 @@
-"""Compact mode (warpgs/compact.py): importance pruning, the search's tolerance on the training views,
+"""Compact mode (warpgs/strategy/compact.py): importance pruning, the search's tolerance on the training views,
 SH-degree reduction, PLY at a reduced degree, byte counts, the schedule during training, the CLI flag."""
 
 import copy
@@ -12,7 +12,7 @@ import torch
 
 import reference
 from tiny_scene import camera_ring, make_scene, tiny_config, write_nerfstudio
-from warpgs.compact import (CompactConfig, ScheduledPruning, attach, check_config, importance, lowest_mask, param_bytes,
+from warpgs.strategy.compact import (CompactConfig, ScheduledPruning, attach, check_config, importance, lowest_mask, param_bytes,
                             ply_bytes, prune_lowest, search, size_report, truncate_sh, virtual_cameras)
 from warpgs.config import Config
 from warpgs.model import GaussianModel
@@ -204,7 +204,7 @@ def test_search_respects_the_tolerance_on_the_training_views(trained):
     cfg = copy.deepcopy(tr.cfg.compact)
     cfg.tolerance_db = 0.1
     n0 = len(tr.model)
-    rep = search(tr, cfg)
+    rep = search(tr.context, cfg)
     pts = rep["points"]
     best = max(p["train_psnr"] for p in pts)
     assert rep["best_train_psnr"] == best and rep["judged_on"] == "train views"
@@ -231,7 +231,7 @@ def test_search_respects_the_tolerance_on_the_training_views(trained):
     tr0 = copy.deepcopy(trained)
     cfg0 = copy.deepcopy(cfg)
     cfg0.tolerance_db, cfg0.sh_search = 0.0, False
-    rep0 = search(tr0, cfg0)
+    rep0 = search(tr0.context, cfg0)
     assert rep0["points"][rep0["chosen"]]["train_psnr"] == max(p["train_psnr"] for p in rep0["points"])
 
 
@@ -239,13 +239,13 @@ def test_search_never_looks_at_the_test_views(trained):
     cfg = copy.deepcopy(trained.cfg.compact)
     cfg.ratios, cfg.sh_search = [0.3, 0.6], False
     a = copy.deepcopy(trained)
-    ra = search(a, cfg)
+    ra = search(a.context, cfg)
     b = copy.deepcopy(trained)
     for cam in b.test_cams:  # other test images, and no test PSNR recorded
         cam.image = torch.rand_like(cam.image)
     cfg_b = copy.deepcopy(cfg)
     cfg_b.report_test = False
-    rb = search(b, cfg_b)
+    rb = search(b.context, cfg_b)
     assert ra["chosen"] == rb["chosen"]
     assert [p["train_psnr"] for p in ra["points"]] == [p["train_psnr"] for p in rb["points"]]
     assert all(torch.equal(a.model.params[k], b.model.params[k]) for k in a.model.params)

@@ -144,7 +144,7 @@ def test_pair_trains_checkpoints_and_resumes_exactly(scene, tmp_path):
     assert alone.pair is None and same_params(param_copy(alone), param_copy(second))
     # and one written without the pair cannot resume a run with it
     Trainer(tiny_config(5), scene, tmp_path / "plain").save_checkpoint()
-    with pytest.raises(Exception, match="co_reg off"):
+    with pytest.raises(Exception, match="corgs.pair off"):
         Trainer(_pair_config(70), scene, tmp_path / "plain").load_checkpoint()
 
 

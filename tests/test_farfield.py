@@ -167,13 +167,14 @@ def test_trainer_fits_the_far_field_on_training_views_only_and_resumes_exactly(t
     scene = make_scene()
     cfg = tiny_config(40, str(tmp_path / "none.pth"), far_field="elevation", far_field_bins=8)
     straight = Trainer(cfg, scene)
-    assert straight.far_field is not None
+    assert straight.bg.components.get("far_field") is not None
     cam = straight.test_cams[0]
     bg = straight.background_for(cam)
     assert bg.shape == (cam.height, cam.width, 3)
     # the test views do not enter it
     blanked = dataclasses.replace(scene, test=[dataclasses.replace(c, image=np.ones_like(c.image)) for c in scene.test])
-    assert torch.equal(Trainer(cfg, blanked).far_field.colors, straight.far_field.colors)
+    assert torch.equal(Trainer(cfg, blanked).bg.components.get("far_field").field.colors,
+                       straight.bg.components.get("far_field").field.colors)
     # every render of the trainer composites it
     with torch.no_grad():
         out = straight.render(cam)
@@ -190,7 +191,37 @@ def test_trainer_fits_the_far_field_on_training_views_only_and_resumes_exactly(t
     assert straight.losses == second.losses
     # the fit's time is one of the run's per-stage timings
     stages = second.finish()["stage_times_s"]
-    assert second.far_field_time > 0 and stages["far_field_s"] == round(second.far_field_time, 2)
+    took = second.bg.components.get("far_field").time
+    assert took > 0 and stages["far_field_s"] == round(took, 2)
+
+
+def test_the_far_field_is_a_registered_background_component(tmp_path):
+    """The far field is an entry of ``warpgs.backgrounds``' registry: its section ``backgrounds.far_field`` (where
+    ``train.far_field`` of earlier versions loads), off by default, and when on, the image it draws behind a view and
+    the far_field.json it writes are those of an ``ElevationFarField`` fitted on the same views by itself."""
+    from types import SimpleNamespace
+
+    from tiny_scene import make_scene
+    from warpgs.backgrounds import REGISTRY, Backgrounds
+    from warpgs.backgrounds.far_field import FarField
+    from warpgs.config import Config, load_config
+
+    assert list(REGISTRY) == ["far_field"]
+    old = load_config([], ["train.far_field=sky", "train.far_field_bins=4"]).backgrounds.far_field
+    assert (old.kind, old.bins) == ("sky", 4)
+    cams = [c.to_torch("cpu") for c in make_scene().train]
+    ctx = SimpleNamespace(cameras=SimpleNamespace(train=cams), background=SimpleNamespace(colour=torch.zeros(3)),
+                          geometry=None, log=lambda msg: None)
+    cfg = Config()
+    assert Backgrounds.build(cfg, ctx).items == {} and Backgrounds.build(cfg, ctx).image(cams[0]) is None
+    cfg.backgrounds.far_field.kind, cfg.backgrounds.far_field.bins = "elevation", 8
+    comps = Backgrounds.build(cfg, ctx)
+    assert isinstance(comps.get("far_field"), FarField) and list(comps.times()) == ["far_field_s"]
+    alone = ElevationFarField.fit(cams, 8)
+    for cam in cams:
+        assert torch.equal(comps.image(cam), alone.image(cam.viewmat, cam.K, cam.width, cam.height))
+    comps.save(tmp_path)
+    assert_close(ElevationFarField.load(tmp_path / "far_field.json").colors, alone.colors, 1e-6, what="saved bands")
 
 
 def _loo_oracle(views, up, bins, blur):
@@ -329,7 +360,7 @@ def test_cylinder_proxy_is_chosen_leave_one_out_and_predicts_a_nearer_camera(dev
     assert err_cyl < 0.25 * err_ray, (err_cyl, err_ray)
     assert ElevationFarField.fit(train, bins, 0.0, "none", points).radius is None
     assert ElevationFarField.fit(train, bins, 0.0, "auto", None).radius is None
-    with pytest.raises(ValueError, match="far_field_proxy"):
+    with pytest.raises(ValueError, match=r"far_field\.proxy"):
         ElevationFarField.fit(train, bins, 0.0, "sphere", points)
 
 
@@ -353,10 +384,11 @@ def test_the_captures_config_asks_for_the_cylinder_and_a_bad_proxy_is_named():
 
     from warpgs.config import load_config
 
-    assert load_config([Path(__file__).resolve().parents[1] / "configs" / "datasets" / "dl3dv.yaml"]).train.far_field_proxy == "auto"
-    assert load_config().train.far_field_proxy == "none"
-    with pytest.raises(ValueError, match="far_field_proxy"):
-        load_config(overrides=["train.far_field_proxy=sphere"])
+    dl3dv = Path(__file__).resolve().parents[1] / "configs" / "datasets" / "dl3dv.yaml"
+    assert load_config([dl3dv]).backgrounds.far_field.proxy == "auto"
+    assert load_config().backgrounds.far_field.proxy == "none"
+    with pytest.raises(ValueError, match=r"far_field\.proxy = 'sphere' \(from --set train\.far_field_proxy=sphere\)"):
+        load_config(overrides=["train.far_field_proxy=sphere"])  # the key of earlier versions, named where it lives now
 
 
 def test_far_field_images_are_kept_per_camera_and_recomputed_when_it_changes():

@@ -76,7 +76,7 @@ def test_appended_gaussians_train_with_fresh_adam_state():
     tr = Trainer(cfg, scene, None, method=FullMethod())
     tr.train(1)
     n0 = len(tr.model)
-    added = append_gaussians(tr, torch.tensor([[0.0, 0.0, 3.0], [0.1, 0.0, 3.0]]), torch.tensor([[1.0, 0, 0], [0, 1.0, 0]]),
+    added = append_gaussians(tr.context, torch.tensor([[0.0, 0.0, 3.0], [0.1, 0.0, 3.0]]), torch.tensor([[1.0, 0, 0], [0, 1.0, 0]]),
                              torch.full((2, 3), 0.05), 0.1)
     assert added == 2 and len(tr.model) == n0 + 2
     assert torch.allclose(tr.model.opacities[-2:], torch.full((2,), 0.1), atol=1e-6)

@@ -7,19 +7,20 @@ from pathlib import Path
 
 PKG = Path(__file__).resolve().parents[1] / "warpgs"
 
-# lower layers may not import higher ones; one layer may import within itself
+# lower layers may not import higher ones; one layer may import within itself. A package's modules share its
+# layer unless one is named on its own ("strategy.compact"): the longest name that matches decides
 LAYERS = [
-    ["console", "runfolder", "_warp", "kernels", "configio", "geometry", "guard", "losses", "ply", "viz",
+    ["console", "runfolder", "_warp", "kernels", "configio", "registry", "geometry", "guard", "losses", "ply", "viz",
      "wallclock"],
     ["render", "metrics", "farfield"],
     ["model", "data"],
-    ["strategy"],
+    ["strategy"],  # the package, DefaultStrategy, its ops and the leaf of its stages' settings
     ["pseudo", "densify"],
-    ["points", "clearance", "regularizers"],
+    ["points", "strategy.clearance", "regularizers", "backgrounds"],
     ["config"],
     ["optim"],
     ["engine", "coreg"],
-    ["compact"],
+    ["strategy.compact"],
     ["methods"],
     ["train", "pipelines", "view", "configdoc"],
 ]
@@ -67,16 +68,31 @@ def import_graph() -> dict[str, set[str]]:
     return graph
 
 
+def _layer_name(name: str) -> str | None:
+    """The entry of ``LAYERS`` that places the module ``name`` (warpgs.a.b.c): the longest of a.b.c, a.b, a."""
+    parts = name.split(".")[1:]
+    return next((".".join(parts[:i]) for i in range(len(parts), 0, -1) if ".".join(parts[:i]) in RANK), None)
+
+
 def _layer(name: str) -> int:
-    parts = name.split(".")
-    if len(parts) == 1:
+    if "." not in name:
         return -1  # the package itself (warpgs/__init__.py)
-    return RANK[parts[1]]
+    return RANK[_layer_name(name)]
 
 
 def test_every_module_has_a_layer():
-    missing = sorted({n.split(".")[1] for n in _modules() if "." in n} - set(RANK))
+    missing = sorted(n for n in _modules() if "." in n and _layer_name(n) is None)
     assert not missing, f"add these to LAYERS: {missing}"
+
+
+def test_a_package_split_across_layers_has_its_package_module_in_the_lowest():
+    """Importing ``warpgs.strategy.compact`` runs ``warpgs.strategy`` first: that package module (and what it
+    imports) must sit no higher than any of its modules named on their own."""
+    mods = _modules()
+    for entry in RANK:
+        if "." in entry:
+            package = "warpgs." + entry.rpartition(".")[0]
+            assert "warpgs." + entry in mods and package in mods and _layer(package) <= RANK[entry], entry
 
 
 def test_no_import_circle():
@@ -119,7 +135,7 @@ def test_no_upward_import():
 def test_the_graph_reader_sees_deferred_and_relative_imports():
     g = import_graph()
     assert "warpgs.data.scene" in g["warpgs.data.llff"]  # from .scene import ...
-    assert "warpgs.engine.stepguard" in g["warpgs.compact"]  # deferred, inside a function
+    assert "warpgs.engine.stepguard" in g["warpgs.strategy.compact"]  # deferred, inside a function
     assert "warpgs.densify" in g["warpgs.points.stereo"]  # a submodule runs its package first
 
 

@@ -214,7 +214,7 @@ def test_only_updates_state_is_what_step_post_backward_does(monkeypatch, pause):
     monkeypatch.setattr(s, "update_state", lambda *a: None)
     monkeypatch.setattr(s, "grow", lambda *a, **k: acted.append("grow") or (0, 0))
     monkeypatch.setattr(s, "prune", lambda *a, **k: acted.append("prune") or 0)
-    monkeypatch.setattr("warpgs.strategy.reset_opacities", lambda *a, **k: acted.append("reset"))
+    monkeypatch.setattr("warpgs.strategy.default.reset_opacities", lambda *a, **k: acted.append("reset"))
     seen = set()
     for step in range(26):
         acted.clear()

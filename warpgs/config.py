@@ -29,16 +29,16 @@ import yaml
 
 from warpgs.configio import (  # noqa: F401  (re-exported: the config API in one place)
     CONFIG_DIR, REPO_ROOT, ConfigError, apply_values, check_limits, merge, parse_override, read_yaml)
+from warpgs.backgrounds import LEGACY_TRAIN_KEYS as BACKGROUND_KEYS, BackgroundsConfig
+from warpgs.backgrounds.far_field import FAR_FIELD_RULE
 from warpgs.densify import DensifyConfig
-from warpgs.farfield import FAR_FIELDS
 from warpgs.points import GeometryConfig
 from warpgs.pseudo.views import PseudoConfig
 from warpgs.runfolder import atomic_write
-from warpgs.regularizers import LEGACY_TRAIN_KEYS, RegularizersConfig
-from warpgs.strategy import DefaultStrategy
+from warpgs.regularizers import LEGACY_TRAIN_KEYS as REGULARIZER_KEYS, RegularizersConfig
+from warpgs.strategy.config import ClearanceConfig, CompactConfig
+from warpgs.strategy.default import DefaultStrategy
 
-
-FAR_FIELD_RULE = "{" + ", ".join(FAR_FIELDS) + "}"  # train.far_field, full.far_field
 
 
 @dataclass
@@ -115,70 +115,41 @@ class TrainConfig:
     background: list | None = None  # [r, g, b]; None: white if the scene says so, else black
     random_background: bool = False  # views with an alpha channel: a random background each step (no floaters
                                      # that mimic the background colour); evaluation keeps ``background``
-    far_field: str = "none"  # none | elevation: behind the Gaussians, a colour per elevation band fitted on the
-    #   inputs instead of ``background`` (warpgs/farfield.py; captures without alpha)
-    far_field_bins: int = 16  # elevation bands of the far field
-    far_field_blur: float | str = 0.0  # width (in bands) of the Gaussian over the elevation that each band averages
-    #   the inputs' pixels with; auto: the width that best predicts each input from the others (leave-one-out)
-    far_field_proxy: str = "none"  # none: bands by the ray's elevation | auto: by the elevation of where the ray
-    #   leaves a vertical cylinder around the capture, its centre and radius chosen leave-one-out over the inputs
-    #   among candidates from the initial points (or no cylinder when none predicts better; warpgs/farfield.py)
-    path_clearance: float = 0.0  # > 0: every strategy.refine_every steps, remove the Gaussians whose centre lies
-    #   within this x the scene's near depth of the camera path (warpgs/clearance.py: the photographer's space,
-    #   where floaters in front of novel views sit); 0: off
-    view_clearance: float = 0.0  # > 0: with the path clearance's schedule, also remove the Gaussians nearer than
-    #   this x the near depth in front of any pose of the camera path (the inputs and the poses between them),
-    #   inside its image (warpgs/clearance.py); 0: off
-    path_floaters: float = 0.0  # > 0: every path_floaters_every steps and before the final evaluation, remove
-    #   the Gaussians that a pose of the camera path between neighbouring inputs sees with more than this x
-    #   their blending weight in all the inputs together (and with at least 0.1% of that pose's weight):
-    #   floaters no input constrains, in front of novel views taken from the path (warpgs/clearance.py
-    #   ``PathFloaters``; bench/diagnostics/floaters.py's test, which used 10 with the test views); 0: off
-    path_floaters_every: int = 500
-    path_floaters_final: bool = True  # also the pass before the final evaluation (no training after it)
-    path_floaters_poses: int = 3  # poses of the path between each pair of neighbouring inputs
-    path_floaters_paths: str = "spline"  # spline: those poses on the pseudo views' path | both: also as many on the
-    #   straight line between the two inputs (bench/diagnostics/plant_floaters.py: castle_p30 9 views' test frame 16 stands
-    #   1.5 m from that line and 4.4 m from the spline, which bulges across the 22.6 m gap between its inputs)
-    hold_geometry: str = "off"  # off | on | stereo: train the colours and opacities at full rate and hold the initial
-    #   geometry: no densification or pruning by the strategy (strategy.refine_stop_iter 0) and the means', scales'
-    #   and rotations' learning rates x the hold_* factors below; stereo: only when the initial points came from
-    #   plane-sweep stereo alone (model.init sfm falling back to stereo on wide baselines, or stereo): a dense
-    #   cloud that growth would only bend towards the few inputs (warpgs.engine.init.hold_geometry)
-    hold_means_lr: float = 0.1
-    hold_scales_lr: float = 0.2
-    hold_quats_lr: float = 0.1
-    prune_unseen_at_end: bool = False  # at the end, drop Gaussians no training view needs (the captures' default:
-    #   a Gaussian no input sees can only stand in front of a novel view; on scenes whose test views see what the
-    #   inputs do not, it can cost novel-view PSNR)
-    # CoR-GS (Zhang et al., ECCV 2024; warpgs/coreg.py): a second model trained beside the first from the same
-    # initial Gaussians, on the same views, with its own random streams; twice the training cost. The first model
-    # is the one evaluated and exported
-    co_reg: bool = False
-    co_prune_every: int = 500  # co-pruning every this many steps after strategy.refine_start_iter (CoR-GS: 500,
-    #   at a densification step); 0: no co-pruning
-    co_prune_dist: float = 0.75  # co-pruning drops a Gaussian with no centre of the other model within this x the
-    #   scene scale (optim.scene_scale: the training cameras' extent). CoR-GS's tau = 5 on LLFF 3 views is in
-    #   COLMAP's units, where the middle 80% of the 20 camera centres span 10: the 3 training views, at both ends
-    #   and the middle, have an extent of about 6.5, so tau is about 0.75 of it
-    co_reg_weight: float = 1.0  # x (l1_weight L1 + ssim_weight D-SSIM) between the two models' renders of a pose
-    #   between two neighbouring training views, each against the other's detached render (CoR-GS: 1); 0: off
-    co_reg_start: int = 500  # first step of the co-regularisation (CoR-GS's LLFF script: 500)
-    co_reg_frames: int = 24  # pseudo poses between each pair of neighbouring training views, drawn in turn
     progress: bool = True
 
     def __post_init__(self):
-        # the sections keys of earlier versions moved to (a Config links its own here: Config.__post_init__);
-        # cfg.train.<old key> reads and sets them there (_moved_key)
-        self._sections = {"guard": GuardConfig(), "regularizers": RegularizersConfig()}
+        # the sections keys of earlier versions moved to, defaults for a TrainConfig of its own (a Config links its
+        # own: link_sections); cfg.train.<old key> reads and sets them there (_moved_key)
+        self.link_sections({name: cls() for name, cls in MOVED_SECTIONS.items()})
+
+    def link_sections(self, sections: dict) -> None:
+        """The sections (by name) that ``train.<key>`` of an earlier version reads and sets (``TRAIN_MOVED``)."""
+        self._sections = dict(sections)
+
+    def moved_section(self, name: str):
+        return self._sections[name]
 
     LIMITS = {"iterations": ">= 1", "seed": ">= 0", "sh_degree_interval": ">= 0", "checkpoint_every": ">= 0",
-              "eval_every": ">= 0", "background": "[0, 1]", "far_field": FAR_FIELD_RULE, "far_field_bins": ">= 1",
-              "far_field_blur": ">= 0 or {auto}", "far_field_proxy": "{none, auto}", "hold_geometry": "{off, on, stereo}",
-              "hold_means_lr": "> 0", "hold_scales_lr": "> 0", "hold_quats_lr": "> 0", "path_clearance": ">= 0",
-              "view_clearance": ">= 0", "path_floaters": ">= 0", "path_floaters_every": ">= 1", "path_floaters_poses": ">= 1",
-              "path_floaters_paths": "{spline, both}", "co_prune_every": ">= 0", "co_prune_dist": "> 0",
-              "co_reg_weight": ">= 0", "co_reg_start": ">= 0", "co_reg_frames": ">= 1"}
+              "eval_every": ">= 0", "background": "[0, 1]"}
+
+
+@dataclass
+class HoldConfig:
+    """Holding the initial geometry (``hold``; warpgs.engine.init.hold_geometry): the colours and opacities train
+    at full rate, the geometry slowly and without densification."""
+
+    geometry: str = "off"  # off | on | stereo: train the colours and opacities at full rate and hold the initial
+    #   geometry: no densification or pruning by the strategy (strategy.refine_stop_iter 0) and the means', scales'
+    #   and rotations' learning rates x the factors below; stereo: only when the initial points came from
+    #   plane-sweep stereo alone (model.init sfm falling back to stereo on wide baselines, or stereo): a dense
+    #   cloud that growth would only bend towards the few inputs
+    means_lr: float = 0.1
+    scales_lr: float = 0.2
+    quats_lr: float = 0.1
+
+    LIMITS = {"geometry": "{off, on, stereo}", "means_lr": "> 0", "scales_lr": "> 0", "quats_lr": "> 0"}
+    LEGACY = {"hold_geometry": "geometry", "hold_means_lr": "means_lr", "hold_scales_lr": "scales_lr",
+              "hold_quats_lr": "quats_lr"}  # train.<key> of earlier versions (MOVED)
 
 
 @dataclass
@@ -218,29 +189,6 @@ class GuardConfig:
     LIMITS = {"max_nan_steps": ">= 1", "explode_factor": ">= 0", "explode_window": ">= 1", "explode_patience": ">= 1",
               "snapshot_every": ">= 0", "max_recoveries": ">= 0", "recovery_lr_factor": "(0, 1]", "cpu_threads": ">= 0",
               "sync_every": ">= 1"}
-
-
-GUARD_KEYS = tuple(f.name for f in dataclasses.fields(GuardConfig))
-# keys of ``train`` before the sections existed -> where they live now (MOVED; TrainConfig reads and sets them)
-TRAIN_MOVED = {**{k: ("guard", k) for k in GUARD_KEYS},
-               **{old: ("regularizers", name, new) for old, (name, new) in LEGACY_TRAIN_KEYS.items()}}
-
-
-def _moved_key(path: tuple) -> property:
-    """``TrainConfig.<old key>``: the key at ``path`` (a section, its subsections, the key), for scripts that set
-    it on ``cfg.train`` as before the sections existed."""
-    def owner(train):
-        node = train._sections[path[0]]
-        for name in path[1:-1]:
-            node = getattr(node, name)
-        return node
-
-    return property(lambda self: getattr(owner(self), path[-1]), lambda self, v: setattr(owner(self), path[-1], v),
-                    doc=f"{'.'.join(path)} (read and set through train as before)")
-
-
-for _old, _path in TRAIN_MOVED.items():
-    setattr(TrainConfig, _old, _moved_key(_path))
 
 
 @dataclass
@@ -288,7 +236,8 @@ class FullConfig:
     drop_rate: float | None = None  # DropGaussian's final rate for this method (train.drop_rate); None: train's
     pseudo_depth_smooth: float = 0.0  # weight of an edge-aware smoothness of the pseudo views' rendered depth
     #   (Monodepth's, Godard et al. CVPR 2017, on depth / its mean; edges from the pseudo view's image); 0: off
-    far_field: str | None = None  # the far field for this method (train.far_field: none | elevation); None: train's
+    far_field: str | None = None  # the far field for this method (backgrounds.far_field.kind: none | elevation |
+    #   sky); None: that one
     refine_stop_fraction: float | None = None  # strategy.refine_stop_fraction for this method; None: the strategy's
     path_consistency: float = 0.0  # weight of the two inputs' agreement at each pseudo view trained on: the photos of
     #   the inputs it lies between, warped into it with its rendered depth (warpgs.regularizers.binocular.pose_warp), compared
@@ -307,42 +256,60 @@ class FullConfig:
               "path_consistency": ">= 0", "reliable_weight": "> 0", "flythrough_frames": ">= 0"}
 
 
-IMPORTANCE_VIEWS = ("train", "virtual", "pseudo")
-
-
 @dataclass
-class CompactConfig:
-    """Compact mode (``--compact``, warpgs/compact.py): importance pruning during training and a search for
-    the smallest model within a tolerance of the best training-view PSNR."""
+class CoRGSConfig:
+    """CoR-GS (Zhang et al., ECCV 2024; ``method: corgs``, warpgs/coreg.py): a second model trained beside the first
+    from the same initial Gaussians, on the same views, with its own random streams; twice the training cost. The
+    first model is the one evaluated and exported. Keys of ``train`` before this section existed (``train.co_reg``,
+    ``train.co_prune_every``, ...) load through ``MOVED``."""
 
-    enabled: bool = False
-    importance: str = "weight"  # weight (total blending weight) | weight_volume (x volume^volume_power, LightGaussian)
-    volume_power: float = 0.1
-    importance_views: list = field(default_factory=lambda: ["train", "pseudo"])  # of train, virtual, pseudo
-    virtual_frames: int = 3  # virtual: poses interpolated between each pair of neighbouring training views
-    prune_at: list = field(default_factory=lambda: [0.5, 0.65, 0.8])  # fractions of the run; [] = none
-    prune_ratio: float = 0.3  # share of the Gaussians pruned at each of prune_at
-    cap_after_prune: bool = False  # densification may not grow the count back above what each pruning left
-    stop_densify_at: float | None = None  # fraction of train.iterations after which densification stops (None: the strategy's)
-    tolerance_db: float = 0.1  # training-view PSNR the final model may lose against the best evaluated
-    ratios: list = field(default_factory=lambda: [0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9])  # searched; [] = no search
-    finetune_steps: int = 300  # per point of the search
-    sh_search: bool = True  # try lower SH degrees (0 first)
-    report_test: bool = True  # record each point's test PSNR (reported only; never used to choose)
-    seed: int = 0
+    pair: bool = False  # the co-regularised pair with any method (--method corgs: always)
+    prune_every: int = 500  # co-pruning every this many steps after strategy.refine_start_iter (CoR-GS: 500, at a
+    #   densification step); 0: no co-pruning
+    prune_dist: float = 0.75  # co-pruning drops a Gaussian with no centre of the other model within this x the
+    #   scene scale (optim.scene_scale: the training cameras' extent). CoR-GS's tau = 5 on LLFF 3 views is in
+    #   COLMAP's units, where the middle 80% of the 20 camera centres span 10: the 3 training views, at both ends
+    #   and the middle, have an extent of about 6.5, so tau is about 0.75 of it
+    weight: float = 1.0  # x (l1_weight L1 + ssim_weight D-SSIM) between the two models' renders of a pose between
+    #   two neighbouring training views, each against the other's detached render (CoR-GS: 1); 0: off
+    start: int = 500  # first step of the co-regularisation (CoR-GS's LLFF script: 500)
+    frames: int = 24  # pseudo poses between each pair of neighbouring training views, drawn in turn
 
-    LIMITS = {"importance": "{weight, weight_volume}", "volume_power": ">= 0",
-              "importance_views": "{" + ", ".join(IMPORTANCE_VIEWS) + "}", "virtual_frames": ">= 0",
-              "prune_at": "(0, 1)", "prune_ratio": "[0, 1)", "stop_densify_at": "(0, 1]", "tolerance_db": ">= 0",
-              "ratios": "(0, 1)", "finetune_steps": ">= 0", "seed": ">= 0"}
+    LIMITS = {"prune_every": ">= 0", "prune_dist": "> 0", "weight": ">= 0", "start": ">= 0", "frames": ">= 1"}
+    LEGACY = {"co_reg": "pair", "co_prune_every": "prune_every", "co_prune_dist": "prune_dist",
+              "co_reg_weight": "weight", "co_reg_start": "start", "co_reg_frames": "frames"}  # train.<key> (MOVED)
 
 
-def check_compact_config(c: CompactConfig) -> CompactConfig:
-    """The ranges of ``CompactConfig.LIMITS`` (for options built in code) and a non-empty list of views."""
-    check_limits(c, "compact mode's options", "compact.")
-    if not c.importance_views:
-        raise ConfigError("compact.importance_views is empty: a non-empty list of " + ", ".join(IMPORTANCE_VIEWS))
-    return c
+GUARD_KEYS = tuple(f.name for f in dataclasses.fields(GuardConfig))
+# the sections that took keys of ``train``, each with its ``LEGACY`` {old train key: its key}
+LEGACY_SECTIONS = {"clearance": ClearanceConfig, "hold": HoldConfig, "strategy": DefaultStrategy,
+                   "corgs": CoRGSConfig}
+# the registries' sections, each with the keys of ``train`` its modules took {old: (module's name, its key)}
+REGISTRY_KEYS = {"regularizers": REGULARIZER_KEYS, "backgrounds": BACKGROUND_KEYS}
+MOVED_SECTIONS = {"guard": GuardConfig, "regularizers": RegularizersConfig, "backgrounds": BackgroundsConfig,
+                  **LEGACY_SECTIONS}
+# keys of ``train`` before the sections existed -> where they live now (MOVED; TrainConfig reads and sets them)
+TRAIN_MOVED = {**{k: ("guard", k) for k in GUARD_KEYS},
+               **{old: (section, name, new) for section, keys in REGISTRY_KEYS.items()
+                  for old, (name, new) in keys.items()},
+               **{old: (section, new) for section, cls in LEGACY_SECTIONS.items() for old, new in cls.LEGACY.items()}}
+
+
+def _moved_key(path: tuple) -> property:
+    """``TrainConfig.<old key>``: the key at ``path`` (a section, its subsections, the key), for scripts that set
+    it on ``cfg.train`` as before the sections existed."""
+    def owner(train):
+        node = train.moved_section(path[0])
+        for name in path[1:-1]:
+            node = getattr(node, name)
+        return node
+
+    return property(lambda self: getattr(owner(self), path[-1]), lambda self, v: setattr(owner(self), path[-1], v),
+                    doc=f"{'.'.join(path)} (read and set through train as before)")
+
+
+for _old, _path in TRAIN_MOVED.items():
+    setattr(TrainConfig, _old, _moved_key(_path))
 
 
 @dataclass
@@ -357,15 +324,19 @@ class Config:
     train: TrainConfig = field(default_factory=TrainConfig)
     guard: GuardConfig = field(default_factory=GuardConfig)  # the step guard and the loop's performance
     regularizers: RegularizersConfig = field(default_factory=RegularizersConfig)  # warpgs/regularizers, one each
+    backgrounds: BackgroundsConfig = field(default_factory=BackgroundsConfig)  # warpgs/backgrounds, one each
+    clearance: ClearanceConfig = field(default_factory=ClearanceConfig)  # the capture path's pruning
+    hold: HoldConfig = field(default_factory=HoldConfig)  # holding the initial geometry
     eval: EvalConfig = field(default_factory=EvalConfig)
     full: FullConfig = field(default_factory=FullConfig)
-    compact: CompactConfig = field(default_factory=CompactConfig)  # compact mode (warpgs/compact.py, --compact)
+    corgs: CoRGSConfig = field(default_factory=CoRGSConfig)  # CoR-GS's co-regularised pair (warpgs/coreg.py)
+    compact: CompactConfig = field(default_factory=CompactConfig)  # compact mode (warpgs/strategy/compact.py)
     geometry: GeometryConfig = field(default_factory=GeometryConfig)  # model.init sfm / stereo (warpgs/points)
     pseudo: PseudoConfig = field(default_factory=PseudoConfig)  # the full method's pseudo views (warpgs/pseudo)
     densify: DensifyConfig = field(default_factory=DensifyConfig)  # its densification from them (warpgs/densify)
 
     def __post_init__(self):
-        self.train._sections = {"guard": self.guard, "regularizers": self.regularizers}  # (TrainConfig.__post_init__)
+        self.train.link_sections({name: getattr(self, name) for name in MOVED_SECTIONS})  # (TrainConfig.__post_init__)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -381,7 +352,7 @@ MOVED = {("full", "n_frames"): ("pseudo", "trajectory", "n_frames"),
          ("full", "photometric"): ("pseudo", "uncertainty", "photometric"),
          ("full", "pseudo"): ("pseudo",),
          ("full", "densify_config"): ("densify",),
-         ("train", "compact"): ("train", "prune_unseen_at_end"),
+         ("train", "compact"): ("strategy", "prune_unseen_at_end"),
          ("strategy", "compact_when_full"): ("strategy", "prune_unseen_when_full"),
          ("strategy", "compact_min_weight"): ("strategy", "unseen_min_weight"),
          **{("train", old): new for old, new in TRAIN_MOVED.items()}}

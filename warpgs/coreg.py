@@ -1,4 +1,5 @@
-"""CoR-GS (Zhang et al., ECCV 2024): a co-regularised pair of 3D-GS models (``train.co_reg``).
+"""CoR-GS (Zhang et al., ECCV 2024): a co-regularised pair of 3D-GS models (``corgs.pair``,
+``--method corgs``; its settings: the section ``corgs``).
 
 Two models are trained side by side, and where they disagree is taken as where neither is right:
 
@@ -8,14 +9,14 @@ Two models are trained side by side, and where they disagree is taken as where n
   densification makes the two differ. The first model is the one evaluated, exported and compacted;
   the method's own terms and phases (the full method's pseudo views, depth priors and densification from
   them) act on it alone, so with ``--method full`` its partner is a model of the input views.
-- **Co-pruning** (CoR-GS Sec. 4.2): every ``train.co_prune_every`` steps after ``strategy.refine_start_iter``
+- **Co-pruning** (CoR-GS Sec. 4.2): every ``corgs.prune_every`` steps after ``strategy.refine_start_iter``
   (right after a densification), a Gaussian of either model with no centre of the other within
-  ``train.co_prune_dist`` x the scene scale is removed (``co_prune_masks``: Warp hash-grid radius queries,
+  ``corgs.prune_dist`` x the scene scale is removed (``co_prune_masks``: Warp hash-grid radius queries,
   ``warpgs.densify.within_radius``). A model is never emptied.
-- **Co-regularisation on pseudo views** (Sec. 4.3): from step ``train.co_reg_start`` on, each step also
-  renders both models at a pose between two neighbouring training views (``train.co_reg_frames`` poses
+- **Co-regularisation on pseudo views** (Sec. 4.3): from step ``corgs.start`` on, each step also
+  renders both models at a pose between two neighbouring training views (``corgs.frames`` poses
   per pair along the path of ``warpgs.pseudo.trajectory.virtual_cameras``, drawn in a shuffled order; never a test
-  view) and adds ``train.co_reg_weight`` x (l1_weight L1 + ssim_weight D-SSIM) of each render against the
+  view) and adds ``corgs.weight`` x (l1_weight L1 + ssim_weight D-SSIM) of each render against the
   other's detached render to that model's loss (``co_reg_loss``). These renders use no dropout: they
   compare the models as they render at test time.
 
@@ -38,7 +39,7 @@ from warpgs.densify import within_radius
 from warpgs.model import PARAM_NAMES, GaussianModel
 from warpgs.optim import STATE_PARTS, load_model_state, make_optimizer, model_state
 from warpgs.pseudo.trajectory import virtual_cameras
-from warpgs.strategy import remove
+from warpgs.strategy.ops import remove
 
 SEED_OFFSETS = {"split": 11, "drop": 12, "views": 13}  # the partner's random streams: train.seed + these
 
@@ -73,32 +74,33 @@ def co_reg_loss(image_a: torch.Tensor, image_b: torch.Tensor, l1_weight: float =
 
 class CoRegPair:
     """The second model of the co-regularised pair, its optimiser, strategy and random streams; the trainer
-    calls ``loss`` in each step before the backward and ``after_update`` after the optimisers' step."""
+    calls ``loss`` in each step before the backward and ``after_update`` after the optimisers' step. ``ctx``:
+    the trainer's narrow view (``warpgs.engine.context.Context``), its model as initialised."""
 
-    def __init__(self, trainer):
-        tc = trainer.cfg.train
-        check_limits(tc, "the training options", "train.")
-        self.trainer = trainer
-        m = trainer.model  # the first model as initialised: the partner starts from the same Gaussians
+    def __init__(self, ctx):
+        tc = ctx.cfg.corgs
+        check_limits(tc, "CoR-GS's options", "corgs.")
+        self.ctx = ctx
+        m = ctx.model  # the first model as initialised: the partner starts from the same Gaussians
         self.model = GaussianModel(*(m.params[n].detach() for n in PARAM_NAMES), max_sh_degree=m.max_sh_degree)
-        self.strategy = copy.deepcopy(trainer.cfg.strategy)
-        self.optimizer = make_optimizer(self.model, trainer.cfg, trainer.scene_scale)
-        self.state = self.strategy.initialize_state(len(self.model), trainer.device)
-        seed = tc.seed
-        self.split_gen = torch.Generator(device=trainer.device).manual_seed(seed + SEED_OFFSETS["split"])
-        self.drop_gen = torch.Generator(device=trainer.device).manual_seed(seed + SEED_OFFSETS["drop"])
-        self.views = virtual_cameras(trainer.train_cams, tc.co_reg_frames)  # poses between the training views
+        self.strategy = copy.deepcopy(ctx.cfg.strategy)
+        self.optimizer = make_optimizer(self.model, ctx.cfg, ctx.scene_scale)
+        self.state = self.strategy.initialize_state(len(self.model), ctx.device)
+        seed = ctx.cfg.train.seed
+        self.split_gen = torch.Generator(device=ctx.device).manual_seed(seed + SEED_OFFSETS["split"])
+        self.drop_gen = torch.Generator(device=ctx.device).manual_seed(seed + SEED_OFFSETS["drop"])
+        self.views = virtual_cameras(ctx.cameras.train, tc.frames)  # poses between the training views
         self.view_rng = np.random.default_rng(seed + SEED_OFFSETS["views"])
         self.order: list[int] = []
         self.co_pruned: list[dict] = []  # each co-pruning: step, Gaussians removed from each model, counts after
         self._out = None  # the partner's render of this step's view, for its densification statistics
-        if not self.views and tc.co_reg_weight > 0:
-            trainer.log("warpgs: train.co_reg: one training view, so no poses between views to co-regularise on; "
+        if not self.views and tc.weight > 0:
+            ctx.log("warpgs: corgs.pair: one training view, so no poses between views to co-regularise on; "
                         "the pair is only co-pruned")
 
     @property
     def settings(self):
-        return self.trainer.cfg.train
+        return self.ctx.cfg.corgs
 
     def next_view(self) -> int:
         if not self.order:
@@ -110,24 +112,24 @@ class CoRegPair:
 
     def loss(self, step: int, cam, background, parts: dict) -> torch.Tensor:
         """What the pair adds to step ``step``'s loss of the first model on the input view ``cam`` (rendered over
-        ``background``): the partner's inputs' loss on that view and, from ``co_reg_start`` on, both models'
-        co-regularisation terms on one pseudo view x ``co_reg_weight``. Their values go into ``parts``
+        ``background``): the partner's inputs' loss on that view and, from ``start`` on, both models'
+        co-regularisation terms on one pseudo view x ``weight``. Their values go into ``parts``
         (``partner``, ``co_reg``)."""
-        tr, s = self.trainer, self.settings
-        self.model.active_sh_degree = tr.model.active_sh_degree
+        ctx, s = self.ctx, self.settings
+        self.model.active_sh_degree = ctx.model.active_sh_degree
         out = self.model.render(cam.viewmat, cam.K, cam.width, cam.height, background=background,
-                                opacity_scale=tr.opacity_scale(step, self.model, self.drop_gen), check_finite=False)
+                                opacity_scale=ctx.opacity_scale(step, self.model, self.drop_gen), check_finite=False)
         self._out = out
-        loss, own = tr.input_loss(out, cam)
+        loss, own = ctx.input_loss(out, cam)
         parts["partner"] = own["inputs"]
-        loss = tr.parameter_priors(self.model, loss, {})
-        if s.co_reg_weight > 0 and step >= s.co_reg_start and self.views:
+        loss = ctx.parameter_priors(self.model, loss, {})
+        if s.weight > 0 and step >= s.start and self.views:
             pc = self.views[self.next_view()]
-            bg = tr.background_for(pc)
+            bg = ctx.background.for_cam(pc)
             a, b = (model.render(pc.viewmat, pc.K, pc.width, pc.height, background=bg, check_finite=False).image
-                    for model in (tr.model, self.model))
-            co = co_reg_loss(a, b, tr.cfg.loss.l1_weight, tr.cfg.loss.ssim_weight)
-            loss = loss + s.co_reg_weight * co
+                    for model in (ctx.model, self.model))
+            co = co_reg_loss(a, b, ctx.cfg.loss.l1_weight, ctx.cfg.loss.ssim_weight)
+            loss = loss + s.weight * co
             parts["co_reg"] = co
         return loss
 
@@ -135,25 +137,25 @@ class CoRegPair:
         """After step ``step``'s update of both models: the partner's densification (``Trainer.densify``; with a
         deferred step's verdict ``apply``, a skipped step counts as one that saw nothing), then the co-pruning
         when it is due. Returns how many Gaussians the co-pruning removed from both models."""
-        tr, s = self.trainer, self.settings
+        s = self.settings
         out, self._out = self._out, None
         if apply is not None:
             out = out._replace(radii=out.radii * apply)
-        tr.densify(self.strategy, self.model, self.optimizer, self.state, step, out, cam, self.split_gen)
-        if s.co_prune_every and step > self.strategy.refine_start_iter and step % s.co_prune_every == 0:
+        self.ctx.densify(self.strategy, self.model, self.optimizer, self.state, step, out, cam, self.split_gen)
+        if s.prune_every and step > self.strategy.refine_start_iter and step % s.prune_every == 0:
             return self.co_prune(step)
         return 0
 
     def co_prune(self, step: int) -> int:
-        """Removes from each model the Gaussians with no centre of the other within ``co_prune_dist`` x the scene
+        """Removes from each model the Gaussians with no centre of the other within ``prune_dist`` x the scene
         scale (``co_prune_masks``, both decided before either is pruned); a model that would lose every Gaussian
         keeps them. Returns how many went, in all."""
-        tr = self.trainer
-        radius = self.settings.co_prune_dist * tr.scene_scale
+        ctx = self.ctx
+        radius = self.settings.prune_dist * ctx.scene_scale
         with torch.no_grad():
-            drop = co_prune_masks(tr.model.means.detach(), self.model.means.detach(), radius)
+            drop = co_prune_masks(ctx.model.means.detach(), self.model.means.detach(), radius)
         removed = []
-        for (model, optimizer, state), mask in zip(((tr.model, tr.optimizer, tr.state),
+        for (model, optimizer, state), mask in zip(((ctx.model, ctx.optimizer, ctx.state),
                                                      (self.model, self.optimizer, self.state)), drop):
             n = int(mask.sum())
             if n == len(model):  # nothing of it is near the other: keep it rather than empty it
@@ -162,10 +164,10 @@ class CoRegPair:
                 remove(model, optimizer, state, mask)
             removed.append(n)
         self.co_pruned.append({"step": step, "removed": removed[0], "partner_removed": removed[1],
-                               "num_gaussians": len(tr.model), "partner_gaussians": len(self.model)})
+                               "num_gaussians": len(ctx.model), "partner_gaussians": len(self.model)})
         if any(removed):
-            tr.log(f"warpgs: step {step}: co-pruning removed {removed[0]} Gaussians of the model and {removed[1]} of "
-                   f"its partner (no counterpart within {radius:.3g}); {len(tr.model)} and {len(self.model)} left")
+            ctx.log(f"warpgs: step {step}: co-pruning removed {removed[0]} Gaussians of the model and {removed[1]} of "
+                   f"its partner (no counterpart within {radius:.3g}); {len(ctx.model)} and {len(self.model)} left")
         return sum(removed)
 
     # ------------------------------------------------------------------------------------------
@@ -186,13 +188,13 @@ class CoRegPair:
 
     def load_state_dict(self, st: dict | None, parts=STATE_PARTS) -> None:
         """Puts back the ``parts`` of the partner's state ``st`` (copies: ``st`` stays usable); ``ValueError``
-        when ``st`` is None (a state written with ``train.co_reg`` off)."""
+        when ``st`` is None (a state written without the pair)."""
         if st is None:
             raise ValueError("it holds no second model of the co-regularised pair (it was written with "
-                             "train.co_reg off; resume it with --set train.co_reg=false)")
-        tr = self.trainer
+                             "corgs.pair off; resume it with --set corgs.pair=false)")
+        ctx = self.ctx
         if "model" in parts:
-            self.optimizer, self.state = load_model_state(st, self.model, tr.cfg, tr.scene_scale, tr.device)
+            self.optimizer, self.state = load_model_state(st, self.model, ctx.cfg, ctx.scene_scale, ctx.device)
         if "progress" in parts:
             self.split_gen.set_state(st["split_gen"])
             self.drop_gen.set_state(st["drop_gen"])
@@ -204,16 +206,17 @@ class CoRegPair:
     def report(self) -> dict:
         """metrics.json's ``co_reg``: the settings, the co-pruning record, the partner's size and its PSNR and
         SSIM on the test views (for comparison only: the first model is the run's result)."""
-        tr, s = self.trainer, self.settings
-        rec = {"co_prune_every": s.co_prune_every, "co_prune_dist": s.co_prune_dist,
-               "co_prune_radius": s.co_prune_dist * tr.scene_scale, "co_reg_weight": s.co_reg_weight,
-               "co_reg_start": s.co_reg_start, "pseudo_views": len(self.views),
+        ctx, s = self.ctx, self.settings
+        rec = {"co_prune_every": s.prune_every, "co_prune_dist": s.prune_dist,
+               "co_prune_radius": s.prune_dist * ctx.scene_scale, "co_reg_weight": s.weight,
+               "co_reg_start": s.start, "pseudo_views": len(self.views),
                "partner_gaussians": len(self.model), "co_pruned": copy.deepcopy(self.co_pruned)}
-        if tr.test_cams:
+        if ctx.cameras.test:
             def render(cam):
-                return self.model.render(cam.viewmat, cam.K, cam.width, cam.height, background=tr.background_for(cam))
+                bg = ctx.background.for_cam(cam)
+                return self.model.render(cam.viewmat, cam.K, cam.width, cam.height, background=bg)
 
-            ev = tr.evaluate(lpips=False, render=render)["mean"]
+            ev = ctx.evaluate(lpips=False, render=render)["mean"]
             rec.update(partner_psnr=ev["psnr"], partner_ssim=ev["ssim"])
         return rec
 

@@ -16,7 +16,7 @@ its resume compute the same one. "Up" is the mean of the training cameras' up ax
     ff = ElevationFarField.fit(train_cams, bins=16)
     out = model.render(cam.viewmat, cam.K, W, H, background=ff.image(cam.viewmat, cam.K, W, H))
 
-**A wall around the capture** (``proxy="auto"``, ``train.far_field_proxy``). A band per elevation of the *ray*
+**A wall around the capture** (``proxy="auto"``, ``backgrounds.far_field.proxy``). A band per elevation of the *ray*
 assumes what is unseen lies infinitely far. In a courtyard or a street it does not: a camera near one wall sees
 that wall's roof line high above its horizon, where a camera in the middle sees sky (castle_p30's test view 24).
 With initial points, the far field can instead index its bands by the elevation, seen from a centre, of the
@@ -41,7 +41,7 @@ import numpy as np
 import torch
 
 FAR_FIELDS = ("none", "elevation", "sky")
-PROXIES = ("none", "auto")  # train.far_field_proxy: bands by the ray's elevation, or by where it leaves a cylinder
+PROXIES = ("none", "auto")  # backgrounds.far_field.proxy: bands by the ray's elevation, or where it leaves a cylinder
 PROXY_RADII = (0.5, 1.0, 1.5, 2.0, 3.0, 5.0)  # candidate radii, x the points' median horizontal distance from a centre
 
 
@@ -192,7 +192,7 @@ class ElevationFarField:
         if not cameras:
             raise ValueError("far field: no views to fit it on")
         if proxy not in PROXIES:
-            raise ValueError(f"train.far_field_proxy={proxy!r}: expected one of {', '.join(PROXIES)}")
+            raise ValueError(f"backgrounds.far_field.proxy={proxy!r}: expected one of {', '.join(PROXIES)}")
         if blur != "auto" and float(blur) < 0:
             raise ValueError(f"far field: blur must be >= 0 or 'auto', got {blur}")
         mats = [torch.as_tensor(c.viewmat, dtype=torch.float32) for c in cameras]
@@ -333,7 +333,7 @@ class FarFieldImages:
 
 def make_far_field(kind: str, cameras, bins: int, background=None, blur: float | str = 0.0, proxy: str = "none",
                    points=None) -> ElevationFarField | None:
-    """The far field ``train.far_field`` asks for, fitted on ``cameras`` (the training views; ``points``: the
+    """The far field ``backgrounds.far_field.kind`` asks for, fitted on ``cameras`` (the training views; ``points``: the
     initial geometry, for ``proxy="auto"``); None for none. ``sky``: the bands above the horizon only; below it,
     ``background`` (default black): the ground is geometry for the Gaussians, not a backdrop."""
     if kind == "none":
@@ -345,4 +345,4 @@ def make_far_field(kind: str, cameras, bins: int, background=None, blur: float |
             bg = torch.zeros(3) if background is None else torch.as_tensor(background, dtype=torch.float32).cpu()
             ff.colors = torch.where(below.to(ff.colors.device)[:, None], bg.to(ff.colors.device), ff.colors)
         return ff
-    raise ValueError(f"train.far_field={kind!r}: expected one of {', '.join(FAR_FIELDS)}")
+    raise ValueError(f"backgrounds.far_field.kind={kind!r}: expected one of {', '.join(FAR_FIELDS)}")

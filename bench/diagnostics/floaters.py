@@ -10,9 +10,9 @@ inputs barely use them (``--ratio``: test weight over input weight) are the susp
 worst view's top suspects (distance to the test camera, size, opacity, colour, weights) and the PSNR of every
 test view with the suspects of *all* views removed, and with every Gaussian the inputs use less than
 ``--min-input`` pixels removed, and how far the worst view's suspects and every test camera lie from the camera
-path (``warpgs/clearance.py``; ``path_near``: in the run's near depths, as ``train.path_clearance`` counts).
+path (``warpgs/strategy/clearance.py``; ``path_near``: in the run's near depths, as ``clearance.path`` counts).
 ``--unseen-sweep 0.05,1,5``: also each view's PSNR without the Gaussians below each of those input weights
-(what ``train.prune_unseen_at_end`` with that ``strategy.unseen_min_weight`` would leave).
+(what ``strategy.prune_unseen_at_end`` with that ``strategy.unseen_min_weight`` would leave).
 Writes ``floaters.json`` in each run folder (or ``--out``).
 """
 
@@ -77,7 +77,7 @@ def render_view(model, cam, far_field, background: torch.Tensor, keep: torch.Ten
 def diagnose(run: Path, device: str, data_root: str | None, ratio: float, min_input: float, top: int,
              sweep: tuple[float, ...] = ()) -> dict:
     from warpgs.strategy import contribution
-    from warpgs.clearance import PathClearance, segment_distance
+    from warpgs.strategy.clearance import PathClearance, segment_distance
 
     cfg, scene, model, ff, bgc, train, test = load_run(run, device, data_root)
 
@@ -98,7 +98,7 @@ def diagnose(run: Path, device: str, data_root: str | None, ratio: float, min_in
     for v, c in zip(views, test):
         v["psnr_without_suspects"] = psnr(render(c, ~suspects), c.image)
         v["psnr_without_unseen"] = psnr(render(c, ~unseen), c.image)
-        # what train.prune_unseen_at_end with strategy.unseen_min_weight t would leave (opacity pruning aside)
+        # what strategy.prune_unseen_at_end with strategy.unseen_min_weight t would leave (opacity pruning aside)
         v["psnr_without_unseen_sweep"] = {str(t): psnr(render(c, w_in >= t), c.image) for t in sweep}
     worst = min(views, key=lambda v: v["psnr"])
     cam = test[views.index(worst)]
@@ -121,7 +121,7 @@ def diagnose(run: Path, device: str, data_root: str | None, ratio: float, min_in
     for v in views:
         v.pop("_w", None)
     depths_in = [float((c.viewmat[:3, :3] @ model.means.detach().T + c.viewmat[:3, 3:]).T[:, 2].median()) for c in train]
-    # where they lie against the camera path of train.path_clearance, in metres and in near depths (the run's
+    # where they lie against the camera path of clearance.path, in metres and in near depths (the run's
     # measured bounds when metrics.json has them: the loader's are not what the clearance used)
     metrics = json.loads((run / "metrics.json").read_text()) if (run / "metrics.json").is_file() else {}
     near = float(((metrics.get("init") or {}).get("bounds") or scene.bounds)[0])

@@ -1,8 +1,8 @@
-"""Which test cameras the path-floater pass (``train.path_floaters``, ``warpgs/clearance.py`` ``PathFloaters``)
+"""Which test cameras the path-floater pass (``clearance.floaters``, ``warpgs/strategy/clearance.py`` ``PathFloaters``)
 protects: plant an opaque, dark Gaussian on each test camera's optical axis at several distances in front of it,
 in a trained model, and report for each whether the pass finds it with N poses per pair of inputs (on the pseudo
-views' spline, and on it and the straight line between the inputs: ``train.path_floaters_paths``), and whether
-the path clearance (``train.path_clearance``, ``PathClearance``, built as the run's trainer builds it) takes it.
+views' spline, and on it and the straight line between the inputs: ``clearance.floaters_paths``), and whether
+the path clearance (``clearance.path``, ``PathClearance``, built as the run's trainer builds it) takes it.
 
     python bench/diagnostics/plant_floaters.py RUN_DIR [--depths 0.3,0.6,1,2] [--poses 3,9,17] [--device cpu]
                                    [--data-root ../shared/data] [--out FILE.json]
@@ -10,7 +10,7 @@ the path clearance (``train.path_clearance``, ``PathClearance``, built as the ru
 Each planted Gaussian is a sphere of radius 0.05 x its distance (about 2% of the view's pixels), opacity 0.998,
 colour near black: what was found in front of castle_p30's frame 8 when its test PSNR collapsed.
 Prints and writes, per distance: the planted Gaussians' weight (pixels) in their test view and in all inputs
-together, and per pose count which of them the pass finds (ratio ``--ratio``, as ``train.path_floaters``).
+together, and per pose count which of them the pass finds (ratio ``--ratio``, as ``clearance.floaters``).
 """
 
 from __future__ import annotations
@@ -46,7 +46,7 @@ def planted(params: dict, points: np.ndarray, radius: np.ndarray, max_sh_degree:
 
 
 def main(argv=None) -> int:
-    from warpgs.clearance import PathFloaters
+    from warpgs.strategy.clearance import PathFloaters
     from warpgs.config import build_config
     from warpgs.configio import read_yaml
     from warpgs.pipelines.sparse import load_scene_for

@@ -35,7 +35,7 @@ class SceneCameras:
         return self._paths[key]
 
     def path_partners(self, reach: float, frames: int = 21) -> dict[str, torch.Tensor]:
-        """``warpgs.clearance.path_partners`` on this path: per input, the poses of the path next to it."""
-        from warpgs.clearance import path_partners
+        """``warpgs.strategy.clearance.path_partners`` on this path: per input, the poses of the path next to it."""
+        from warpgs.strategy.clearance import path_partners
 
         return path_partners(self.viewmats, self.names, self.order, reach, frames, trajectories=self.trajectories)

@@ -1,6 +1,8 @@
-"""The narrow view of a trainer that its collaborators get (regularisers, the path pruning, methods, stages):
-the model and its optimiser and densification state, the strategy, the scene's cameras and their path, the
-background, the step, the generators, the log and whether a stop was requested. Never the trainer itself."""
+"""The narrow view of a trainer that its collaborators get (regularisers, the path pruning, the co-regularised
+pair, compact mode, stages): the model and its optimiser and densification state, the strategy, the scene's
+cameras and their path, the background, the step, the generators, the log, whether a stop was requested, and
+the few operations of the loop they build on (the losses, densification, evaluation, the training state).
+Never the trainer itself, nor anything private of it."""
 
 from __future__ import annotations
 
@@ -46,6 +48,17 @@ class Context:
         return self._trainer.total_steps
 
     @property
+    def reserved_steps(self) -> int:
+        """The run's last steps that a stage (compact mode's search) trains itself (``Trainer.add_stage``)."""
+        return self._trainer.reserved_steps
+
+    @property
+    def geometry(self):
+        """The initial points found between the training views (``warpgs.engine.init.prepare_geometry``; None:
+        the initialisation found none)."""
+        return self._trainer.geometry
+
+    @property
     def scene_scale(self) -> float:
         return self._trainer.scene_scale
 
@@ -62,3 +75,38 @@ class Context:
     def stop_requested(self) -> bool:
         """Whether a stop was asked for (Ctrl-C, SIGTERM; ``warpgs.engine.signals``): a long phase polls it."""
         return self._trainer.stop_requested
+
+    def extra_views(self) -> list:
+        """The views the method trains on besides the inputs (``Method.extra_views``)."""
+        return self._trainer.method.extra_views()
+
+    # ---- the loop's operations, for those that train a model beside it or after it
+    def means_lr(self, step: int) -> float:
+        return self._trainer.means_lr(step)
+
+    def compute_loss(self, out, cam):
+        """The training loss of a render of the input view ``cam`` (``Trainer.compute_loss``)."""
+        return self._trainer.compute_loss(out, cam)
+
+    def input_loss(self, out, cam):
+        """The inputs' loss and the regularisers' terms on a render (``Trainer.input_loss``)."""
+        return self._trainer.input_loss(out, cam)
+
+    def parameter_priors(self, model, loss, parts: dict):
+        """``loss`` plus the regularisers' priors on ``model``'s parameters (``Trainer.parameter_priors``)."""
+        return self._trainer.parameter_priors(model, loss, parts)
+
+    def densify(self, strategy, model, optimizer, state: dict, step: int, out, cam, generator) -> dict:
+        """A strategy's densification of ``model`` after step ``step`` (``Trainer.densify``)."""
+        return self._trainer.densify(strategy, model, optimizer, state, step, out, cam, generator)
+
+    def evaluate(self, cameras=None, lpips: bool = True, render=None) -> dict:
+        """Metrics over ``cameras`` (default: the test views) of ``render`` (``Trainer.evaluate``)."""
+        return self._trainer.evaluate(cameras, lpips=lpips, render=render)
+
+    def state_dict(self, parts) -> dict:
+        """A copy of the ``parts`` of the training state (``warpgs.engine.state.state_dict``)."""
+        return self._trainer.state_dict(parts)
+
+    def load_state_dict(self, st: dict) -> None:
+        self._trainer.load_state_dict(st)

@@ -91,8 +91,7 @@ def run_metrics(trainer, ev: dict, train_ev: dict, fps: float) -> dict:
         metrics["init"] = geo.summary()
     metrics["stage_times_s"] = {**{f"init_{k}": round(v, 2) for k, v in (geo.times.items() if geo else [])},
                                 "train_s": round(tr.train_time, 2)}
-    if getattr(tr, "far_field_time", None) is not None:
-        metrics["stage_times_s"]["far_field_s"] = round(tr.far_field_time, 2)
+    metrics["stage_times_s"].update({k: round(v, 2) for k, v in tr.bg.components.times().items()})  # far_field_s
     if getattr(tr, "path_floaters_time", None) is not None:
         metrics["stage_times_s"]["path_floaters_s"] = round(tr.path_floaters_time, 2)
     if getattr(tr, "held", None):
@@ -105,8 +104,7 @@ def run_metrics(trainer, ev: dict, train_ev: dict, fps: float) -> dict:
         metrics["lpips_missing"] = ev["lpips_missing"]
     size = size_report(tr.model)  # SH degree stored, float32 parameter bytes, PLY file bytes
     metrics.update(sh_degree=size["sh_degree"], param_bytes=size["param_bytes"], ply_bytes=size["ply_bytes"])
-    if tr.compact_report is not None:
-        metrics["compact"] = tr.compact_report
+    metrics.update(tr.stage_records)  # (compact mode's ``compact``)
     return metrics
 
 
@@ -120,14 +118,22 @@ def finish_run(tr, baseline: dict | None = None) -> dict:
         # the trained state, before the final pruning changes it: an interrupt while the results are written
         # loses no training (--resume writes them from here, as an uninterrupted run would)
         tr.save_checkpoint()
-    if tr.cfg.train.path_floaters_final:
-        tr.remove_path_floaters(tr.step)
-    if tr.cfg.train.prune_unseen_at_end:
-        removed = tr.prune_unseen()
+    if tr.cfg.clearance.floaters_final:  # the camera path's floaters (warpgs.strategy.clearance.PathPruning)
+        tr.path_pruning.remove_floaters(tr.context, tr.step)
+    if tr.cfg.strategy.prune_unseen_at_end:  # what no training view uses
+        if tr.n_before_compaction is None:
+            tr.n_before_compaction = len(tr.model)
+        removed = tr.strategy.prune_unseen(tr.model, tr.optimizer, tr.state, tr.train_cams, tr.background)
         if removed:
             tr.log(f"warpgs: pruning the unseen removed {removed} of {tr.n_before_compaction} Gaussians")
-    for stage in tr.stages:
-        stage.before_evaluation(tr)
+    for stage in tr.stages:  # (Trainer.add_stage)
+        record = stage.before_evaluation(tr.context)
+        if record is not None:
+            tr.stage_records[stage.name] = record
+        if tr.n_before_compaction is None:
+            tr.n_before_compaction = stage.size_before
+        tr.step += tr.reserved_steps  # the stage trained the run's last steps
+        tr.reserved_steps = 0
     ev = tr.evaluate(save_dir=(out / "test") if out is not None and tr.cfg.eval.save_images else None)
     train_ev = tr.evaluate(tr.train_cams, lpips=False)
     fps = render_fps(lambda i: tr.render(tr.test_cams[i] if tr.test_cams else tr.train_cams[i]),
@@ -153,8 +159,7 @@ def write_run_outputs(trainer, metrics: dict) -> None:
     if geo is not None and len(geo.xyz):
         save_origin_ply(out / "init_points.ply", geo.xyz, geo.rgb)
     trainer.save_checkpoint()
-    if trainer.far_field is not None:
-        trainer.far_field.save(out / "far_field.json")
+    trainer.bg.components.save(out)  # far_field.json
     save_config(trainer.requested_cfg, out / "config.yaml")  # as requested; what the run derived from it is recorded
     #   in metrics.json (hold_geometry) and derived again on --resume
     write_metrics(out, metrics)

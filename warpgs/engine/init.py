@@ -1,5 +1,5 @@
 """Model initialisation: the device, the background colour, the scene's scale, the initial points and the
-configuration a run derives from them (``growth_schedule``, ``hold_geometry``), and the initial Gaussians."""
+configuration a run derives from them (``growth_schedule``, ``method_far_field``, ``hold_geometry``), and the initial Gaussians."""
 
 from __future__ import annotations
 
@@ -89,27 +89,37 @@ def growth_schedule(cfg: Config, method: str = "baseline") -> Config:
     return dataclasses.replace(cfg, strategy=dataclasses.replace(cfg.strategy, refine_stop_iter=stop))
 
 
+def method_far_field(cfg: Config, method: str = "baseline") -> Config:
+    """The run's configuration with ``full.far_field`` (when set, for the full method) as its far field's kind
+    (``backgrounds.far_field.kind``)."""
+    kind = cfg.full.far_field if method == "full" else None
+    if kind is None:
+        return cfg
+    bg = cfg.backgrounds
+    return dataclasses.replace(cfg, backgrounds=dataclasses.replace(bg, far_field=dataclasses.replace(bg.far_field,
+                                                                                                     kind=kind)))
+
+
 def hold_geometry(cfg: Config, geo) -> tuple[Config, dict | None]:
-    """``train.hold_geometry``: the run's configuration with the initial geometry held (no densification or
-    pruning by the strategy; the means', scales' and rotations' learning rates x ``train.hold_*``), and a
+    """``hold.geometry``: the run's configuration with the initial geometry held (no densification or
+    pruning by the strategy; the means', scales' and rotations' learning rates x ``hold.*_lr``), and a
     record of why (None: not held). ``stereo`` holds it only when ``geo`` (``prepare_geometry``'s points)
     came from plane-sweep stereo alone. At 3 views of a walk-around capture SfM finds too few points and the
     run starts from the stereo cloud; growth then bends it towards the inputs and the test views get worse
     than at step 300 (castle_p30 / herz_jesus_p25, 384x256, seeds 0-2: 13.62 / 17.28 with growth, 14.35 / 17.89
     held)."""
-    t = cfg.train
-    mode = t.hold_geometry
+    t = cfg.hold
+    mode = t.geometry
     if mode not in ("off", "on", "stereo"):
-        raise ValueError(f"train.hold_geometry must be off, on or stereo, got {mode!r}")
+        raise ValueError(f"hold.geometry must be off, on or stereo, got {mode!r}")
     if mode == "off" or (mode == "stereo" and (geo is None or geo.method != "stereo")):
         return cfg, None
     o = cfg.optim
-    optim = dataclasses.replace(o, means_lr=o.means_lr * t.hold_means_lr, means_lr_final=o.means_lr_final * t.hold_means_lr,
-                                scales_lr=o.scales_lr * t.hold_scales_lr, quats_lr=o.quats_lr * t.hold_quats_lr)
+    optim = dataclasses.replace(o, means_lr=o.means_lr * t.means_lr, means_lr_final=o.means_lr_final * t.means_lr,
+                                scales_lr=o.scales_lr * t.scales_lr, quats_lr=o.quats_lr * t.quats_lr)
     held = dataclasses.replace(cfg, optim=optim, strategy=dataclasses.replace(cfg.strategy, refine_stop_iter=0))
-    why = "train.hold_geometry=on" if mode == "on" else "the initial points came from stereo"
-    return held, {"mode": mode, "why": why, "means_lr": t.hold_means_lr, "scales_lr": t.hold_scales_lr,
-                  "quats_lr": t.hold_quats_lr}
+    why = "hold.geometry=on" if mode == "on" else "the initial points came from stereo"
+    return held, {"mode": mode, "why": why, "means_lr": t.means_lr, "scales_lr": t.scales_lr, "quats_lr": t.quats_lr}
 
 
 def init_model(cfg: Config, scene, generator: torch.Generator) -> GaussianModel:

@@ -9,7 +9,7 @@ terms, among them extra views, keeps its part of the training state, runs its ph
 training. One input view per iteration (3D-GS's shuffled order); loss = 0.8 L1 + 0.2 D-SSIM (+ a Pearson depth
 term when ``loss.depth_weight`` > 0 and the view has a depth prior); Adam with 3D-GS's learning rates and an
 exponentially decaying position rate; densification by ``DefaultStrategy``, then the pruning on the camera path
-(``warpgs.clearance.PathPruning``). The regularisers (``warpgs.regularizers``: dropout, opacity noise and decay,
+(``warpgs.strategy.clearance.PathPruning``). The regularisers (``warpgs.regularizers``: dropout, opacity noise and decay,
 the parameter priors, the binocular term, the path consistency) add their terms in their registry's order.
 
 The trainer's parts: ``warpgs.engine.init`` (the initial model and the configuration derived for the run),
@@ -17,7 +17,7 @@ The trainer's parts: ``warpgs.engine.init`` (the initial model and the configura
 ``warpgs.engine.state`` (the training state and checkpoints), ``warpgs.engine.signals`` (graceful stops),
 ``warpgs.engine.context`` (the narrow view the collaborators get).
 
-With ``train.co_reg`` (CoR-GS, ``warpgs.coreg``) a second model trains beside the first on the same views, with
+With ``corgs.pair`` (CoR-GS, ``warpgs.coreg``) a second model trains beside the first on the same views, with
 its own optimiser, strategy and random streams; the two are co-pruned and co-regularised on poses between the
 training views. Each step adds its loss to the first model's before the one backward, both optimisers step on the
 guard's one verdict (``optimizers``; the guard checks both models' ``trained_parameters``), and its state goes
@@ -40,7 +40,7 @@ import numpy as np
 import torch
 
 from warpgs import losses
-from warpgs.clearance import PathPruning
+from warpgs.strategy.clearance import PathPruning
 from warpgs.config import Config
 from warpgs.engine import state as training_state
 from warpgs.engine.background import Background
@@ -48,8 +48,8 @@ from warpgs.engine.cameras import SceneCameras
 from warpgs.engine.checkpoint import CHECKPOINT, TrainingInterrupted
 from warpgs.engine.context import Context
 from warpgs.engine.evaluation import evaluate_views, finish_run
-from warpgs.engine.init import (background_colour, growth_schedule, hold_geometry, init_model, prepare_geometry,
-                                resolve_device, scene_scale_of)
+from warpgs.engine.init import (background_colour, growth_schedule, hold_geometry, init_model, method_far_field,
+                                prepare_geometry, resolve_device, scene_scale_of)
 from warpgs.engine.signals import StopRequest
 from warpgs.engine.stepguard import StepGuard
 from warpgs.engine.method import Method
@@ -97,14 +97,13 @@ class Trainer:
         seed = cfg.train.seed
         torch.manual_seed(seed)
         np.random.seed(seed % 2**32)
-        # the initial points (found here or earlier, then kept on the scene) decide train.hold_geometry
-        geo = prepare_geometry(cfg, scene, self.log)
-        cfg = growth_schedule(cfg, method.name if method is not None else "baseline")
+        # the initial points (found here or earlier, then kept on the scene) decide hold.geometry
+        self.geometry = geo = prepare_geometry(cfg, scene, self.log)
+        name = method.name if method is not None else "baseline"
+        cfg = method_far_field(growth_schedule(cfg, name), name)
         cfg, self.held = hold_geometry(cfg, geo)  # the same cfg when not held
         self.cfg = cfg
-        self.bg = Background(colour, self.cameras.train, cfg.train, lambda msg: self.log(msg))
-        # fitted on the training views (and their points) only, deterministic: a resumed run computes the same one
-        self.bg.far_field = self.bg.fit(cfg.train.far_field, geo)
+        self.bg = Background(colour, cfg.train)
         if self.held is not None:
             self.log(f"warpgs: geometry held ({self.held['why']}): no densification; means / scales / rotations "
                      f"learning rates x {self.held['means_lr']:g} / {self.held['scales_lr']:g} / {self.held['quats_lr']:g}")
@@ -114,10 +113,13 @@ class Trainer:
         self.split_gen = torch.Generator(device=self.device).manual_seed(seed + 1)
         self.drop_gen = torch.Generator(device=self.device).manual_seed(seed + 5)
         self.context = Context(self)
+        # the background components (warpgs.backgrounds: the far field), fitted on the training views (and their
+        # points) only, deterministic: a resumed run computes the same ones
+        self.bg.build(cfg, self.context)
         self.stop = StopRequest(lambda msg: self.log(msg))
         # the regularisers on for this run, in the registry's order (warpgs.regularizers)
         self.regularizers = Regularizers.build(cfg, self.context)
-        self.path_pruning = PathPruning.build(cfg, scene, self.cameras, self.device)
+        self.path_pruning = PathPruning.build(cfg.clearance, scene, self.cameras, self.device)
         self.view_rng = np.random.default_rng(seed + 2)
         self.order: list[int] = []
         self.optimizer = make_optimizer(self.model, cfg, self.scene_scale)
@@ -137,20 +139,17 @@ class Trainer:
         self.saved_step: int | None = None  # the step of the checkpoint last written or read (messages)
         self.in_phase = False  # inside train()'s loop: a checkpoint written now is in the middle of a phase
         self.resumed = False  # a checkpoint of the middle of a phase was loaded: the next train() continues it
-        self.compact_report: dict | None = None
+        self.stage_records: dict = {}  # each stage's record by its name (metrics.json's ``compact``)
         self.stopped_early: dict | None = None  # set by the caller when training stopped before the end
-        self.reserved_steps = 0  # compact mode: the last steps, taken by the search's fine-tunes (warpgs/compact.py)
-        # stages above training (compact mode, warpgs/compact.py): objects with ``before_evaluation(trainer)``
-        # that ``finish`` calls in order, after training and before the test metrics. They are attached by
-        # whoever builds the trainer (warpgs.pipelines.sparse.make_trainer), so this module imports none of them.
-        self.stages: list = []
-        # CoR-GS (--method corgs, or train.co_reg with any method): the second model of the co-regularised pair,
+        self.reserved_steps = 0  # the run's last steps, trained by a stage (compact mode's search's fine-tunes)
+        self.stages: list = []  # stages above training (``add_stage``; warpgs.engine.stage)
+        # CoR-GS (--method corgs, or corgs.pair with any method): the second model of the co-regularised pair,
         # its optimiser and strategy
         self.pair = None
-        if cfg.train.co_reg or getattr(method, "pair", False):
+        if cfg.corgs.pair or getattr(method, "pair", False):
             from warpgs.coreg import CoRegPair
 
-            self.pair = CoRegPair(self)
+            self.pair = CoRegPair(self.context)
         self.method = method if method is not None else Method()
         self.method.attach(self)
         # train.cuda_graph: deferred steps replayed as one CUDA graph (warpgs/engine/graphstep.py)
@@ -166,21 +165,12 @@ class Trainer:
     train_cams = property(lambda self: self.cameras.train)
     test_cams = property(lambda self: self.cameras.test)
     background = property(lambda self: self.bg.colour)  # the [3] colour behind the Gaussians
-    far_field_time = property(lambda self: self.bg.far_field_time)
     guard = property(lambda self: self.stepguard.guard)  # warpgs.guard.DivergenceGuard: the verdicts' counts
     clearance = property(lambda self: self.path_pruning.clearance)
     floaters = property(lambda self: self.path_pruning.floaters)
     path_floaters_time = property(lambda self: self.path_pruning.time)
     stop_requested = property(lambda self: self.stop.requested)
     sync_every = property(lambda self: self.stepguard.sync_every)
-
-    @property
-    def far_field(self):
-        return self.bg.far_field
-
-    @far_field.setter
-    def far_field(self, ff) -> None:
-        self.bg.far_field = ff
 
     @property
     def drop_rate(self) -> float:
@@ -206,11 +196,11 @@ class Trainer:
 
     @property
     def optimizers(self) -> list[torch.optim.Optimizer]:
-        """The optimisers of the models being trained: the model's, then (``train.co_reg``) its partner's."""
+        """The optimisers of the models being trained: the model's, then (``corgs.pair``) its partner's."""
         return [self.optimizer] + ([self.pair.optimizer] if self.pair is not None else [])
 
     def trained_parameters(self) -> dict[str, torch.Tensor]:
-        """The parameters being trained, by name: the model's, then (``train.co_reg``) its partner's as
+        """The parameters being trained, by name: the model's, then (``corgs.pair``) its partner's as
         ``partner.<name>``. The divergence guard checks them all."""
         params = dict(self.model.params)
         if self.pair is not None:
@@ -254,10 +244,6 @@ class Trainer:
         """``loss`` plus the regularisers' priors on ``model``'s parameters (``Regularizer.model_term``), each
         recorded in ``parts``; the divergence guard's ``inputs`` part leaves them out."""
         return self.regularizers.model_term(model, loss, parts)
-
-    def fit_far_field(self, kind: str, geo=None):
-        """``Background.fit``: a far field of ``kind`` on the training views (None: none)."""
-        return self.bg.fit(kind, geo)
 
     def background_for(self, cam, keep: bool = True) -> torch.Tensor:
         """What ``cam`` sees behind the Gaussians (``Background.for_cam``)."""
@@ -315,7 +301,7 @@ class Trainer:
 
     def after_update(self, step: int, out, cam, apply: torch.Tensor | None = None) -> dict:
         """What follows a step's update: densification (``densify``), the co-regularised partner's and the
-        co-pruning (``train.co_reg``), and a new statistic after an opacity reset (whose jump in the loss is
+        co-pruning (``corgs.pair``), and a new statistic after an opacity reset (whose jump in the loss is
         expected). ``apply``: a deferred step's verdict (``out``'s radii are already masked with it)."""
         info = self.densify(self.strategy, self.model, self.optimizer, self.state, step, out, cam, self.split_gen)
         if self.pair is not None:
@@ -417,6 +403,15 @@ class Trainer:
         self.curve.append(row)
         return row
 
+    def add_stage(self, stage) -> None:
+        """A stage above training (``warpgs.engine.stage.Stage``, before training or resuming): the run's last
+        steps it reserves, its wrap of the strategy; ``finish`` runs it. A stage of a kind already added: nothing."""
+        if any(type(s) is type(stage) for s in self.stages):
+            return
+        self.stages.append(stage)
+        self.reserved_steps = max(self.reserved_steps, stage.reserve_steps(self.cfg.train.iterations))
+        self.strategy = stage.wrap_strategy(self.strategy, self.context)
+
     def request_stop(self) -> None:
         """Stop after the current step, saving a checkpoint (what Ctrl-C and SIGTERM do)."""
         self.stop.request()
@@ -450,18 +445,6 @@ class Trainer:
                               masked=bool(self.scene.eval_masked), scene_name=self.scene.name,
                               lpips_weights=self.cfg.eval.lpips_weights, device=self.device, save_dir=save_dir,
                               lpips=lpips)
-
-    def remove_path_floaters(self, step: int) -> int:
-        """``train.path_floaters``: removes the Gaussians that poses of the camera path see and no input does
-        (``PathPruning.remove_floaters``); returns how many. Runs on its schedule in ``densify`` and once more
-        before the final evaluation."""
-        return self.path_pruning.remove_floaters(self.context, step)
-
-    def prune_unseen(self) -> int:
-        """The final pruning (``train.prune_unseen_at_end``): drops what no training view uses."""
-        if self.n_before_compaction is None:
-            self.n_before_compaction = len(self.model)
-        return self.strategy.prune_unseen(self.model, self.optimizer, self.state, self.train_cams, self.background)
 
     def export_ply(self, path: str | Path | None = None) -> Path:
         return self.model.save_ply(Path(path) if path is not None else self.out / "point_cloud.ply")

@@ -21,7 +21,7 @@ class Method:
     - ``finish(metrics, baseline)``: records and outputs after ``Trainer.finish``'s own."""
 
     name = "baseline"
-    pair = False  # True: the trainer trains CoR-GS's co-regularised pair with it (warpgs.coreg; train.co_reg adds
+    pair = False  # True: the trainer trains CoR-GS's co-regularised pair with it (warpgs.coreg; corgs.pair adds
     #   it to any method)
 
     def attach(self, trainer) -> None:

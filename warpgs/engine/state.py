@@ -2,7 +2,7 @@
 in three parts: ``model`` (parameters, Adam's moments, densification statistics), ``progress`` (step, RNGs,
 view order) and ``history`` (times, losses, recoveries, curve). Checkpoints hold all three, the in-memory
 snapshot of a divergence rollback (``warpgs.engine.stepguard``) ``model`` and ``progress``, compact mode's
-search (``warpgs.compact``) ``model``. A checkpoint of format 1 (the layout before the method's share moved
+search (``warpgs.strategy.compact``) ``model``. A checkpoint of format 1 (the layout before the method's share moved
 under ``method``) is upgraded when read (``upgrade_format_1``)."""
 
 from __future__ import annotations
@@ -135,7 +135,7 @@ def load_checkpoint(tr, path: str | Path | None = None) -> Path:
     if ck.get("format", 1) == 1:
         ck = upgrade_format_1(ck, tr.cfg.train.sh_degree_interval)
     if ck.get("pair") is not None and tr.pair is None:
-        tr.log("warpgs: note: the checkpoint holds a co-regularised pair (train.co_reg); this run goes on with "
+        tr.log("warpgs: note: the checkpoint holds a co-regularised pair (corgs.pair); this run goes on with "
                "its first model alone")
     try:
         tr.load_state_dict(ck)

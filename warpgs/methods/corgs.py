@@ -1,7 +1,7 @@
 """CoR-GS (Zhang et al., ECCV 2024) as a method, ``--method corgs``: the baseline's loop with a second model
 beside the first, the two co-pruned and co-regularised on poses between the training views
-(``warpgs.coreg.CoRegPair``; its settings are ``train.co_*``). ``train.co_reg: true`` adds the same pair to
-another method (the full method with it: ``--method full --set train.co_reg=true``)."""
+(``warpgs.coreg.CoRegPair``; its settings are the section ``corgs``). ``corgs.pair: true`` adds the same pair
+to another method (the full method with it: ``--method full --set corgs.pair=true``)."""
 
 from __future__ import annotations
 

@@ -37,7 +37,6 @@ from warpgs import losses
 from warpgs.config import FullConfig, check_limits
 from warpgs.console import warn_once
 from warpgs.engine.checkpoint import TrainingInterrupted
-from warpgs.engine.loop import Trainer
 from warpgs.engine.method import Method
 from warpgs.model import rgb_to_sh
 from warpgs.optim import STATE_PARTS
@@ -61,15 +60,16 @@ def check_settings(s: FullConfig) -> FullConfig:
     return s
 
 
-def append_gaussians(trainer: Trainer, means, colors, scales, opacity: float) -> int:
+def append_gaussians(ctx, means, colors, scales, opacity: float) -> int:
     """Adds Gaussians (centres, RGB colours, isotropic std devs) to the trainer's model, with zero Adam
-    moments and zero densification statistics."""
-    from warpgs.strategy import update_params
+    moments and zero densification statistics. ``ctx``: the trainer's narrow view (``Trainer.context``: its
+    model, device, optimiser and densification state)."""
+    from warpgs.strategy.ops import update_params
 
     n = int(means.shape[0])
     if n == 0:
         return 0
-    model, dev = trainer.model, trainer.device
+    model, dev = ctx.model, ctx.device
     means = means.to(dev, torch.float32)
     rgb = (colors[:, :3] if colors.shape[1] >= 3 else torch.full((n, 3), 0.5)).to(dev, torch.float32).clamp(0, 1)
     quats = torch.zeros(n, 4, device=dev)
@@ -82,10 +82,10 @@ def append_gaussians(trainer: Trainer, means, colors, scales, opacity: float) ->
         "sh0": rgb_to_sh(rgb)[:, None, :],
         "shN": torch.zeros(n, *model.params["shN"].shape[1:], device=dev),
     }
-    update_params(model, trainer.optimizer, lambda name, p: torch.cat([p, new[name].to(p.dtype)]),
+    update_params(model, ctx.optimizer, lambda name, p: torch.cat([p, new[name].to(p.dtype)]),
                   lambda k, v: torch.cat([v, torch.zeros((n, *v.shape[1:]), device=v.device, dtype=v.dtype)]))
-    for k, v in trainer.state.items():
-        trainer.state[k] = torch.cat([v, torch.zeros((n, *v.shape[1:]), device=v.device, dtype=v.dtype)])
+    for k, v in ctx.state.items():
+        ctx.state[k] = torch.cat([v, torch.zeros((n, *v.shape[1:]), device=v.device, dtype=v.dtype)])
     return n
 
 
@@ -101,8 +101,6 @@ class FullMethod(Method):
         self.settings = check_settings(cfg.full)
         if self.settings.drop_rate is not None:
             trainer.drop_rate = self.settings.drop_rate
-        if self.settings.far_field is not None:
-            trainer.far_field = trainer.fit_far_field(self.settings.far_field, getattr(trainer.scene, "geometry", None))
         if self.settings.path_consistency > 0:  # the pseudo views carry their start input's intrinsics and size
             check_one_camera(trainer.train_cams, "full.path_consistency")
         self.pseudo_cams: list = []
@@ -336,7 +334,7 @@ class FullMethod(Method):
                 colors = sh_to_rgb(tr.model.params["sh0"][:, 0]).clamp(0, 1)
             pts, cols, origin = dens.origin_cloud(tr.model.means.detach(), colors)
             save_origin_ply(cycle_dir / "densified.ply", pts, cols, origin)
-        return append_gaussians(tr, ins.means[keep], ins.colors[keep], ins.scales[keep], s.init_opacity)
+        return append_gaussians(tr.context, ins.means[keep], ins.colors[keep], ins.scales[keep], s.init_opacity)
 
     # ------------------------------------------------------------------------------------------
     # the method's share of the training state

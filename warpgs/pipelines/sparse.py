@@ -59,7 +59,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="switch of the paper's Table 4 (repeatable): " + ", ".join(ABLATIONS))
     g.add_argument("--compact", action="store_true",
                    help="compact mode: the fewest Gaussians and lowest SH degree within 0.1 dB of the best "
-                        "training-view PSNR (configs/presets/compact.yaml, warpgs/compact.py)")
+                        "training-view PSNR (configs/presets/compact.yaml, warpgs/strategy/compact.py)")
     g.add_argument("--config", action="append", default=[], metavar="FILE", help="extra YAML config (repeatable)")
     g.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                    help="override a config value, e.g. --set strategy.max_gaussians=20000 (repeatable)")
@@ -214,7 +214,7 @@ def training_methods() -> dict:
 
 def make_trainer(cfg, scene, out: Path | None = None, **kwargs):
     """The trainer of ``cfg.method`` with the stages its config asks for (compact mode)."""
-    from warpgs.compact import attach
+    from warpgs.strategy.compact import attach
     from warpgs.engine.loop import Trainer
 
     methods = training_methods()

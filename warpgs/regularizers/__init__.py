@@ -16,12 +16,12 @@ line below, and a test (docs/architecture.md).
 
 from __future__ import annotations
 
-import dataclasses
 import importlib
 
 import torch
 
 from warpgs.regularizers.base import Regularizer
+from warpgs.registry import build_registered, registry_section
 
 # name -> module (warpgs.regularizers.<module>), in the order their terms enter the loss
 REGISTRY = {
@@ -36,16 +36,11 @@ REGISTRY = {
 
 MODULES = {name: importlib.import_module(f"warpgs.regularizers.{m}") for name, m in REGISTRY.items()}
 
-# the config's section ``regularizers``: one subsection per regulariser, its module's ``CONFIG`` dataclass
-RegularizersConfig = dataclasses.make_dataclass(
-    "RegularizersConfig", [(name, mod.CONFIG, dataclasses.field(default_factory=mod.CONFIG))
-                           for name, mod in MODULES.items()])
-RegularizersConfig.__doc__ = "The regularisers' settings (``regularizers.<name>``; warpgs/regularizers/<name>.py)."
-RegularizersConfig.__module__ = __name__
-
+# the config's section ``regularizers`` (one subsection per regulariser, its module's ``CONFIG`` dataclass) and the
 # keys of ``train`` before the section existed -> (regulariser, its key): warpgs.config's MOVED and TrainConfig
-LEGACY_TRAIN_KEYS = {old: (name, new) for name, mod in MODULES.items()
-                     for old, new in getattr(mod.CONFIG, "LEGACY", {}).items()}
+RegularizersConfig, LEGACY_TRAIN_KEYS = registry_section(
+    "RegularizersConfig", MODULES, __name__,
+    "The regularisers' settings (``regularizers.<name>``; warpgs/regularizers/<name>.py).")
 
 
 class Regularizers:
@@ -56,12 +51,7 @@ class Regularizers:
 
     @classmethod
     def build(cls, cfg, ctx, names=None) -> "Regularizers":
-        items = {}
-        for name in names or REGISTRY:
-            reg = MODULES[name].build(cfg, ctx)
-            if reg is not None:
-                items[name] = reg
-        return cls(items)
+        return cls(build_registered(MODULES, cfg, ctx, names))
 
     def get(self, name: str) -> Regularizer | None:
         return self.items.get(name)

@@ -186,7 +186,7 @@ class Binocular(Regularizer):
         self.gen.manual_seed(int(seed) + 17)
         self.device = device
         # partner "path": per input view (name), the poses of the capture path next to it
-        # (warpgs.clearance.path_partners); a view without any keeps the shifted partner
+        # (warpgs.strategy.clearance.path_partners); a view without any keeps the shifted partner
         self.path = {k: v.to(device=device, dtype=torch.float32) for k, v in (path or {}).items()}
 
     def active(self, step: int) -> bool:

@@ -30,6 +30,8 @@ from __future__ import annotations
 import numpy as np
 import torch
 
+from warpgs.strategy.ops import contribution, remove
+
 
 def _pairwise(points: torch.Tensor, a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
     """[n, K] distance of each of ``points`` [n, 3] to each segment ``a[k]``-``b[k]`` ([K, 3])."""
@@ -145,7 +147,7 @@ class PathFloaters:
         between each pair (the walk between two far-apart inputs can lie nearer the line than the spline).
         ``trajectories``: the path as ``SceneCameras.trajectories`` hands it out (default: made here)."""
         if paths not in ("spline", "both"):
-            raise ValueError(f"train.path_floaters_paths must be spline or both, got {paths!r}")
+            raise ValueError(f"clearance.floaters_paths must be spline or both, got {paths!r}")
         V = np.asarray(viewmats if not torch.is_tensor(viewmats) else viewmats.detach().cpu().numpy(), np.float64)
         poses = []
         if len(V) >= 2 and per_pair > 0:
@@ -160,8 +162,6 @@ class PathFloaters:
         blending weight (pixels) in ``inputs`` (cameras with viewmat, K, width, height) together, and with at
         least ``min_share`` of that pose's total weight."""
         from types import SimpleNamespace
-
-        from warpgs.strategy import contribution
 
         found = torch.zeros(len(model), dtype=torch.bool, device=model.device)
         if len(self.poses) == 0 or len(model) == 0:
@@ -193,33 +193,32 @@ def path_partners(viewmats, names: list[str], order, reach: float, frames: int =
 
 
 class PathPruning:
-    """The pruning on the camera path that follows the strategy's densification: ``train.path_clearance`` /
-    ``train.view_clearance`` (``PathClearance``, every ``strategy.refine_every`` steps) and
-    ``train.path_floaters`` (``PathFloaters``, every ``train.path_floaters_every`` steps and before the final
-    evaluation). ``time``: seconds the floater passes took (metrics.json's ``path_floaters_s``)."""
+    """The pruning on the camera path that follows the strategy's densification: ``clearance.path`` /
+    ``clearance.view`` (``PathClearance``, every ``strategy.refine_every`` steps) and ``clearance.floaters``
+    (``PathFloaters``, every ``clearance.floaters_every`` steps and before the final evaluation). ``time``: seconds the floater passes took (metrics.json's ``path_floaters_s``)."""
 
     def __init__(self, clearance: PathClearance | None, floaters: PathFloaters | None, floaters_every: int):
         self.clearance, self.floaters, self.floaters_every = clearance, floaters, floaters_every
         self.time = None if floaters is None else 0.0
 
     @classmethod
-    def build(cls, cfg, scene, cameras, device) -> "PathPruning":
-        """From the run's ``train`` settings, the scene (its near depth, the initial points on ``scene.geometry``)
-        and its cameras and path (``warpgs.engine.cameras.SceneCameras``)."""
-        tc = cfg.train
+    def build(cls, c, scene, cameras, device) -> "PathPruning":
+        """From the run's ``clearance`` settings ``c`` (``warpgs.strategy.config.ClearanceConfig``), the scene (its
+        near depth, the initial points on ``scene.geometry``) and its cameras and path
+        (``warpgs.engine.cameras.SceneCameras``)."""
         c0 = scene.train[0]
         clearance = floaters = None
-        if tc.path_clearance > 0 or tc.view_clearance > 0:
+        if c.path > 0 or c.view > 0:
             geo = getattr(scene, "geometry", None)
             clearance = PathClearance.build(
-                cameras.viewmats, tc.path_clearance * float(scene.bounds[0]), order=cameras.order,
+                cameras.viewmats, c.path * float(scene.bounds[0]), order=cameras.order,
                 geometry=None if geo is None else geo.xyz, device=device, K=c0.K, size=(c0.width, c0.height),
-                view_depth=tc.view_clearance * float(scene.bounds[0]), trajectories=cameras.trajectories)
-        if tc.path_floaters > 0 and len(scene.train) >= 2:
+                view_depth=c.view * float(scene.bounds[0]), trajectories=cameras.trajectories)
+        if c.floaters > 0 and len(scene.train) >= 2:
             floaters = PathFloaters.build(
-                cameras.viewmats, c0.K, (c0.width, c0.height), tc.path_floaters, per_pair=tc.path_floaters_poses,
-                order=cameras.order, device=device, paths=tc.path_floaters_paths, trajectories=cameras.trajectories)
-        return cls(clearance, floaters, tc.path_floaters_every)
+                cameras.viewmats, c0.K, (c0.width, c0.height), c.floaters, per_pair=c.floaters_poses,
+                order=cameras.order, device=device, paths=c.floaters_paths, trajectories=cameras.trajectories)
+        return cls(clearance, floaters, c.floaters_every)
 
     def floaters_due(self, step: int) -> bool:
         """Whether the pass after step ``step``'s densification removes the camera path's floaters."""
@@ -232,8 +231,6 @@ class PathPruning:
     def after_densify(self, ctx, step: int, refine_every: int, info: dict) -> None:
         """After the strategy's densification of the trained model at ``step``: the Gaussians on the path go
         (``pruned_on_path`` in ``info``), and the floaters when due (``pruned_floaters``)."""
-        from warpgs.strategy import remove
-
         model = ctx.model
         if self.clearance is not None and step % refine_every == 0:
             on_path = self.clearance.inside(model.means)
@@ -249,8 +246,6 @@ class PathPruning:
         returns how many."""
         import time
 
-        from warpgs.strategy import remove
-
         if self.floaters is None:
             return 0
         model = ctx.model
@@ -264,5 +259,5 @@ class PathPruning:
         if not removing:
             return 0
         ctx.log(f"warpgs: step {step}: {n} Gaussians removed that poses of the camera path see and no input does "
-                f"(train.path_floaters)")
+                f"(clearance.floaters)")
         return n

@@ -4,7 +4,7 @@ Three parts, in the spirit of LightGaussian (global significance pruning, SH dis
 Mini-Splatting (pruning by blending weight):
 
 1. **Importance.** A Gaussian's importance is its total blending weight ``sum_pixels alpha_i T_i`` over
-   the importance views (``warpgs.strategy.contribution``: the training views, optionally poses
+   the importance views (``warpgs.strategy.ops.contribution``: the training views, optionally poses
    interpolated between them and, for the full method, its pseudo views), optionally multiplied by its
    volume ``prod(scales) ** volume_power`` (LightGaussian's global significance; ``importance:
    weight_volume``). A Gaussian that covers no pixel of any of those views has importance 0.
@@ -49,23 +49,25 @@ import copy
 import numpy as np
 import torch
 
-from warpgs.config import CompactConfig, check_compact_config as check_config
+from warpgs.engine.stage import Stage
 from warpgs.model import GaussianModel, num_sh_coeffs, param_bytes, ply_bytes, size_report  # sizes: re-exported
 from warpgs.pseudo.trajectory import virtual_cameras  # noqa: F401  (re-exported: compact mode's "virtual" views)
-from warpgs.strategy import contribution, remove, update_params
+from warpgs.strategy.config import CompactConfig, check_compact_config as check_config
+from warpgs.strategy.ops import contribution, remove, update_params
 
 # ----------------------------------------------------------------------------------------------
 # importance and pruning
 
 
-def importance_cameras(trainer, cfg: CompactConfig) -> list:
+def importance_cameras(ctx, cfg: CompactConfig) -> list:
+    """The views of ``cfg.importance_views`` (``ctx``: the trainer's narrow view, ``warpgs.engine.context``)."""
     cams = []
     if "train" in cfg.importance_views:
-        cams += list(trainer.train_cams)
+        cams += list(ctx.cameras.train)
     if "virtual" in cfg.importance_views:
-        cams += virtual_cameras(trainer.train_cams, cfg.virtual_frames)
+        cams += virtual_cameras(ctx.cameras.train, cfg.virtual_frames)
     if "pseudo" in cfg.importance_views:
-        cams += list(trainer.method.extra_views())
+        cams += list(ctx.extra_views())
     return cams
 
 
@@ -126,11 +128,11 @@ class ScheduledPruning:
     the copy's ``max_gaussians``: densification can still move Gaussians to where the views need them
     (the budget's compaction frees room), but cannot grow back what was pruned."""
 
-    def __init__(self, base, trainer, cfg: CompactConfig):
-        self.base, self.trainer, self.compact_cfg = copy.copy(base), trainer, cfg
+    def __init__(self, base, ctx, cfg: CompactConfig):
+        self.base, self.ctx, self.compact_cfg = copy.copy(base), ctx, cfg
         self.budget = base.max_gaussians  # the configured one (0: none)
         self.cap: int | None = None
-        total = trainer.total_steps
+        total = ctx.total_steps
         self.prune_steps = sorted({int(round(f * total)) for f in cfg.prune_at} - {0}) if cfg.prune_ratio > 0 else []
         self.stop_step = int(round(cfg.stop_densify_at * total)) if cfg.stop_densify_at is not None else None
         self.log: list[dict] = []
@@ -141,60 +143,78 @@ class ScheduledPruning:
     def step_post_backward(self, model, optimizer, state, step, out, width, height, scene_scale, generator=None):
         c = self.compact_cfg
         if c.cap_after_prune and self.cap is None and self.prune_steps and step >= self.prune_steps[0]:
-            self._set_cap(len(model))  # resumed after a pruning: the count now is within the lost cap
+            self.set_cap(len(model))  # resumed after a pruning: the count now is within the lost cap
         if self.stop_step is not None and step >= self.stop_step:  # densification (and opacity resets) over
             info = {"cloned": 0, "split": 0, "pruned": 0, "reset": 0}
         else:
             info = self.base.step_post_backward(model, optimizer, state, step, out, width, height, scene_scale,
                                                 generator=generator)
         if step + 1 in self.prune_steps:  # after step + 1 steps
-            tr = self.trainer
-            scores = importance(model, importance_cameras(tr, c), tr.background, c.importance, c.volume_power)
+            ctx = self.ctx
+            scores = importance(model, importance_cameras(ctx, c), ctx.background.colour, c.importance, c.volume_power)
             n0 = len(model)
             k = prune_lowest(model, optimizer, state, scores, c.prune_ratio)
             info["pruned"] = info.get("pruned", 0) + k
             self.log.append({"step": step + 1, "before": n0, "after": len(model)})
             if c.cap_after_prune:
-                self._set_cap(len(model))
-            tr.log(f"warpgs: compact: step {step + 1}: pruned {k} of {n0} Gaussians by importance"
+                self.set_cap(len(model))
+            ctx.log(f"warpgs: compact: step {step + 1}: pruned {k} of {n0} Gaussians by importance"
                    + (f"; at most {self.base.max_gaussians} from now on" if c.cap_after_prune else ""))
         return info
 
-    def _set_cap(self, n: int) -> None:
+    def set_cap(self, n: int) -> None:
+        """At most ``n`` Gaussians from now on (and at most the configured budget)."""
         self.cap = n
         self.base.max_gaussians = n if self.budget <= 0 else min(self.budget, n)
 
 
-class CompactStage:
-    """The search, as a stage ``Trainer.finish`` runs before evaluation (``Trainer.stages``)."""
+class CompactStage(Stage):
+    """Compact mode as a stage of the run (``warpgs.engine.stage.Stage``, ``Trainer.add_stage``): the steps
+    reserved for the search's fine-tunes, the pruning schedule around the strategy, and the search before the
+    test metrics (its record: metrics.json's ``compact``)."""
 
-    def before_evaluation(self, trainer) -> None:
-        trainer.compact_report = finish_hook(trainer)
+    name = "compact"
+
+    def __init__(self, cfg: CompactConfig):
+        self.cfg = check_config(cfg)
+
+    def reserve_steps(self, iterations: int) -> int:
+        c = self.cfg
+        if (c.ratios or c.sh_search) and c.finetune_steps > 0:
+            # the search's fine-tunes are the run's last steps, so the kept model has had train.iterations
+            # steps, as the default run has (fairer than extra steps: on sparse views more steps overfit)
+            return min(c.finetune_steps, iterations // 2)
+        return 0
+
+    def wrap_strategy(self, strategy, ctx):
+        c = self.cfg
+        if ((c.prune_at and c.prune_ratio > 0) or c.stop_densify_at is not None) \
+                and not isinstance(strategy, ScheduledPruning):
+            return ScheduledPruning(strategy, ctx, c)
+        return strategy
+
+    def before_evaluation(self, ctx) -> dict:
+        c = self.cfg
+        if not c.ratios and not c.sh_search:
+            return {"before": size_report(ctx.model), "points": []}
+        report = search(ctx, c)
+        report["trained_steps_before_search"] = ctx.step  # the trainer counts the reserved steps next
+        self.size_before = report["before"]["num_gaussians"]
+        return report
 
 
 def attach(trainer) -> None:
-    """Compact mode on a freshly built trainer (before training or resuming): the pruning schedule, the
-    steps reserved for the search's fine-tunes, and the search as a stage of ``finish``. Nothing when
-    ``compact.enabled`` is off."""
-    if not trainer.cfg.compact.enabled:
-        return
-    cfg = check_config(trainer.cfg.compact)
-    if not any(isinstance(s, CompactStage) for s in trainer.stages):
-        trainer.stages.append(CompactStage())
-    if (cfg.ratios or cfg.sh_search) and cfg.finetune_steps > 0:
-        # the search's fine-tunes are the run's last steps, so the kept model has had train.iterations
-        # steps, as the default run has (fairer than extra steps: on sparse views more steps overfit)
-        trainer.reserved_steps = min(cfg.finetune_steps, trainer.cfg.train.iterations // 2)
-    if ((cfg.prune_at and cfg.prune_ratio > 0) or cfg.stop_densify_at is not None) \
-            and not isinstance(trainer.strategy, ScheduledPruning):
-        trainer.strategy = ScheduledPruning(trainer.strategy, trainer, cfg)
+    """Compact mode on a freshly built trainer (before training or resuming: ``Trainer.add_stage``). Nothing
+    when ``compact.enabled`` is off."""
+    if trainer.cfg.compact.enabled:
+        trainer.add_stage(CompactStage(trainer.cfg.compact))
 
 
 # ----------------------------------------------------------------------------------------------
 # the search
 
 
-def finetune(trainer, steps: int, seed: int = 0) -> int:
+def finetune(ctx, steps: int, seed: int = 0) -> int:
     """``steps`` steps of the trainer's loss on the training views (its ``compute_loss``, so the full
     method's pseudo views too), no densification, learning rates as at the end of training. The view order
     and random backgrounds come from ``seed``, so every candidate sees the same sequence. Returns the
@@ -203,20 +223,20 @@ def finetune(trainer, steps: int, seed: int = 0) -> int:
 
     if steps <= 0:
         return 0
-    model, opt = trainer.model, trainer.optimizer
+    model, opt = ctx.model, ctx.optimizer
     for g in opt.param_groups:
         if g.get("name") == "means":
-            g["lr"] = trainer.means_lr(trainer.total_steps)
+            g["lr"] = ctx.means_lr(ctx.total_steps)
     rng = np.random.default_rng(seed)
-    gen = torch.Generator(device=trainer.device).manual_seed(seed)
+    gen = torch.Generator(device=ctx.device).manual_seed(seed)
     order: list[int] = []
     skipped = 0
     for _ in range(steps):
         if not order:
-            order = rng.permutation(len(trainer.train_cams)).tolist()
-        cam, bg = trainer.with_training_background(trainer.train_cams[order.pop()], gen)
+            order = rng.permutation(len(ctx.cameras.train)).tolist()
+        cam, bg = ctx.background.for_training(ctx.cameras.train[order.pop()], gen)
         out = model.render(cam.viewmat, cam.K, cam.width, cam.height, background=bg)
-        loss, _ = trainer.compute_loss(out, cam)
+        loss, _ = ctx.compute_loss(out, cam)
         loss.backward()
         if _all_finite([loss.detach()] + [p.grad for p in model.params.values()]):
             opt.step()
@@ -226,46 +246,46 @@ def finetune(trainer, steps: int, seed: int = 0) -> int:
     return skipped
 
 
-def _psnr(trainer, cams) -> float:
-    return float(trainer.evaluate(cams, lpips=False)["mean"]["psnr"])
+def _psnr(ctx, cams) -> float:
+    return float(ctx.evaluate(cams, lpips=False)["mean"]["psnr"])
 
 
-def search(trainer, cfg: CompactConfig | None = None) -> dict:
+def search(ctx, cfg: CompactConfig | None = None) -> dict:
     """The search after training (see the module docstring). Leaves the trainer holding the chosen model
     (with its optimizer state) and returns the report that goes into metrics.json under ``compact``."""
     import time
 
-    cfg = check_config(cfg if cfg is not None else trainer.cfg.compact)
+    cfg = check_config(cfg if cfg is not None else ctx.cfg.compact)
     t0 = time.perf_counter()
-    model = trainer.model
-    test = cfg.report_test and bool(trainer.test_cams)
-    before = {**size_report(model), "train_psnr": _psnr(trainer, trainer.train_cams)}
+    model = ctx.model
+    test = cfg.report_test and bool(ctx.cameras.test)
+    before = {**size_report(model), "train_psnr": _psnr(ctx, ctx.cameras.train)}
     if test:
-        before["test_psnr"] = _psnr(trainer, trainer.test_cams)
-    start = trainer.state_dict(("model",))
-    steps = trainer.reserved_steps or cfg.finetune_steps  # compact mode reserved the run's last steps for them
-    cams = importance_cameras(trainer, cfg)
-    scores = importance(model, cams, trainer.background, cfg.importance, cfg.volume_power).to(trainer.device)
+        before["test_psnr"] = _psnr(ctx, ctx.cameras.test)
+    start = ctx.state_dict(("model",))
+    steps = ctx.reserved_steps or cfg.finetune_steps  # compact mode reserved the run's last steps for them
+    cams = importance_cameras(ctx, cfg)
+    scores = importance(model, cams, ctx.background.colour, cfg.importance, cfg.volume_power).to(ctx.device)
     points: list[dict] = []
     kept: dict[int, dict] = {}  # point index -> snapshot (on the CPU)
 
     def run_point(kind: str, ratio: float, degree: int) -> dict:
         """One point: from the trained model, prune ``ratio``, truncate to ``degree``, fine-tune, measure."""
-        trainer.load_state_dict(start)
+        ctx.load_state_dict(start)
         if ratio > 0:
-            prune_lowest(trainer.model, trainer.optimizer, trainer.state, scores, ratio)
-        if degree < trainer.model.max_sh_degree:
-            truncate_sh(trainer.model, degree, trainer.optimizer)
-        skipped = finetune(trainer, steps, seed=cfg.seed + trainer.cfg.train.seed)
-        row = {"kind": kind, "ratio": ratio, **size_report(trainer.model),
-               "train_psnr": _psnr(trainer, trainer.train_cams), "finetune_steps": steps}
+            prune_lowest(ctx.model, ctx.optimizer, ctx.state, scores, ratio)
+        if degree < ctx.model.max_sh_degree:
+            truncate_sh(ctx.model, degree, ctx.optimizer)
+        skipped = finetune(ctx, steps, seed=cfg.seed + ctx.cfg.train.seed)
+        row = {"kind": kind, "ratio": ratio, **size_report(ctx.model),
+               "train_psnr": _psnr(ctx, ctx.cameras.train), "finetune_steps": steps}
         if skipped:
             row["skipped_steps"] = skipped
         if test:
-            row["test_psnr"] = _psnr(trainer, trainer.test_cams)
-        kept[len(points)] = trainer.state_dict(("model",))
+            row["test_psnr"] = _psnr(ctx, ctx.cameras.test)
+        kept[len(points)] = ctx.state_dict(("model",))
         points.append(row)
-        trainer.log(f"warpgs: compact: {kind} ratio {ratio:.2f} degree {row['sh_degree']}: {row['num_gaussians']} "
+        ctx.log(f"warpgs: compact: {kind} ratio {ratio:.2f} degree {row['sh_degree']}: {row['num_gaussians']} "
                     f"Gaussians, train PSNR {row['train_psnr']:.3f}"
                     + (f", test PSNR {row['test_psnr']:.3f} (reported only)" if test else ""))
         return row
@@ -296,10 +316,10 @@ def search(trainer, cfg: CompactConfig | None = None) -> dict:
         active = start["active_sh_degree"]
         for d in range(max_deg):
             if d >= active:  # the model never rendered above ``active``: dropping the rest changes nothing
-                trainer.load_state_dict(kept[chosen])
-                truncate_sh(trainer.model, d, trainer.optimizer)
-                kept[len(points)] = trainer.state_dict(("model",))
-                points.append({**points[chosen], "kind": "sh", **size_report(trainer.model),
+                ctx.load_state_dict(kept[chosen])
+                truncate_sh(ctx.model, d, ctx.optimizer)
+                kept[len(points)] = ctx.state_dict(("model",))
+                points.append({**points[chosen], "kind": "sh", **size_report(ctx.model),
                                "note": f"the active SH degree was {active}: same model, fewer stored coefficients"})
                 chosen = len(points) - 1
                 break
@@ -308,7 +328,7 @@ def search(trainer, cfg: CompactConfig | None = None) -> dict:
                 break
     chosen = min((i for i, p in enumerate(points) if ok(p) and p["num_gaussians"] == points[chosen]["num_gaussians"]),
                  key=lambda i: (points[i]["param_bytes"], -points[i]["train_psnr"]))
-    trainer.load_state_dict(kept[chosen])
+    ctx.load_state_dict(kept[chosen])
     for p in points:
         p["within_tolerance"] = ok(p)
     final = points[chosen]
@@ -328,27 +348,11 @@ def search(trainer, cfg: CompactConfig | None = None) -> dict:
         "points": points,
         "search_time_s": round(time.perf_counter() - t0, 2),
     }
-    if isinstance(trainer.strategy, ScheduledPruning):
-        report["pruned_during_training"] = trainer.strategy.log
-    if trainer.n_before_compaction is None:
-        trainer.n_before_compaction = before["num_gaussians"]
-    trainer.log(f"warpgs: compact: kept {final['num_gaussians']} of {before['num_gaussians']} Gaussians at SH degree "
+    if isinstance(ctx.strategy, ScheduledPruning):
+        report["pruned_during_training"] = ctx.strategy.log
+    ctx.log(f"warpgs: compact: kept {final['num_gaussians']} of {before['num_gaussians']} Gaussians at SH degree "
                 f"{final['sh_degree']} ({final['param_bytes'] / 2**20:.2f} MiB of parameters), train PSNR "
                 f"{final['train_psnr']:.3f} (best {best():.3f}, tolerance {cfg.tolerance_db} dB)")
-    return report
-
-
-def finish_hook(trainer) -> dict | None:
-    """The search when compact mode is on (``CompactStage``, before evaluation)."""
-    cfg = trainer.cfg.compact
-    if not cfg.enabled:
-        return None
-    if not cfg.ratios and not cfg.sh_search:
-        return {"before": size_report(trainer.model), "points": []}
-    report = search(trainer, cfg)
-    report["trained_steps_before_search"] = trainer.step
-    trainer.step += trainer.reserved_steps  # the kept model took the reserved last steps in its fine-tune
-    trainer.reserved_steps = 0
     return report
 
 

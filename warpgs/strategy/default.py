@@ -13,25 +13,24 @@ Every ``refine_every`` steps between ``refine_start_iter`` and ``refine_stop_ite
 gradients grow. ``prune_unseen`` removes what the training views do not need: Gaussians whose total
 blending weight over all training views is below ``unseen_min_weight`` pixels, and transparent ones.
 The trainer does so whenever a refinement finds the budget spent (``prune_unseen_when_full``), so growth
-goes on where the views need it, and optionally once more at the end (``train.prune_unseen_at_end``).
-(Compact mode, ``warpgs/compact.py``, is something else: importance pruning and a size search.) Note that in
-sparse-view training the Gaussians no input view sees still fill the novel views: dropping them at
+goes on where the views need it, and optionally once more at the end (``prune_unseen_at_end``).
+(Compact mode, ``warpgs/strategy/compact.py``, is something else: importance pruning and a size search.)
+Note that in sparse-view training the Gaussians no input view sees still fill the novel views: dropping them at
 the end lowered test PSNR by 0.4 dB on the synthetic scene, so the final pruning is off by default.
 
-New Gaussians get zeroed Adam moments, as in gsplat. The strategy's running state (gradient sums and
-counts) is a plain dict of tensors, saved in checkpoints.
+New Gaussians get zeroed Adam moments, as in gsplat (the operations: ``warpgs.strategy.ops``). The
+strategy's running state (gradient sums and counts) is a plain dict of tensors, saved in checkpoints.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Callable
 
 import torch
-from torch import nn
 
 from warpgs.model import GaussianModel
 from warpgs.render import RenderOutput, means2d_grad_norm
+from warpgs.strategy.ops import contribution, duplicate, remove, reset_opacities, split
 
 
 @dataclass
@@ -54,6 +53,9 @@ class DefaultStrategy:
     max_gaussians: int = 0  # 0 = no budget
     prune_unseen_when_full: bool = True  # prune_unseen when a refinement finds the budget spent
     unseen_min_weight: float = 0.05  # prune_unseen keeps Gaussians with at least this total weight (pixels)
+    prune_unseen_at_end: bool = False  # prune_unseen before the final evaluation, with the training views (the
+    #   captures' default: a Gaussian no input sees can only stand in front of a novel view; on scenes whose test
+    #   views see what the inputs do not, it can cost novel-view PSNR)
     verbose: bool = False
 
     LIMITS = {"prune_opa": "[0, 1]", "grow_grad2d": ">= 0", "grow_scale3d": ">= 0", "grow_scale2d": ">= 0",
@@ -61,6 +63,7 @@ class DefaultStrategy:
               "refine_start_iter": ">= 0", "refine_stop_iter": ">= 0", "refine_stop_fraction": "[0, 1]",
               "reset_every": ">= 1", "refine_every": ">= 1",
               "pause_refine_after_reset": ">= 0", "max_gaussians": ">= 0", "unseen_min_weight": ">= 0"}
+    LEGACY = {"prune_unseen_at_end": "prune_unseen_at_end"}  # train.<key> of earlier versions (warpgs.config.MOVED)
 
     # ------------------------------------------------------------------------------------------
 
@@ -159,101 +162,3 @@ class DefaultStrategy:
             return 0
         remove(model, optimizer, state, drop)
         return n
-
-
-# ----------------------------------------------------------------------------------------------
-# the operations (gsplat's strategy/ops.py semantics)
-
-
-def update_params(model: GaussianModel, optimizer: torch.optim.Optimizer | None,
-                  param_fn: Callable[[str, torch.Tensor], torch.Tensor],
-                  state_fn: Callable[[str, torch.Tensor], torch.Tensor], names=None) -> None:
-    """Replaces each parameter by ``param_fn(name, p)`` and its Adam moments by ``state_fn(key, v)``."""
-    names = list(model.params.keys()) if names is None else names
-    for name in names:
-        old = model.params[name]
-        new = nn.Parameter(param_fn(name, old.detach()), requires_grad=old.requires_grad)
-        if optimizer is not None:
-            for group in optimizer.param_groups:
-                for i, p in enumerate(group["params"]):
-                    if p is old:
-                        st = optimizer.state.pop(old, None)
-                        group["params"][i] = new
-                        if st:
-                            optimizer.state[new] = {k: (state_fn(k, v) if isinstance(v, torch.Tensor) and v.dim() > 0
-                                                        else v) for k, v in st.items()}
-        model.params[name] = new
-
-
-def duplicate(model, optimizer, state, mask: torch.Tensor) -> None:
-    sel = torch.where(mask)[0]
-    update_params(model, optimizer, lambda n, p: torch.cat([p, p[sel]]),
-                  lambda k, v: torch.cat([v, torch.zeros((len(sel), *v.shape[1:]), device=v.device, dtype=v.dtype)]))
-    for k, v in state.items():
-        state[k] = torch.cat([v, v[sel]])
-
-
-def split(model, optimizer, state, mask: torch.Tensor, generator: torch.Generator | None = None) -> None:
-    sel = torch.where(mask)[0]
-    rest = torch.where(~mask)[0]
-    p = model.params
-    scales = torch.exp(p["scales"].detach()[sel])
-    q = torch.nn.functional.normalize(p["quats"].detach()[sel], dim=-1)
-    R = quat_to_rotmat(q)
-    noise = torch.randn(2, len(sel), 3, device=scales.device, generator=generator)
-    samples = torch.einsum("nij,nj,bnj->bni", R, scales, noise)  # [2, n, 3]
-
-    def param_fn(name, t):
-        if name == "means":
-            new = (t[sel] + samples).reshape(-1, 3)
-        elif name == "scales":
-            new = torch.log(scales / 1.6).repeat(2, 1)
-        else:
-            new = t[sel].repeat(2, *([1] * (t.dim() - 1)))
-        return torch.cat([t[rest], new])
-
-    update_params(model, optimizer, param_fn,
-                  lambda k, v: torch.cat([v[rest], torch.zeros((2 * len(sel), *v.shape[1:]), device=v.device, dtype=v.dtype)]))
-    for k, v in state.items():
-        state[k] = torch.cat([v[rest], v[sel].repeat(2, *([1] * (v.dim() - 1)))])
-
-
-def remove(model, optimizer, state, mask: torch.Tensor) -> None:
-    keep = torch.where(~mask)[0]
-    update_params(model, optimizer, lambda n, p: p[keep], lambda k, v: v[keep])
-    for k, v in state.items():
-        state[k] = v[keep]
-
-
-def reset_opacities(model, optimizer, value: float) -> None:
-    """Clamps opacities to at most ``value`` and zeroes their Adam moments (3D-GS's opacity reset)."""
-    logit = float(torch.logit(torch.tensor(value)))
-    update_params(model, optimizer, lambda n, p: p.clamp(max=logit), lambda k, v: torch.zeros_like(v), names=["opacities"])
-
-
-def quat_to_rotmat(q: torch.Tensor) -> torch.Tensor:
-    """Unit quaternions (w, x, y, z) [N, 4] -> rotation matrices [N, 3, 3]."""
-    w, x, y, z = q.unbind(-1)
-    return torch.stack([
-        1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y),
-        2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x),
-        2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y),
-    ], dim=-1).reshape(q.shape[:-1] + (3, 3))
-
-
-def contribution(model: GaussianModel, cameras, background=None) -> torch.Tensor:
-    """Total blending weight sum_pixels w_i of each Gaussian over ``cameras`` (objects with viewmat, K,
-    width, height as tensors on the model's device). The image is sum_i w_i c_i + T bg, so the
-    gradient of the image's sum with respect to a plain RGB colour c_i is exactly that weight."""
-    from warpgs.render import rasterize
-
-    total = torch.zeros(len(model), device=model.device)
-    means, quats = model.means.detach(), model.quats.detach()
-    scales, opac = model.scales.detach(), model.opacities.detach()
-    for cam in cameras:
-        colors = torch.zeros(len(model), 3, device=model.device, requires_grad=True)
-        out = rasterize(means, quats, scales, opac, colors, cam.viewmat, cam.K, cam.width, cam.height,
-                        background=background)
-        out.image[..., 0].sum().backward()
-        total += colors.grad[:, 0]
-    return total
