@@ -26,7 +26,7 @@ REPO = Path(__file__).resolve().parents[1]
 TINY = ["--set", "model.init=box", "--set", "model.init_box=[-1.2,-1.2,-1.2,1.2,1.2,1.2]", "--set", "model.init_num=200",
         "--set", "eval.lpips_weights=/nonexistent/alexnet.pth", "--set", "eval.fps_repeats=1",
         "--set", "eval.save_images=false", "--set", "train.checkpoint_every=10", "--iterations", "100", "--device", "cpu"]
-TIMING = ("train_time_s", "render_fps", "peak_rss_mb", "stage_times_s", "curve")
+TIMING = ("train_time_s", "render_fps", "peak_rss_mb", "stage_times_s", "curve", "wall_s", "outputs_s")
 
 
 def test_gpu_shares_and_the_plan_need_no_ray(tmp_path, capsys):
