@@ -143,9 +143,9 @@ def recipe_overrides(strategy: dict, scene_scale: float | None = None) -> list[s
         "regularizers.opacity_noise.sigma": 0, "regularizers.opacity_decay.rate": 0,
         "regularizers.binocular.weight": 0, "regularizers.path_consistency.weight": 0,
         # the datasets' defaults that are not 3D-GS (configs/datasets/*.yaml)
-        "train.random_background": "false", "train.far_field": "none", "train.path_clearance": 0,
-        "train.view_clearance": 0, "train.path_floaters": 0, "train.hold_geometry": "off",
-        "train.prune_unseen_at_end": "false", "train.co_reg": "false", "train.eval_every": 0,
+        "train.random_background": "false", "backgrounds.far_field.kind": "none", "clearance.path": 0,
+        "clearance.view": 0, "clearance.floaters": 0, "hold.geometry": "off",
+        "strategy.prune_unseen_at_end": "false", "corgs.pair": "false", "train.eval_every": 0,
         "compact.enabled": "false",
         "strategy.refine_stop_fraction": 0, "strategy.max_gaussians": 0,
         **{f"strategy.{k}": v for k, v in strategy.items()},
@@ -197,9 +197,9 @@ def plain_problems(tr, strategy: dict) -> list[str]:
         out.append(f"regularisers on: {', '.join(on)}")
     if tr.held is not None:
         out.append(f"geometry held ({tr.held['why']})")
-    if tr.far_field is not None:
-        out.append("a far field")
-    if tr.clearance is not None or tr.floaters is not None:
+    if tr.bg.components.items:
+        out.append(f"background components: {', '.join(tr.bg.components.items)}")
+    if tr.path_pruning.clearance is not None or tr.path_pruning.floaters is not None:
         out.append("path clearance / floaters")
     if tr.pair is not None:
         out.append("a co-regularised pair")
@@ -207,7 +207,7 @@ def plain_problems(tr, strategy: dict) -> list[str]:
         out.append("compact mode")
     if tr.cfg.train.random_background:
         out.append("a random background")
-    if tr.cfg.train.prune_unseen_at_end:
+    if tr.cfg.strategy.prune_unseen_at_end:
         out.append("the final pruning")
     lc = tr.cfg.loss
     if (lc.l1_weight, lc.ssim_weight) != (1.0 - RECIPE["ssim_lambda"], RECIPE["ssim_lambda"]):
