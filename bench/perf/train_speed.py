@@ -103,12 +103,12 @@ def make_config(args):
         argv += ["--data-root", args.data_root]
     # the plain loops train plain 3D-GS: the trainer gets none of the regularisers a dataset config may turn on
     # (DropGaussian is the captures' and LLFF's default since issue 14); --set can still ask for them
-    argv += ["--set", "train.drop_rate=0", "--set", "train.opacity_noise=0", "--set", "train.scale_reg=0",
-             "--set", "train.co_reg=false", "--set", "train.far_field=none", "--set", "train.path_clearance=0",
-             "--set", "train.view_clearance=0", "--set", "train.alpha_binary=0",  # the captures' defaults
+    argv += ["--set", "regularizers.dropout.rate=0", "--set", "regularizers.opacity_noise.sigma=0",
+             "--set", "regularizers.scale_reg.weight=0", "--set", "corgs.pair=false", "--set", "backgrounds.far_field.kind=none", "--set", "clearance.path=0",
+             "--set", "clearance.view=0", "--set", "regularizers.alpha_binary.weight=0",  # the captures' defaults
              "--set", "strategy.refine_stop_fraction=0",  # 3D-GS's schedule in steps (LLFF's, DTU's and the captures'
              #   baseline stop growing at half the run; the plain loops read refine_stop_iter alone)
-             "--set", "train.opacity_decay=0", "--set", "train.binocular=0"]  # Binocular3DGS's terms
+             "--set", "regularizers.opacity_decay.rate=0", "--set", "regularizers.binocular.weight=0"]  # Binocular3DGS's terms
     for s in args.set:
         argv += ["--set", s]
     cfg, _ = cli_config(build_parser().parse_args(argv))

@@ -54,7 +54,7 @@ PRESETS = {
         "model.init_num=1000", "strategy.max_gaussians=4000", "strategy.refine_start_iter=100",
         "strategy.refine_every=50", "train.sh_degree_interval=100", "train.checkpoint_every=100",
         "full.n_frames=5", "full.flythrough_frames=6", "full.pseudo={sampler: {steps: 10}}", "eval.fps_repeats=1",
-        "train.co_reg_start=100", "train.co_prune_every=100"]},  # CoR-GS's pair from step 100 (its 500 is past the end)
+        "corgs.start=100", "corgs.prune_every=100"]},  # CoR-GS's pair from step 100 (its 500 is past the end)
     # GPU-sized: the capture's 256x192, 3000 steps, the synthetic config's numbers otherwise
     "full": {"downscale": 1, "iterations": 3000, "set": [
         "strategy.refine_start_iter=500", "train.checkpoint_every=500", "eval.fps_repeats=3"]},
