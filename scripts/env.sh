@@ -67,7 +67,7 @@ if [ ! -x "$WARPGS_VENV/bin/python" ] || [ "$(cat "$_stamp" 2>/dev/null)" != "$_
       "$WARPGS_VENV/bin/python" -c 'import torch' 2>/dev/null || "${_pip[@]}" torch --index-url https://download.pytorch.org/whl/cpu
     fi
   fi
-  _install "warpgs with its test dependencies (pycolmap, open3d, diffusers, transformers, ray, viser, playwright)" \
+  _install "warpgs with its test dependencies (pycolmap, open3d, diffusers, transformers, ray, viser, playwright, gsplat)" \
     -e "$WARPGS_ROOT[test]"
   # The viewer's browser test (tests/test_view.py) drives a real Chromium through playwright's pip package
   # (no `playwright install`): Debian's chromium-headless-shell. An install that fails stops the set-up; where it
@@ -93,7 +93,7 @@ if [ ! -x "$WARPGS_VENV/bin/python" ] || [ "$(cat "$_stamp" 2>/dev/null)" != "$_
   "$WARPGS_VENV/bin/python" - <<'PY' || { _say "installation incomplete (see the line above)"; exit 1; }
 import importlib, sys
 for name in ("warpgs", "warp", "torch", "open3d", "kornia", "trimesh", "pycolmap", "plyfile", "cv2", "lpips", "scipy",
-             "diffusers", "transformers", "ray", "viser", "playwright.sync_api"):
+             "diffusers", "transformers", "ray", "viser", "playwright.sync_api", "gsplat"):
     try:
         if name == "lpips":  # as warpgs imports it: without torchvision, with its own AlexNet layout
             from warpgs.losses import _import_lpips
