@@ -21,7 +21,7 @@ from warpgs.config import save_config
 from warpgs.metrics import LPIPSMetric, mean_or_none, peak_memory_mb, psnr, render_fps, ssim
 from warpgs.model import size_report
 from warpgs.runfolder import atomic_write
-from warpgs.viz import save_image
+from warpgs.viz import save_image, to_uint8
 
 
 def evaluate_views(render, cams, *, masked: bool, scene_name: str, lpips_weights, device, save_dir=None,
@@ -200,7 +200,7 @@ def write_flythrough(trainer, path: Path, frames_per_segment: int = 24, max_fram
                 view = SimpleNamespace(viewmat=v, K=K, width=width, height=height)
                 bg = trainer.background_for(view, keep=False)  # a one-off pose: nothing kept
                 img = trainer.model.render(v, K, width, height, background=bg).image
-                frames.append(Image.fromarray((img.clamp(0, 1).cpu().numpy() * 255 + 0.5).astype(np.uint8)))
+                frames.append(Image.fromarray(to_uint8(img)))
     # through a rename: an interrupted run leaves no half-written GIF
     return atomic_write(path, lambda tmp: frames[0].save(tmp, format="GIF", save_all=True, append_images=frames[1:],
                                                          duration=80, loop=0))
