@@ -106,6 +106,43 @@ def test_an_exploding_loss_is_caught_and_rolled_back_exactly(scene, monkeypatch)
     assert same_params(param_copy(tr), param_copy(twin)) and tr.losses == twin.losses
 
 
+def test_a_loss_that_jumps_after_a_pruning_is_a_new_level_not_a_divergence(scene, monkeypatch):
+    """gsplat's recipe on fern at 3 views prunes the Gaussians over prune_scale3d at step 3100 and its loss stays
+    13x higher: rolling back only repeated it. After a pruning the statistic starts again (as after an opacity
+    reset), so a loss that jumps there and stays is judged against its new level; the same jump where nothing
+    was pruned is still rolled back (test_an_exploding_loss_is_caught_and_rolled_back_exactly)."""
+    tr = Trainer(_cfg(100, snapshot_every=25), scene)
+    real_loss, real_densify = tr.compute_loss, tr.densify
+    pruned_at = []
+
+    def densify(strategy, model, *args):
+        if pruned_at:
+            return real_densify(strategy, model, *args)
+        # until the first refinement: a threshold that prunes a real half of the Gaussians there
+        before, strategy.prune_opa = strategy.prune_opa, float(model.opacities.detach().median())
+        try:
+            info = real_densify(strategy, model, *args)
+        finally:
+            strategy.prune_opa = before
+        if info["pruned"]:
+            pruned_at.append(info["pruned"])
+        return info
+
+    def jump_after_the_pruning(out, cam):
+        loss, parts = real_loss(out, cam)
+        if pruned_at:
+            return loss * 30, {**parts, "inputs": parts["inputs"] * 30}
+        return loss, parts
+
+    monkeypatch.setattr(tr, "densify", densify)
+    monkeypatch.setattr(tr, "compute_loss", jump_after_the_pruning)
+    tr.train()
+    assert pruned_at and pruned_at[0] > 0
+    assert tr.recoveries == [] and np.isfinite(tr.losses).all()  # no step skipped, nothing rolled back
+    # the statistic started again at step 51: no step after it came near explode_factor x its median
+    assert tr.guard.max_loss_ratio < tr.cfg.guard.explode_factor
+
+
 def test_nonfinite_parameters_are_rolled_back_and_never_checkpointed(scene, tmp_path, monkeypatch):
     tr = Trainer(_cfg(60, snapshot_every=20), scene, tmp_path)
     tr.train(30)

@@ -57,7 +57,6 @@ from warpgs.model import GaussianModel
 from warpgs.optim import base_learning_rates, make_optimizer
 from warpgs.regularizers import Regularizers
 
-
 def _update_bar(bar, ema: dict, info: dict, step: int, n: int) -> None:
     """The progress bar's loss and PSNR: running averages of the steps that read them."""
     for k in ("loss", "psnr"):
@@ -301,12 +300,14 @@ class Trainer:
 
     def after_update(self, step: int, out, cam, apply: torch.Tensor | None = None) -> dict:
         """What follows a step's update: densification (``densify``), the co-regularised partner's and the
-        co-pruning (``corgs.pair``), and a new statistic after an opacity reset (whose jump in the loss is
-        expected). ``apply``: a deferred step's verdict (``out``'s radii are already masked with it)."""
+        co-pruning (``corgs.pair``), and a new statistic after an opacity reset or a pruning (the loss's jump
+        after either is expected, not divergence: gsplat's recipe on fern at 3 views prunes the Gaussians over
+        ``prune_scale3d`` at step 3100 and the loss jumps 13x, which rolling back only repeats). ``apply``: a
+        deferred step's verdict (``out``'s radii are already masked with it)."""
         info = self.densify(self.strategy, self.model, self.optimizer, self.state, step, out, cam, self.split_gen)
         if self.pair is not None:
             info["co_pruned"] = self.pair.after_update(step, cam, apply)
-        if info.get("reset"):
+        if info.get("reset") or info.get("pruned"):
             self.stepguard.restart_statistic(step + 1)
         return info
 

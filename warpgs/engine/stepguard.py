@@ -6,8 +6,8 @@ Divergence (judged by ``warpgs.guard.DivergenceGuard``, acted on here): a step i
 when its loss or gradients are not finite, or when its loss on the input views (``parts["inputs"]`` of
 ``Trainer.compute_loss``; pseudo views are left out) explodes: above ``guard.explode_factor`` x the median of
 the last ``guard.explode_window`` finite losses (the statistic restarts with each ``Trainer.train()`` call,
-i.e. each phase of the full method, and after an opacity reset, whose expected jumps are not divergence). A
-divergence is ``guard.max_nan_steps`` skipped steps in a row, ``guard.explode_patience`` exploding ones
+i.e. each phase of the full method, and after an opacity reset or a pruning, whose expected jumps are not
+divergence). A divergence is ``guard.max_nan_steps`` skipped steps in a row, ``guard.explode_patience`` exploding ones
 in a row (one high loss alone, e.g. a hard view early in a phase, costs one step, never the run), or
 parameters that are not finite after the optimiser step. The guard keeps an in-memory snapshot of the
 last good state (parameters, Adam moments, densification statistics, RNGs), taken at each ``train()``
