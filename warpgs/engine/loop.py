@@ -353,8 +353,10 @@ class Trainer:
             sg.diverge(self.step, f"the model is not finite at the start of training (step {self.step}: "
                                   f"{', '.join(sg.nonfinite_parameters()) or 'optimiser state'})")
         restore = self.stop.install()
+        # into a log file (not a terminal) the bar writes at most every 30 s, not ten times a second
         bar = tqdm(total=total, initial=self.step, desc=f"{self.cfg.method} {self.scene.name}", unit="it",
-                   dynamic_ncols=True, disable=not self.cfg.train.progress, file=sys.stderr)
+                   dynamic_ncols=True, disable=not self.cfg.train.progress, file=sys.stderr,
+                   mininterval=0.1 if sys.stderr.isatty() else 30.0)
         every = self.cfg.train.checkpoint_every
         ev_every = self.cfg.train.eval_every
         t0 = time.perf_counter()
