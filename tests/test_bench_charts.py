@@ -193,3 +193,22 @@ def test_the_committed_results_chart(tmp_path):
     tables, paths = charts.build(charts.RESULTS, tmp_path)
     assert paths and all(p.is_file() for p in paths)
     assert all(len(tables[k].splitlines()) > 2 for k in ("speed_accuracy", "stability", "compact"))
+
+
+def test_a_compact_pair_of_bench_quality_compact_keeps_its_view_count(tmp_path):
+    """bench/quality/compact.py's compact.json: with ``views`` its pair is that scene at that many views (the
+    table's "castle_p30 3v" row, where the sweep's runs land too); documents without it are the scene alone."""
+    def doc(**extra):
+        run = {"psnr": 15.5, "num_gaussians": 4000, "param_bytes": 10, "iterations": 3000, "train_time_s": 1.0}
+        return {"scene": "castle_p30", "method": "baseline", "device": "cpu", "default": run,
+                "compact": {**run, "psnr": 15.4, "num_gaussians": 1500}, **extra}
+    for folder, d in (("with", doc(views=3)), ("without", doc())):
+        (tmp_path / folder).mkdir()
+        (tmp_path / folder / "compact.json").write_text(json.dumps(d))
+    sources = {Path(s["file"]).parent.name: s for s in charts.load_sources(tmp_path)}
+    assert sorted(r["name"] for r in sources["with"]["runs"]) == ["castle_p30_3v_baseline_s0",
+                                                                 "castle_p30_3v_baseline_s0_compact"]
+    assert {r["views"] for r in sources["with"]["runs"]} == {3}
+    assert {r["views"] for r in sources["without"]["runs"]} == {None}
+    by = {v["scene"]: v for v in charts.compact_verdicts(sources["with"]["runs"])}
+    assert set(by) == {"castle_p30 3v"}

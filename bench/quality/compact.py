@@ -171,6 +171,7 @@ def run_compact(data: str = "synthetic", device: str | None = None, iterations: 
     count_reduction = 1.0 - c_n / max(d_n, 1)
     result = {
         "scene": default["scene"],
+        "views": default.get("train_views"),
         "method": method,
         "iterations": default["iterations"],
         "device": compact["device"],

@@ -318,7 +318,8 @@ def _runs_of_stability(doc: dict) -> dict:
 def _runs_of_compact(doc: dict) -> dict:
     """bench/quality/compact.py's document (one seed, the config's) as a default and a compact run."""
     seed = doc.get("seed", 0)
-    base = f"{doc['scene']}_{doc['method']}_s{seed}"
+    views = f"{doc['views']}v_" if doc.get("views") else ""  # documents before 2026-11-29 did not record it
+    base = f"{doc['scene']}_{views}{doc['method']}_s{seed}"
     keep = ("psnr", "num_gaussians", "param_bytes", "iterations", "train_time_s")
     return {base: {k: doc["default"].get(k) for k in keep}, f"{base}_compact": {k: doc["compact"].get(k) for k in keep}}
 
