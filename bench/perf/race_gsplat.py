@@ -59,12 +59,11 @@ Output: bench/results/perf/race_gsplat_<gpu>.json (``cpu`` on the CPU; the scale
 earlier file, so scales may be run one by one), with the machine (GPU, torch, Warp, gsplat, the commit, the date)
 and the seeds; one line per scale on stdout.
 
-Expected time on one H200 (``--all``, 7000 steps each side; estimated from train_speed.py's fern figures, not yet
-measured): 5-8 minutes: gsplat's first-use compilation (~1 minute), the initial points (seconds), then per scale
-1-3 minutes for both sides together, lego8 (800x800, a few hundred thousand Gaussians) the longest. Where a
-10-minute limit is near, run ``--scale fern3 --scale castle9`` and then ``--scale lego8``: both write into the same
-JSON (written after every scale). The CPU smoke (``--device cpu --shrink 8 --iterations 60 --all``) takes about a
-minute on 2 cores.
+Time on one H200 (1f001bc, 2026-11-29): gsplat's first-use compilation 66 s; castle9: SfM 12 s, then 50 s of
+gsplat's training and 24 s of warpgs's; lego8's whole call 97 s (compiled already); fern3 (150,000 initial
+Gaussians from SfM + stereo) had not finished both sides after 3 minutes. Under a 10-minute limit run
+``--scale fern3``, then ``--scale castle9 --scale lego8``: each call writes into the same JSON (written after every
+scale). The CPU smoke (``--device cpu --shrink 8 --iterations 60 --all``) takes about a minute on 2 cores.
 """
 
 from __future__ import annotations
