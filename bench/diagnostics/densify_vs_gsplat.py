@@ -34,8 +34,10 @@ def statistic(sc, grow_grad2d: float) -> list[dict]:
 
     lam = race.RECIPE["ssim_lambda"]
     rows = []
+    # the initial Gaussians, never updated here: each render's 2D means are a tensor of its own, whose gradient is
+    # that view's alone
+    g_side, w_side = race.GsplatSide(sc, 1), race.WarpgsSide(sc, 1)
     for i, cam in enumerate(sc.train_cams):
-        g_side = race.GsplatSide(sc, 1)
         img, info = g_side.rasterize(cam, 0)
         info["means2d"].retain_grad()
         loss = (img - cam.image).abs().mean() * (1.0 - lam) + dssim(img, cam.image) * lam
@@ -45,11 +47,8 @@ def statistic(sc, grow_grad2d: float) -> list[dict]:
         g_grad[:, 1] *= cam.height / 2.0
         g_norm = g_grad.norm(dim=-1)
         g_vis = (info["radii"][0] > 0).all(dim=-1)
-        del g_side
 
-        w_side = race.WarpgsSide(sc, 1)
-        tr = w_side.tr
-        out = tr.render(cam)
+        out = w_side.tr.render(cam)
         wimg = out.image.reshape(cam.image.shape)
         wloss = (wimg - cam.image).abs().mean() * (1.0 - lam) + dssim(wimg, cam.image) * lam
         wloss.backward()
@@ -65,8 +64,6 @@ def statistic(sc, grow_grad2d: float) -> list[dict]:
                      "grad_ratio_median": float((w_norm[both] / g_norm[both].clamp_min(1e-20)).median()) if rel.numel() else None,
                      "above_gsplat": int((g_norm[g_vis] > grow_grad2d).sum()),
                      "above_warpgs": int((w_norm[w_vis] > grow_grad2d).sum())})
-        del w_side, tr, out
-        torch.cuda.empty_cache()
     return rows
 
 
