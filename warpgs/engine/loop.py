@@ -57,6 +57,7 @@ from warpgs.model import GaussianModel
 from warpgs.optim import base_learning_rates, make_optimizer
 from warpgs.regularizers import Regularizers
 
+
 def _update_bar(bar, ema: dict, info: dict, step: int, n: int) -> None:
     """The progress bar's loss and PSNR: running averages of the steps that read them."""
     for k in ("loss", "psnr"):
