@@ -345,6 +345,7 @@ def test_cli_flag_and_bench(tmp_path, capsys):
         assert (tmp_path / "bench" / f).is_file()
     saved = json.loads((tmp_path / "bench" / "compact.json").read_text())
     assert saved["compact"]["num_gaussians"] == res["compact"]["num_gaussians"] and saved["points"]
+    assert (saved["views"], saved["seed"]) == (3, 0)  # the chart names the pair by them (castle_p30_3v_..._s0)
     assert saved["count_reduction"] == pytest.approx(1 - res["compact"]["num_gaussians"] / res["default"]["num_gaussians"])
 
 

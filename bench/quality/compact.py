@@ -172,6 +172,7 @@ def run_compact(data: str = "synthetic", device: str | None = None, iterations: 
     result = {
         "scene": default["scene"],
         "views": default.get("train_views"),
+        "seed": default.get("seed", 0),  # the chart's run names carry it (bench/report/charts.py)
         "method": method,
         "iterations": default["iterations"],
         "device": compact["device"],
