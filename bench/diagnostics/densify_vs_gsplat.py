@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import json
 import sys
+import traceback
 from pathlib import Path
 
 import torch
@@ -33,6 +34,10 @@ def statistic(sc, grow_grad2d: float) -> list[dict]:
     from warpgs.render import means2d_grad_norm
 
     lam = race.RECIPE["ssim_lambda"]
+
+    def recipe_loss(img, gt):  # the same loss on both sides (simple_trainer's, with warpgs's D-SSIM)
+        return (img - gt).abs().mean() * (1.0 - lam) + dssim(img, gt) * lam
+
     rows = []
     # the initial Gaussians, never updated here: each render's 2D means are a tensor of its own, whose gradient is
     # that view's alone
@@ -40,7 +45,7 @@ def statistic(sc, grow_grad2d: float) -> list[dict]:
     for i, cam in enumerate(sc.train_cams):
         img, info = g_side.rasterize(cam, 0)
         info["means2d"].retain_grad()
-        loss = (img - cam.image).abs().mean() * (1.0 - lam) + dssim(img, cam.image) * lam
+        loss = recipe_loss(img, cam.image)
         loss.backward()
         g_grad = info["means2d"].grad[0].clone()
         g_grad[:, 0] *= cam.width / 2.0
@@ -50,7 +55,7 @@ def statistic(sc, grow_grad2d: float) -> list[dict]:
 
         out = w_side.tr.render(cam)
         wimg = out.image.reshape(cam.image.shape)
-        wloss = (wimg - cam.image).abs().mean() * (1.0 - lam) + dssim(wimg, cam.image) * lam
+        wloss = recipe_loss(wimg, cam.image)
         wloss.backward()
         w_norm = means2d_grad_norm(out, cam.width, cam.height)
         w_vis = (out.radii > 0).all(dim=-1)
@@ -99,8 +104,7 @@ def main(argv=None) -> dict:
                          ("counts", lambda: counts(sc, a.steps, strategy["refine_every"]))):
             try:
                 result[name][part] = fn()
-            except Exception as e:  # noqa: BLE001 - a diagnostic: say what failed, keep the other part
-                import traceback
+            except Exception:  # noqa: BLE001 - a diagnostic: say what failed, keep the other part
                 result[name][part] = {"error": traceback.format_exc()[-1500:]}
         print(name, json.dumps(result[name])[:2000], flush=True)
         if a.out:
