@@ -216,6 +216,28 @@ def test_binocular_loss_is_lower_with_the_true_depth():
     assert right < 0.5 * term(1.3) and right < 0.5 * term(0.7)
 
 
+def test_a_moved_render_cut_short_by_a_fixed_capacity_sits_the_term_out_and_is_counted():
+    """In a step recorded as a CUDA graph the moved render gets fixed buffers (its pose is drawn on the device, so
+    its count cannot be read first). With room enough the term is the counted render's, bit for bit, gradient
+    included; with too little the term is 0 for that step and ``overflows`` counts it (the next recording makes
+    more room)."""
+    from warpgs.regularizers.binocular import Binocular
+
+    gx, gy = np.meshgrid(np.linspace(-2.4, 2.4, 60), np.linspace(-1.6, 1.6, 40))
+    model, inp, cam, bg = _plane_view(gx, gy, np.random.default_rng(0).random((gx.size, 3)))
+    results = []
+    for capacity in (None, 10 ** 6, 50):
+        b = Binocular(1.0, 1.0, 0, 0.05, "cpu", 0)
+        depth = inp.depth.detach().clone().requires_grad_(True)
+        term = b.loss(model, inp._replace(depth=depth), cam, bg, {}, capacity)
+        term.backward()
+        results.append((term.detach(), depth.grad, int(b.overflows)))
+    (t0, g0, n0), (t1, g1, n1), (t2, g2, n2) = results
+    assert float(t0) > 0 and n0 == 0
+    assert torch.equal(t1, t0) and torch.equal(g1, g0) and n1 == 0
+    assert float(t2) == 0.0 and float(g2.abs().sum()) == 0.0 and n2 == 1
+
+
 # ----------------------------------------------------------------------------------------------
 # the general warp (pose_warp) and the capture path's partner (train.binocular_partner: path)
 

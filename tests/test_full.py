@@ -1,6 +1,7 @@
 """The generation-guided pipeline (warpgs/pipelines/full.py): the loop runs end to end on the embedded
 synthetic scene, writes its outputs, resumes, and its switches reach the config."""
 
+import dataclasses
 import json
 import math
 
@@ -257,3 +258,64 @@ def test_cycle_iterations_resume_past_train_iterations(tmp_path, monkeypatch):
     assert [c.name for c in again.method.pseudo_cams] == [c.name for c in straight.method.pseudo_cams]
     for k, v in straight.model.params.items():
         assert torch.allclose(again.model.params[k].detach(), v.detach(), atol=1e-6), k
+
+
+def test_a_step_from_a_recordings_copies_is_the_step_itself(tmp_path):
+    """What a CUDA graph of a full-method step holds (``FullMethod.graph_inputs`` / ``graph_bind``): the pseudo view
+    is picked once, before the step, from the host's generator; the loss computed from the recording's own copies
+    of the step's tensors (pose, image, depth, mask, the input's depth prior) is the loss of the step itself, bit
+    for bit, with its gradient; and the pick is the step's either way (a step that is not replayed uses it, so the
+    pseudo views follow the same order with or without the graphs)."""
+    from tiny_scene import small_full_trainer
+
+    _, tr = small_full_trainer(tmp_path, "--set", "full.reliable_weight=3.0")
+    tr.run()
+    fm = tr.method
+    with torch.no_grad():  # depth priors of the inputs and the pseudo views (the stereo's, in a run that densifies)
+        fm.input_depths = {c.name: tr.render(c).depth * 1.3 + 0.1 for c in tr.train_cams}
+        fm.pseudo_cams = [dataclasses.replace(c, depth=tr.render(c).depth * 0.9) for c in fm.pseudo_cams]
+    assert fm.pseudo_cams and fm.graph_safe()
+    cam = next(c for c in tr.train_cams if c.name in fm.input_depths)
+    key, tensors, cams = fm.graph_inputs(cam)
+    pick = fm._pick
+    assert cams == [pick] and pick in fm.pseudo_cams
+    assert {"prior", "pseudo_viewmat", "pseudo_K", "pseudo_image", "pseudo_depth", "reliable"} <= set(tensors)
+    assert fm.graph_inputs(cam)[0] == key and fm._pick is pick  # asked again: the same pick, nothing drawn
+    order = list(fm.pseudo_order)
+
+    def step_loss():
+        params = [p for p in tr.model.params.values()]
+        for p in params:
+            p.grad = None
+        tr.drop_gen.manual_seed(7)  # the pseudo view's render draws its dropout mask
+        out = tr.model.render(cam.viewmat, cam.K, cam.width, cam.height, background=tr.background_for(cam))
+        parts = {}
+        loss = fm.loss_terms(out, cam, out.image.sum() * 0, parts)
+        loss.backward()
+        return loss.detach(), {k: float(v) for k, v in parts.items()}, [p.grad.clone() for p in params]
+
+    fm.graph_bind({k: v.clone() for k, v in tensors.items()})
+    bound = step_loss()
+    assert fm._pick is pick  # a recording leaves the pick for the step
+    fm.graph_bind(None)
+    eager = step_loss()
+    assert fm._pick is None and fm.pseudo_order == order  # the step used the pick it was given
+    assert {"input_depth", "pseudo"} <= set(eager[1])
+    assert torch.equal(bound[0], eager[0]) and bound[1] == eager[1]
+    assert all(torch.equal(a, b) for a, b in zip(bound[2], eager[2]))
+    # the bound step reads the copies (a replay's inputs), not the views it was recorded from
+    for name in ("pseudo_image", "prior"):
+        fm._pick = pick
+        fm.graph_bind({k: (v.flip(-1) if k == name else v.clone()) for k, v in tensors.items()})  # (Pearson:
+        # blind to an affine change of the prior)
+        changed = step_loss()
+        fm.graph_bind(None)
+        assert not torch.equal(changed[0], eager[0]), name
+        assert (changed[1]["pseudo" if name == "pseudo_image" else "input_depth"]
+                != eager[1]["pseudo" if name == "pseudo_image" else "input_depth"]), name
+    # a pseudo view without a mask is another recording
+    fm._pick = dataclasses.replace(pick, mask=None) if pick.mask is not None else dataclasses.replace(
+        pick, mask=torch.ones(pick.height, pick.width, dtype=torch.bool))
+    assert fm.graph_inputs(cam)[0] != key
+    fm.graph_done()
+    assert fm._pick is None

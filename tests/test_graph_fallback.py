@@ -25,3 +25,28 @@ def test_a_step_that_cannot_be_recorded_leaves_the_run_without_graphs_and_its_dr
     assert tr.step == 60
     assert tr.graph is not None and tr.graph.off is not None and tr.graph.captures == 0
     assert all(bool(torch.isfinite(p).all()) for p in tr.model.params.values())
+
+
+def test_the_full_methods_cycles_replay_with_the_numbers_of_the_steps_without_graphs(tmp_path):
+    """The full method after its first cycle (one input and one pseudo view a step, the depth priors of the stereo, the
+    binocular term drawing its partner's move on the device, dropout): with the graphs the cycles' steps are
+    replays, and every parameter and recorded loss is the one of the run without them, bit for bit."""
+    from warpgs.data.stress import stress_scene
+    from warpgs.pipelines.sparse import build_parser, make_config, make_trainer
+
+    runs = {}
+    for graph in (False, True):
+        args = build_parser().parse_args([
+            "--method", "full", "--iterations", "60", "--device", "cuda", "--no-progress",
+            "--set", "pseudo.trajectory.n_frames=4", "--set", "pseudo.sampler.steps=3", "--set", "model.init_num=300",
+            "--set", "eval.lpips_weights=/nonexistent/alexnet.pth",
+            "--set", "regularizers.binocular.weight=1.0", "--set", "regularizers.binocular.start=0.0",
+            "--set", "regularizers.dropout.rate=0.2", "--set", f"guard.cuda_graph={str(graph).lower()}"])
+        cfg, _ = make_config(args)
+        tr = make_trainer(cfg, stress_scene("views_3", downscale=4), tmp_path / str(graph))
+        tr.run()
+        runs[graph] = ({k: v.detach().clone() for k, v in tr.model.params.items()}, list(tr.losses), tr.graph)
+    (pe, le, _), (pg, lg, g) = runs[False], runs[True]
+    assert g is not None and g.off is None and g.replays > 20, (g.off, g.replays)
+    assert le == lg
+    assert all(torch.equal(pe[k], pg[k]) for k in pe)

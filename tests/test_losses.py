@@ -67,6 +67,40 @@ def test_pearson_analytic_cases():
         losses.pearson_depth_loss(d, d[:-1])
 
 
+def test_masked_terms_ignore_what_lies_outside_the_mask():
+    """The masked L1 and Pearson terms sum over the whole image with the outside set to 0 (no host read): a NaN or
+    an Inf outside the mask changes neither the value nor the gradient, and under two pixels (Pearson) or none
+    (L1) the term is 0 with a finite, zero gradient."""
+    g = torch.Generator().manual_seed(1)
+    d = 1 + torch.rand(12, 16, generator=g)
+    prior = 2 + torch.rand(12, 16, generator=g)
+    mask = torch.rand(12, 16, generator=g) > 0.4
+    sel_x, sel_y = d[mask].double().numpy(), prior[mask].double().numpy()
+    bad = d.clone()
+    bad[~mask] = float("nan")
+    bad[0, 0] = float("inf") if not mask[0, 0] else bad[0, 0]
+    x = bad.clone().requires_grad_(True)
+    v = losses.pearson_depth_loss(x, prior, mask)
+    v.backward()
+    assert abs(float(v) - (1 - np.corrcoef(sel_x, sel_y)[0, 1])) < 1e-5  # numpy on the selected pixels
+    assert bool(torch.isfinite(x.grad).all()) and float(x.grad[~mask].abs().sum()) == 0.0
+    img, target = torch.rand(12, 16, 3, generator=g), torch.rand(12, 16, 3, generator=g)
+    want = (img - target).abs()[mask].mean()
+    noisy = img.clone()
+    noisy[~mask] = float("nan")
+    assert abs(float(losses.l1(noisy, target, mask)) - float(want)) < 1e-6
+    for few in (torch.zeros_like(mask), torch.zeros_like(mask).index_put_((torch.tensor([3]), torch.tensor([4])),
+                                                                          torch.tensor(True))):
+        x = d.clone().requires_grad_(True)
+        v = losses.pearson_depth_loss(x, prior, few)
+        v.backward()
+        assert float(v) == 0.0 and bool(torch.isfinite(x.grad).all()) and float(x.grad.abs().sum()) == 0.0
+    y = img.clone().requires_grad_(True)
+    v = losses.l1(y, target, torch.zeros_like(mask))
+    v.backward()
+    assert float(v) == 0.0 and float(y.grad.abs().sum()) == 0.0
+
+
 # ----------------------------------------------------------------------------------------------
 # LPIPS
 

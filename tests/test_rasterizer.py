@@ -482,6 +482,10 @@ def test_fixed_capacity_render_is_the_counted_one_bit_for_bit(device):
             assert torch.equal(getattr(out, k), getattr(base, k)), k
         for k, g in grads.items():
             assert torch.equal(g, base_grads[k]), k
+    # what each render needed, on the device: the count (a counted render has no such record)
+    assert base.needed is None and all(int(out.needed) == base.n_intersections for out, _ in results[1:])
+    short, _ = run_warp(scene, device, grad=False, sh_degree=2, isect_capacity=base.n_intersections // 3)
+    assert short.n_intersections == base.n_intersections // 3 and int(short.needed) == base.n_intersections
 
 
 @pytest.mark.parametrize("device", DEVICES)

@@ -82,10 +82,8 @@ def test_a_full_run_weighs_the_reliable_pixels_and_a_resumed_run_keeps_the_maps(
     cam = cams[0]
     out = tr.model.render(cam.viewmat, cam.K, cam.width, cam.height, background=tr.background_for(cam))
     with torch.no_grad():
-        fm.pseudo_reliable[cam.name] = torch.zeros_like(fm.pseudo_reliable[cam.name])
-        none_reliable = fm.pseudo_loss(out, cam)
-        fm.pseudo_reliable[cam.name] = torch.ones_like(fm.pseudo_reliable[cam.name])
-        all_reliable = fm.pseudo_loss(out, cam)
+        none_reliable = fm.pseudo_loss(out, cam, torch.zeros_like(fm.pseudo_reliable[cam.name]))
+        all_reliable = fm.pseudo_loss(out, cam, torch.ones_like(fm.pseudo_reliable[cam.name]))
         fm.settings = dataclasses.replace(fm.settings, reliable_weight=1.0)
         unweighted = fm.pseudo_loss(out, cam)
     assert torch.allclose(none_reliable, unweighted, rtol=1e-5)

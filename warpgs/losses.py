@@ -43,8 +43,9 @@ def l1(pred: torch.Tensor, target: torch.Tensor, mask: torch.Tensor | None = Non
     d = (pred - target).abs()
     if mask is None:
         return d.mean()
-    m = mask[..., None].expand_as(d) if mask.dim() == d.dim() - 1 else mask
-    return d[m].mean() if m.any() else d.sum() * 0
+    m = (mask.bool()[..., None].expand_as(d) if mask.dim() == d.dim() - 1 else mask.bool())
+    # a sum over the image with the rest at 0 rather than a boolean selection (a host read): ``pearson_depth_loss``
+    return torch.where(m, d, d.new_zeros(())).sum() / m.sum(dtype=d.dtype).clamp_min(1.0)
 
 
 def ssim(pred: torch.Tensor, target: torch.Tensor, window_size: int = 11, padding: str = "same") -> torch.Tensor:
@@ -106,7 +107,7 @@ def weighted_l1(pred: torch.Tensor, target: torch.Tensor, weight: torch.Tensor, 
         return d.mean()
     m = mask.to(d.dtype)[..., None]
     n = m.sum() * d.shape[-1]
-    return (d * m).sum() / n if n > 0 else d.sum() * 0
+    return (d * m).sum() / n.clamp_min(1.0)  # 0 without a pixel, and no host read (``pearson_depth_loss``)
 
 
 def weighted_dssim(pred: torch.Tensor, target: torch.Tensor, weight: torch.Tensor, window_size: int = 11
@@ -119,16 +120,22 @@ def weighted_dssim(pred: torch.Tensor, target: torch.Tensor, weight: torch.Tenso
 
 def pearson_depth_loss(depth: torch.Tensor, prior: torch.Tensor, mask: torch.Tensor | None = None,
                        eps: float = 1e-8) -> torch.Tensor:
-    """1 - Pearson correlation of ``depth`` and ``prior`` over ``mask`` (default: where prior > 0)."""
+    """1 - Pearson correlation of ``depth`` and ``prior`` over ``mask`` (default: where prior > 0); 0 over fewer
+    than two pixels. Sums over the whole image with the pixels outside the mask set to 0, not over the selected
+    pixels: no host read (a boolean selection waits for the device to know its size), so a CUDA graph can hold
+    it and the host runs ahead of the device (``warpgs.engine.graphstep``)."""
     if depth.shape != prior.shape:
         raise ValueError(f"pearson_depth_loss: depth {list(depth.shape)} and prior {list(prior.shape)} differ")
     m = (prior > 0) if mask is None else mask.bool()
-    x, y = depth[m].reshape(-1), prior[m].reshape(-1).to(depth.dtype)
-    if x.numel() < 2:
-        return depth.sum() * 0
-    x, y = x - x.mean(), y - y.mean()
+    zero = depth.new_zeros(())
+    n = m.sum(dtype=depth.dtype)
+    k = n.clamp_min(1.0)
+    x = torch.where(m, depth, zero)  # (where, not a product: a non-finite value outside the mask stays out)
+    y = torch.where(m, prior.to(depth.dtype), zero)
+    x = torch.where(m, x - x.sum() / k, zero)
+    y = torch.where(m, y - y.sum() / k, zero)
     corr = (x * y).sum() / (x.norm() * y.norm() + eps)
-    return 1.0 - corr
+    return torch.where(n >= 2, 1.0 - corr, zero)
 
 
 def scale_anisotropy_loss(log_scales: torch.Tensor, max_ratio: float) -> torch.Tensor:

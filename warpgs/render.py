@@ -56,6 +56,9 @@ class RenderOutput(NamedTuple):
     radii: torch.Tensor
     depths: torch.Tensor
     n_intersections: int
+    # with ``isect_capacity``: the intersections the render had (a device scalar, no host read), which a render
+    # that needed more than its capacity exceeds (it drew some Gaussians in fewer tiles); else None
+    needed: torch.Tensor | None = None
 
 
 def _grad_or_zeros(g: torch.Tensor | None, shape, device) -> torch.Tensor:
@@ -338,6 +341,7 @@ class _Composite(torch.autograd.Function):
         gauss_ids, keys, shift, total = _bin_gaussians(means2d, radii, depths, conics, opac_eff, colors, splats,
                                                        offsets, ranges, tiles_x, tiles_y, near, capacity, dev, stream)
         info.append(total)
+        info.append(offsets[-1] if capacity is not None and offsets.numel() else None)  # what it needed
         # the kernels' struct arguments as field tuples (kr.Tiles, kr.Image)
         tiles = (ranges, gauss_ids, splats, background.reshape(1, 3), width, height, tiles_x, alpha_max)
         image = (color.view(-1, 3), depth.view(-1), alpha.view(-1), last.view(-1))
@@ -554,26 +558,28 @@ def rasterize(
         means2d, conics, opac_eff, rgb, depths, background, radii, tiles_touched, width, height, alpha_max,
         deterministic, near_plane, isect_capacity, info, dev, stream
     )
-    total = info[0]
+    total, needed = info[0], info[1] if len(info) > 1 else None
     if backdrop is not None:
         image = image + (1.0 - alpha)[..., None] * backdrop.float()
-    return RenderOutput(image, depth, alpha, means2d, radii, depths, total)
+    return RenderOutput(image, depth, alpha, means2d, radii, depths, total, needed)
 
 
 def count_intersections(means, quats, scales, opacities, viewmat, K, width: int, height: int, *,
                         near_plane: float = 0.01, far_plane: float = 1e10, eps2d: float = 0.3,
-                        antialiased: bool = False) -> int:
+                        antialiased: bool = False, read: bool = True) -> int | torch.Tensor:
     """How many (Gaussian, tile) pairs ``rasterize`` of the same inputs (and the same keyword arguments) sorts: its
     ``n_intersections`` without ``isect_capacity``, from the projection alone and one host read. What a
-    fixed-capacity render (``isect_capacity``) must hold."""
+    fixed-capacity render (``isect_capacity``) must hold. ``read`` False: the count as a device scalar (int64),
+    not read (several counts read in one transfer)."""
     with torch.no_grad():
         means, quats, scales, opacities = (t.detach().float().contiguous() for t in (means, quats, scales, opacities))
         viewmat, K = (t.detach().float().contiguous() for t in (viewmat, K))
         if means.shape[0] == 0:
-            return 0
+            return 0 if read else torch.zeros((), dtype=torch.int64, device=means.device)
         tiles_touched = _project(means, quats, scales, opacities, viewmat, K, width, height, eps2d, near_plane,
                                  far_plane, antialiased, device_of(means), launch_stream(means))[5]
-        return int(tiles_touched.sum())
+        total = tiles_touched.sum(dtype=torch.int64)
+        return int(total) if read else total
 
 
 def means2d_grad_norm(out: RenderOutput, width: int, height: int) -> torch.Tensor:

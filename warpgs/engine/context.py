@@ -44,6 +44,12 @@ class Context:
         return self._trainer.step
 
     @property
+    def isect_capacity(self) -> int | None:
+        """The intersection capacity of the step being recorded as a CUDA graph (``warpgs.engine.graphstep``): every
+        render of the step uses fixed buffers of this size instead of reading its count; None otherwise."""
+        return self._trainer.isect_capacity
+
+    @property
     def total_steps(self) -> int:
         return self._trainer.total_steps
 

@@ -98,6 +98,9 @@ def run_metrics(trainer, ev: dict, train_ev: dict, fps: float) -> dict:
         metrics["hold_geometry"] = tr.held
     # the step growth stopped at, as the run resolved it (strategy.refine_stop_fraction; 0 when held)
     metrics["refine_stop_iter"] = tr.cfg.strategy.refine_stop_iter
+    if tr.graph is not None:  # train.cuda_graph: how many steps ran as replays (warpgs.engine.graphstep)
+        g = tr.graph
+        metrics["cuda_graph"] = {"recordings": g.captures, "replays": g.replays, "cut_short": g.cut, "off": g.off}
     if tr.stopped_early:
         metrics["stopped_early"] = tr.stopped_early
     if "lpips_missing" in ev:

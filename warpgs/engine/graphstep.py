@@ -17,22 +17,29 @@ background (copied into the graph's own tensors; a random colour behind an alpha
 image are made outside the graph, as the step without it makes them), the means' learning rate
 (``GroupedAdam.set_lr``), the guard's slot (``LossWindow.set_slot``), DropGaussian's rate
 (``Dropout.rate_tensors``). Dropout and opacity noise draw inside the graph from the trainer's
-``drop_gen``, registered with it (``register_generator_state``): each replay draws anew, the numbers the step
-without the graph would draw. The render uses buffers of a fixed capacity (``rasterize(isect_capacity=...)``);
-before each replay ``count_intersections`` reads the step's count (the one host read, which the step without
-the graph also makes; on opacities scaled by the largest factor dropout and noise can give,
+``drop_gen``, registered with it (``register_generator_state``), and the binocular term draws its partner's move
+from its own generator, registered too: each replay draws anew, the numbers the step without the graph would
+draw. The full method's pseudo view (``FullMethod.graph_inputs``) is picked on the host before the replay and its
+tensors (pose, image, masks, depth, far-field image; the input's depth prior) copied into the graph's own. The
+renders use buffers of a fixed capacity (``rasterize(isect_capacity=...)``): before each replay
+``count_intersections`` counts the input's and the pseudo view's intersections (one host read, as the step without
+the graph makes one per render; on opacities scaled by the largest factor dropout and noise can give,
 ``Regularizers.opacity_scale_bound``, since the screen box grows with the opacity) and a count above the capacity
-records the graph again with more room, so no step ever renders less than it would without the graph. The same
-kernels in the same order give the same numbers as the step without the graph, bit for bit (the GPU test in
-``bench/perf/graph_check.py`` checks it).
+records the graph again with more room, so neither ever renders less than it would without the graph. The
+binocular partner's pose is drawn on the device, so its count cannot be read first: it renders into the same
+capacity (1.5x the largest count); a render that needed more sits its term out for that step and is counted
+(``Binocular.overflows``), and the next recording gets twice the room. Otherwise the same kernels in the same order
+give the same numbers as the step without the graph, bit for bit (``bench/perf/graph_check.py`` checks it on a
+GPU).
 
 The graph is recorded again whenever what it holds changed: the Gaussians (growth, pruning, a reset, a
 rollback: other tensors), the optimiser's state or its other learning rates, the densification statistics,
-the guard's window, the image size, the SH degree in use, the kind of background. It covers only steps with
-nothing the graph cannot hold: no densification at that step (``Trainer.densify_only_updates_state``), no
-Pearson depth term (its mask selects pixels on the host), no co-regularised pair, and a method whose loss adds
-nothing (the baseline; the full method before its first cycle). A recording that fails turns the graphs off for
-the run, with one line saying why; training goes on without them.
+the guard's window, the image size, the SH degree in use, the kind of background, whether the binocular term is
+on, which of the pseudo view's tensors exist. It covers only steps with nothing the graph cannot hold: no
+densification at that step (``Trainer.densify_only_updates_state``), no Pearson depth prior of the baseline's
+``loss.depth_prior: scene``, no co-regularised pair, no path consistency, no LPIPS on the pseudo views
+(``FullMethod.graph_safe``). A recording that fails turns the graphs off for the run, with one line saying why;
+training goes on without them.
 """
 
 from __future__ import annotations
@@ -58,6 +65,9 @@ class StepGraph:
         self.stream = torch.cuda.Stream(trainer.device)
         self.inputs: dict[str, torch.Tensor] = {}
         self.background: torch.Tensor | None = None  # what the recorded step renders over
+        self.extra: dict[str, torch.Tensor] = {}  # the method's inputs of the step (``Method.graph_inputs``)
+        self.headroom = 1.5  # capacity / the largest count of the step's views: room for a pose drawn on the device
+        self.cut = 0  # renders cut short by the capacity so far (``Regularizers.graph_counters``)
 
     # ------------------------------------------------------------------------------------------
 
@@ -67,8 +77,9 @@ class StepGraph:
         lc = tr.cfg.loss
         if self.off is not None or tr.pair is not None:
             return False
-        if self.draws(step) and not hasattr(torch.cuda.CUDAGraph, "register_generator_state"):
-            return False  # a torch whose graphs cannot hold draws from the trainer's own generator
+        if (self.draws(step) or tr.regularizers.graph_generators()) and not hasattr(torch.cuda.CUDAGraph,
+                                                                                     "register_generator_state"):
+            return False  # a torch whose graphs cannot hold draws from the trainer's own generators
         if lc.depth_weight > 0 and lc.depth_prior == "scene" and cam.depth is not None:
             return False
         if not tr.regularizers.graph_safe(tr.context, step):
@@ -90,20 +101,29 @@ class StepGraph:
         tr = self.tr
         model = tr.model
         window = tr.stepguard.loss_window(step)
+        # the method's inputs of the step (its pseudo view, picked now) and the cameras it renders besides ``cam``
+        extra_key, extra, extra_cams = tr.method.graph_inputs(cam)
         bound = tr.regularizers.opacity_scale_bound(tr.context, step)  # dropout's and the noise's largest factor: the count bounds the render's
-        count = count_intersections(model.means, model.quats, model.scales,
-                                    model.opacities if bound is None else model.opacities * bound,
-                                    cam.viewmat, cam.K, cam.width, cam.height)
+        opac = model.opacities if bound is None else model.opacities * bound
+        counts = [count_intersections(model.means, model.quats, model.scales, opac, c.viewmat, c.K, c.width, c.height,
+                                      read=False) for c in [cam, *extra_cams]]
+        counters = tr.regularizers.graph_counters()  # renders cut short by the capacity (the moved binocular one)
+        values = torch.stack([c.reshape(()).to(torch.int64) for c in counts + counters]).tolist()  # one host read
+        count = max(values[:len(counts)])
+        cut = sum(values[len(counts):])
+        if cut > self.cut:  # a render of a pose drawn on the device needed more: record with more room
+            self.cut, self.headroom = cut, self.headroom * 2
+            self.graph = None
         # the target and background of the step (a random colour behind an alpha channel, the far field), as
         # the step without the graph makes them, outside the graph
         cam, bg = tr.with_training_background(cam, tr.split_gen)
         dropout = tr.regularizers.get("dropout")
         if dropout is not None and dropout.rate_at(tr.context, step) > 0:
             dropout.rate_tensors(tr.context, step)
-        key = self._key(cam, bg)
+        key = self._key(cam, bg) + (extra_key,)
         if self.graph is None or key != self.key or count > self.capacity:
-            capacity = max(count + count // 2, 1024)  # room for the other views and the next steps' growth
-            if not self._capture(cam, bg, capacity):
+            capacity = max(int(count * self.headroom), 1024)  # room for the other views and the next steps' growth
+            if not self._capture(cam, bg, capacity, extra, extra_key):
                 return None
         inp = self.inputs
         inp["viewmat"].copy_(cam.viewmat)
@@ -113,11 +133,20 @@ class StepGraph:
             inp["alpha"].copy_(cam.alpha)
         if "bg" in inp:
             inp["bg"].copy_(bg)
+        for name, t in extra.items():
+            self.extra[name].copy_(t)
         window.set_slot(step)
         self.graph.replay()
         self.replays += 1
+        tr.method.graph_done()
         tr.stepguard.pending.append((step, tr.guard.stat_start, self.record.clone()))
         return {"cloned": 0, "split": 0, "pruned": 0, "reset": 0}
+
+    def generators(self) -> list[tuple[object, str]]:
+        """The device generators the step draws from, as (holder, attribute): the trainer's ``drop_gen`` when it
+        draws (``draws``), then the regularisers' own (the binocular partner's move)."""
+        tr = self.tr
+        return ([(tr, "drop_gen")] if self.draws(tr.step) else []) + tr.regularizers.graph_generators()
 
     # ------------------------------------------------------------------------------------------
 
@@ -145,9 +174,10 @@ class StepGraph:
                 tr.step < sc.refine_stop_iter, tr.regularizers.graph_key(tr.context, tr.step), tr.guard.cfg.explode_factor,
                 bg is tr.background, tuple(bg.shape), self.draws(tr.step))
 
-    def _capture(self, cam, bg, capacity: int) -> bool:
+    def _capture(self, cam, bg, capacity: int, extra: dict, extra_key: tuple) -> bool:
         """Records the step (a warm-up of its forward and backward on the graph's stream first, then the capture);
-        False, with the graphs off for the run, when that fails."""
+        False, with the graphs off for the run, when that fails. ``extra``: the method's inputs of the step
+        (``Method.graph_inputs``), copied into the recording's own tensors."""
         tr = self.tr
         self.graph = self.record = None
         self.inputs = inp = {"viewmat": cam.viewmat.clone(), "K": cam.K.clone(), "image": cam.image.clone()}
@@ -155,14 +185,17 @@ class StepGraph:
             inp["alpha"] = cam.alpha.clone()
         if bg is not tr.background:  # a random colour or the far field's image: copied in before each replay
             inp["bg"] = bg.clone()
+        self.extra = {name: t.clone() for name, t in extra.items()}
         self.background = inp.get("bg", tr.background)
         static = dataclasses.replace(cam, viewmat=inp["viewmat"], K=inp["K"], image=inp["image"],
                                      alpha=inp.get("alpha"), depth=None, mask=None)
-        draws = self.draws(tr.step)
+        gens = self.generators()
         drawn = None
+        tr.method.graph_bind(self.extra)
         try:
             self.stream.wait_stream(torch.cuda.current_stream(tr.device))
-            drawn = tr.drop_gen.get_state()  # the warm-up's draws are given back: the replays draw what eager steps would
+            # the warm-up's draws are given back: the replays draw what eager steps would
+            drawn = [getattr(holder, name).get_state() for holder, name in gens]
             with torch.cuda.stream(self.stream):  # the warm-up: lazy set-ups happen outside the capture
                 out, _, _ = tr.forward_backward(tr.step, static, self.background, capacity)
                 means2d_grad_norm(out, static.width, static.height)  # its constant is made here, not in the capture
@@ -170,12 +203,13 @@ class StepGraph:
                     opt.zero_grad(set_to_none=True)
                 del out
             torch.cuda.current_stream(tr.device).wait_stream(self.stream)
-            tr.drop_gen.set_state(drawn)
+            for (holder, name), state in zip(gens, drawn):
+                getattr(holder, name).set_state(state)
             # capture_begin / capture_end rather than torch.cuda.graph, whose entry collects Python's garbage and
             # empties the allocator's cache each time (tens of milliseconds a recording)
             graph = torch.cuda.CUDAGraph()
-            if draws:
-                graph.register_generator_state(tr.drop_gen)
+            for holder, name in gens:
+                graph.register_generator_state(getattr(holder, name))
             with torch.cuda.stream(self.stream):
                 graph.capture_begin()
                 try:
@@ -188,17 +222,20 @@ class StepGraph:
             self.graph = self.record = None
             for opt in tr.optimizers:
                 opt.zero_grad(set_to_none=True)
-            if draws and drawn is not None:
+            if drawn is not None:
                 # a generator registered with a capture that failed can refuse the eager steps' draws ("Offset
-                # increment outside graph capture"): the run goes on with a fresh one at the state this step starts
-                # from, so it draws what it would have
-                fresh = torch.Generator(device=tr.device)
-                fresh.set_state(drawn)
-                tr.drop_gen = fresh
+                # increment outside graph capture"): the run goes on with fresh ones at the states this step starts
+                # from, so they draw what they would have
+                for (holder, name), state in zip(gens, drawn):
+                    fresh = torch.Generator(device=tr.device)
+                    fresh.set_state(state)
+                    setattr(holder, name, fresh)
             tr.log(f"warpgs: CUDA graphs off for this run (train.cuda_graph): recording the step failed: {self.off}")
             return False
+        finally:
+            tr.method.graph_bind(None)
         self.graph, self.capacity = graph, capacity
-        self.key = self._key(cam, bg)  # as it is now: the warm-up may have grown the backward's zeros
+        self.key = self._key(cam, bg) + (extra_key,)  # as it is now: the warm-up may have grown the backward's zeros
         self.captures += 1
         return True
 

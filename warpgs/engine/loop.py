@@ -154,6 +154,7 @@ class Trainer:
         self.method.attach(self)
         # train.cuda_graph: deferred steps replayed as one CUDA graph (warpgs/engine/graphstep.py)
         self.graph = None
+        self.isect_capacity: int | None = None  # the fixed capacity of the renders of a step being recorded
         if self.device.type == "cuda" and cfg.guard.cuda_graph and cfg.guard.guard_kernels:
             from warpgs.engine.graphstep import StepGraph
 
@@ -287,14 +288,18 @@ class Trainer:
         (``rasterize``; a CUDA graph of the step)."""
         # no input checks in the rasterizer (each is a host read): the guard checks the loss, the gradients and
         # the parameters, and a step with non-finite ones makes no update
-        out = self.model.render(cam.viewmat, cam.K, cam.width, cam.height, background=bg,
-                                opacity_scale=self.opacity_scale(step), check_finite=False,
-                                isect_capacity=isect_capacity)
-        loss, parts = self.compute_loss(out, cam)
-        loss = self.regularizers.step_terms(self.context, step, out, cam, bg, loss, parts)
-        if self.pair is not None:  # its partner on the same view, and the two co-regularised (one backward for both)
-            loss = loss + self.pair.loss(step, cam, bg, parts)
-        loss.backward()
+        self.isect_capacity = isect_capacity  # the step's other renders (extra views, regularisers) use it too
+        try:
+            out = self.model.render(cam.viewmat, cam.K, cam.width, cam.height, background=bg,
+                                    opacity_scale=self.opacity_scale(step), check_finite=False,
+                                    isect_capacity=isect_capacity)
+            loss, parts = self.compute_loss(out, cam)
+            loss = self.regularizers.step_terms(self.context, step, out, cam, bg, loss, parts)
+            if self.pair is not None:  # its partner on the same view, the two co-regularised (one backward for both)
+                loss = loss + self.pair.loss(step, cam, bg, parts)
+            loss.backward()
+        finally:
+            self.isect_capacity = None
         # the guard judges the input views' loss: extra views (the full method's pseudo views) change what is
         # optimised and can be far off at first without anything diverging
         return out, loss.detach(), parts.get("inputs", loss).detach()

@@ -107,6 +107,8 @@ class FullMethod(Method):
         self.pseudo_reliable: dict[str, torch.Tensor] = {}  # full.reliable_weight: each pseudo view's U < delta
         self.pseudo_order: list[int] = []
         self.pseudo_rng = np.random.default_rng(cfg.train.seed + 3)
+        self._pick = None  # the pseudo view of the step under way, once picked (``step_views``)
+        self._bound = None  # the views a step being recorded as a CUDA graph reads (``graph_bind``)
         self.cycles_done = 0
         self.history: list[dict] = []  # per cycle: test PSNR/SSIM, Gaussians, stage times
         self.input_depths: dict[str, torch.Tensor] = {}  # plane-sweep depth of the inputs (0: unknown)
@@ -133,12 +135,13 @@ class FullMethod(Method):
             self.pseudo_order = self.pseudo_rng.permutation(len(self.pseudo_cams)).tolist()
         return self.pseudo_order.pop()
 
-    def pseudo_loss(self, out, cam) -> torch.Tensor:
+    def pseudo_loss(self, out, cam, reliable: torch.Tensor | None = None) -> torch.Tensor:
+        """The loss of the render ``out`` of the pseudo view ``cam``; ``reliable``: its U < delta (for
+        ``full.reliable_weight``)."""
         s = self.settings
         m = cam.mask.to(out.image.dtype)[..., None] if cam.mask is not None else None
         pred = out.image * m if m is not None else out.image
         target = cam.image * m if m is not None else cam.image
-        reliable = self.pseudo_reliable.get(cam.name) if s.reliable_weight != 1.0 else None
         # reliable pixels x reliable_weight, the rest x 1; a mask keeps the unweighted terms' normalisation
         weight = None if reliable is None else torch.where(reliable, s.reliable_weight, 1.0).to(out.image.dtype)
         if self._lpips is not None:
@@ -154,21 +157,42 @@ class FullMethod(Method):
             loss = loss + s.depth_weight * losses.pearson_depth_loss(out.depth, cam.depth, cam.depth > 0)
         return loss
 
+    def step_views(self, cam) -> dict:
+        """What the step on the input ``cam`` reads besides it: ``prior`` (its depth prior) and, once pseudo views
+        exist, ``pseudo`` (the one trained on, picked here from the host's generator), ``pseudo_bg`` (what it sees
+        behind the Gaussians) and ``reliable`` (its U < delta, for ``full.reliable_weight``); each None where it has
+        none. A step recorded as a CUDA graph reads the recording's copies of them (``graph_bind``)."""
+        if self._bound is not None:
+            return self._bound
+        s, tr = self.settings, self.trainer
+        views = {"prior": self.input_depths.get(cam.name) if s.input_depth_weight > 0 else None,
+                 "pseudo": None, "pseudo_bg": None, "reliable": None}
+        if self.pseudo_cams and s.pseudo_weight > 0:
+            if self._pick is None:
+                self._pick = self.pseudo_cams[self.next_pseudo()]
+            pc = views["pseudo"] = self._pick
+            views["pseudo_bg"] = tr.background_for(pc)
+            views["reliable"] = self.pseudo_reliable.get(pc.name) if s.reliable_weight != 1.0 else None
+        return views
+
     def loss_terms(self, out, cam, loss, parts):
         """The inputs' depth prior (from the cycles' stereo) and one pseudo view. The divergence guard judges
         ``parts["inputs"]`` without them: the prior appears with the first cycle, and its Pearson term (about 1
         at first) made the input loss jump 30x there and stopped a run."""
         tr = self.trainer
-        prior = self.input_depths.get(cam.name)
-        if prior is not None and self.settings.input_depth_weight > 0:
+        views = self.step_views(cam)
+        if self._bound is None:  # (a recording's warm-up and capture keep the pick for the step itself)
+            self._pick = None  # used by this step
+        prior = views["prior"]
+        if prior is not None:
             dl = losses.pearson_depth_loss(out.depth, prior, prior > 0)
             loss = loss + self.settings.input_depth_weight * dl
             parts["input_depth"] = dl
-        if self.pseudo_cams and self.settings.pseudo_weight > 0:
-            pc = self.pseudo_cams[self.next_pseudo()]
-            po = tr.model.render(pc.viewmat, pc.K, pc.width, pc.height, background=tr.background_for(pc),
-                                 opacity_scale=tr.opacity_scale(tr.step))
-            pl = self.pseudo_loss(po, pc)
+        pc = views["pseudo"]
+        if pc is not None:
+            po = tr.model.render(pc.viewmat, pc.K, pc.width, pc.height, background=views["pseudo_bg"],
+                                 opacity_scale=tr.opacity_scale(tr.step), isect_capacity=tr.isect_capacity)
+            pl = self.pseudo_loss(po, pc, views["reliable"])
             loss = loss + self.settings.pseudo_weight * pl
             parts["pseudo"] = pl
             if self.settings.pseudo_depth_smooth > 0:  # where no input constrains the depth: flat between edges
@@ -184,10 +208,56 @@ class FullMethod(Method):
                     parts["path_consistency"] = pcl
         return loss
 
+    # a step recorded as a CUDA graph (warpgs.engine.graphstep)
+
     def graph_safe(self) -> bool:
-        """Before the first cycle ``loss_terms`` adds nothing; after it, a pseudo view's render and masked
-        depth terms, which a CUDA graph cannot hold."""
-        return not self.pseudo_cams and not self.input_depths
+        """Before the first cycle ``loss_terms`` adds nothing. After it, a graph holds the pseudo view's render and
+        loss (the view picked and its tensors copied in before each replay, ``graph_inputs``), except LPIPS (a
+        network, not checked in a graph) and the path consistency (its two inputs depend on the view picked)."""
+        if not self.pseudo_cams and not self.input_depths:
+            return True
+        return self._lpips is None and self.settings.path_consistency <= 0
+
+    def graph_inputs(self, cam) -> tuple[tuple, dict[str, torch.Tensor], list]:
+        """For the step on ``cam`` as a replay: (what the recording depends on, the tensors copied into its own
+        before the replay, the extra cameras it renders, whose intersection counts bound its capacity). Picks the
+        step's pseudo view; the step uses that pick, replayed or not (``graph_done`` after a replay)."""
+        views = self.step_views(cam)
+        tensors, key = {}, []
+        pc = views["pseudo"]
+        if pc is not None:
+            views = dict(views, pseudo_viewmat=pc.viewmat, pseudo_K=pc.K, pseudo_image=pc.image,
+                         pseudo_mask=pc.mask, pseudo_depth=pc.depth)
+            key.append((pc.width, pc.height, views["pseudo_bg"] is self.trainer.background))
+            if views["pseudo_bg"] is self.trainer.background:  # the colour the recording reads where it is
+                views["pseudo_bg"] = None
+        for name in ("prior", "pseudo_viewmat", "pseudo_K", "pseudo_image", "pseudo_mask", "pseudo_depth",
+                     "pseudo_bg", "reliable"):
+            t = views.get(name)
+            key.append(None if t is None else (name, tuple(t.shape), t.dtype))
+            if t is not None:
+                tensors[name] = t
+        return tuple(key), tensors, ([] if pc is None else [pc])
+
+    def graph_bind(self, tensors: dict[str, torch.Tensor] | None) -> None:
+        """While a step is recorded: ``step_views`` gives the recording's own tensors (``graph_inputs``' names);
+        None: the views are picked again."""
+        if tensors is None:
+            self._bound = None
+            return
+        pc = self._pick
+        bound = {"prior": tensors.get("prior"), "reliable": tensors.get("reliable"), "pseudo": None,
+                 "pseudo_bg": None}
+        if pc is not None and "pseudo_viewmat" in tensors:
+            bound["pseudo"] = dataclasses.replace(pc, viewmat=tensors["pseudo_viewmat"], K=tensors["pseudo_K"],
+                                                  image=tensors["pseudo_image"], mask=tensors.get("pseudo_mask"),
+                                                  depth=tensors.get("pseudo_depth"))
+            bound["pseudo_bg"] = tensors.get("pseudo_bg", self.trainer.background)
+        self._bound = bound
+
+    def graph_done(self) -> None:
+        """A replay made the step: its pick is used."""
+        self._pick = None
 
     def extra_views(self) -> list:
         """This cycle's pseudo views."""

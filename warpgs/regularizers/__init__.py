@@ -106,6 +106,12 @@ class Regularizers:
     def graph_tensors(self) -> list[torch.Tensor]:
         return [t for reg in self.items.values() for t in reg.graph_tensors()]
 
+    def graph_generators(self) -> list[tuple[object, str]]:
+        return [g for reg in self.items.values() for g in reg.graph_generators()]
+
+    def graph_counters(self) -> list[torch.Tensor]:
+        return [c for reg in self.items.values() for c in reg.graph_counters()]
+
     def state_dict(self) -> dict:
         st = {}
         for reg in self.items.values():

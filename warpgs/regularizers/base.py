@@ -53,7 +53,17 @@ class Regularizer:
         return None
 
     def graph_tensors(self) -> list[torch.Tensor]:
-        """The tensors a recorded step reads that this regulariser fills between replays."""
+        """The tensors a recorded step reads or writes that live outside it (filled between replays, or counters)."""
+        return []
+
+    def graph_counters(self) -> list[torch.Tensor]:
+        """Device counters (int64 scalars) of the renders a recorded step's fixed capacity cut short: a recording
+        whose counters grew is made again with more room."""
+        return []
+
+    def graph_generators(self) -> list[tuple[object, str]]:
+        """The generators its step terms draw from on the device, as (holder, attribute): a recorded step
+        registers them, so each replay draws anew what the step without the graph would draw."""
         return []
 
     # ---- its share of the training state (the ``progress`` part)

@@ -185,6 +185,8 @@ class Binocular(Regularizer):
         self.gen = torch.Generator(device=device)
         self.gen.manual_seed(int(seed) + 17)
         self.device = device
+        # steps whose moved render needed more than a CUDA graph's fixed capacity (``loss``)
+        self.overflows = torch.zeros((), dtype=torch.int64, device=device)
         # partner "path": per input view (name), the poses of the capture path next to it
         # (warpgs.strategy.clearance.path_partners); a view without any keeps the shifted partner
         self.path = {k: v.to(device=device, dtype=torch.float32) for k, v in (path or {}).items()}
@@ -192,9 +194,14 @@ class Binocular(Regularizer):
     def active(self, step: int) -> bool:
         return self.weight > 0 and step >= self.start
 
-    def loss(self, model, out, cam, bg, parts: dict) -> torch.Tensor:
+    def loss(self, model, out, cam, bg, parts: dict, capacity: int | None = None) -> torch.Tensor:
         """weight x (masked L1 of the warped moved render against ``cam.image`` + smooth x disparity smoothness)
-        for the input render ``out`` of ``cam`` (over ``bg``); recorded in ``parts`` as ``binocular``."""
+        for the input render ``out`` of ``cam`` (over ``bg``); recorded in ``parts`` as ``binocular``.
+
+        ``capacity``: the moved render's fixed intersection buffers (a step recorded as a CUDA graph,
+        ``warpgs.engine.graphstep``; its pose is drawn on the device, so its count cannot be read before the
+        step). A render that needed more is cut short: the term sits that step out (0) and ``overflows`` counts it,
+        so the next recording makes more room."""
         depth = out.depth
         fx = cam.K[0, 0]
         seen = depth.detach() > MIN_DEPTH
@@ -213,12 +220,13 @@ class Binocular(Regularizer):
                 vm[:2, 3] = vm[:2, 3] - t * torch.cat([torch.cos(a), torch.sin(a)])
         if vm is not None:
             rel = vm @ rigid_inverse(cam.viewmat.float())
-            moved = model.render(vm, cam.K, cam.width, cam.height, background=bg, check_finite=False)
+            moved = model.render(vm, cam.K, cam.width, cam.height, background=bg, check_finite=False,
+                                 isect_capacity=capacity)
             warped, weight = pose_warp(moved.image, depth, rel, cam.K)
             ft = (fx * rel[:3, 3].norm()).reshape(1)  # the disparity of depth 1, for the smoothness below
         else:
             moved = model.render(moved_viewmat(cam.viewmat, t), cam.K, cam.width, cam.height, background=bg,
-                                 check_finite=False)
+                                 check_finite=False, isect_capacity=capacity)
             ft = (fx * t).reshape(1)
             warped, weight = shift_warp(moved.image, depth, ft)
         diff = (warped - cam.image).abs() * weight[..., None]
@@ -226,15 +234,26 @@ class Binocular(Regularizer):
         if self.smooth > 0:
             disparity = torch.where(seen, ft.abs() / depth.clamp_min(MIN_DEPTH), torch.zeros_like(depth)) * weight
             term = term + self.smooth * losses.edge_aware_smoothness(disparity, cam.image, normalise=False)
+        if moved.needed is not None:  # a fixed-capacity render: one cut short contributes nothing
+            over = moved.needed > moved.n_intersections
+            self.overflows += over
+            term = torch.where(over, term.new_zeros(()), term)
         parts["binocular"] = term.detach()
         return self.weight * term
 
-    # the Regularizer hooks: the term a step adds, not held by a CUDA graph (a second render of a pose drawn anew)
+    # the Regularizer hooks: the term a step adds; in a CUDA graph, its draws come from its registered generator
+    # and its render uses the step's fixed capacity
     def step_term(self, ctx, step: int, out, cam, bg, parts: dict) -> torch.Tensor | None:
-        return self.loss(ctx.model, out, cam, bg, parts) if self.active(step) else None
+        return self.loss(ctx.model, out, cam, bg, parts, ctx.isect_capacity) if self.active(step) else None
 
-    def graph_safe(self, ctx, step: int) -> bool:
-        return not self.active(step)
+    def graph_key(self, ctx, step: int):
+        return self.active(step)
+
+    def graph_counters(self) -> list[torch.Tensor]:
+        return [self.overflows]
+
+    def graph_generators(self) -> list[tuple[object, str]]:
+        return [(self, "gen")]
 
     def state_dict(self) -> dict:
         return {"binocular_gen": self.gen.get_state()}
