@@ -86,8 +86,10 @@ def test_plain_problems_names_what_is_not_the_recipe():
     for k, v in strategy.items():
         setattr(cfg.strategy, k, v)
     cfg.strategy.max_gaussians = 0
+    cfg.strategy.reset_opacity = False  # as gsplat 1.5.3 (its reset test is never true)
+    cfg.model.alpha_max = 0.999  # its kernels' cap
     assert rg.plain_problems(Trainer(cfg, make_scene()), strategy) == []
-    bad = tiny_config(20)  # its budget and thresholds are the tests', not gsplat's
+    bad = tiny_config(20)  # its budget and thresholds are the tests', not gsplat's; 3D-GS's reset and alpha cap
     bad.regularizers.dropout.rate = 0.2
     bad.regularizers.opacity_decay.rate = 0.005
     bad.train.hold_geometry = "on"
@@ -96,6 +98,7 @@ def test_plain_problems_names_what_is_not_the_recipe():
     text = "; ".join(problems)
     assert "dropout" in text and "opacity_decay" in text and "geometry held" in text
     assert "strategy.refine_start_iter" in text and "strategy.max_gaussians" in text and "depth" in text
+    assert "reset_opacity" in text and "alpha capped at 0.99" in text
 
 
 @pytest.mark.skipif(not (SHARED / "llff_fern").is_dir(), reason=f"shared data not found at {SHARED}")

@@ -200,6 +200,32 @@ def test_quat_to_rotmat_is_a_rotation(q):
     assert torch.allclose(R[:, 0], vx, atol=1e-6)
 
 
+def test_without_the_opacity_reset_the_large_are_still_pruned_after_reset_every(monkeypatch):
+    """``reset_opacity: false`` (gsplat 1.5.3's DefaultStrategy, whose reset test is never true): no reset at
+    ``reset_every``, the opacities and their Adam moments untouched there, and the pruning of the too large
+    still starts after it, at the same refinement steps."""
+    for reset in (True, False):
+        s = DefaultStrategy(refine_start_iter=2, refine_every=2, reset_every=4, refine_stop_iter=7, grow_grad2d=1e9,
+                            prune_opa=0.001, prune_scale3d=0.1, reset_opacity=reset)
+        m = _model([0.05] * 5 + [0.5], [0.5] * 6)
+        opt = _with_adam_state(m)
+        st = s.initialize_state(len(m), "cpu")
+        V, K = torch.eye(4), torch.tensor([[30.0, 0, 16], [0, 30.0, 16], [0, 0, 1]])
+        events = []
+        for step in range(9):
+            out = m.render(V, K, 32, 32)
+            out.image.sum().backward()
+            before = m.opacities.detach().clone()
+            info = s.step_post_backward(m, opt, st, step, out, 32, 32, 1.0)
+            events.append((step, info["reset"], info["pruned"]))
+            if step == 4 and not reset:
+                assert torch.equal(m.opacities, before)  # nothing clamped
+                assert bool((opt.state[m.params["opacities"]]["exp_avg"] != 0).any())
+            assert s.only_updates_state(step) == (not (info["reset"] or step in (4, 6)))
+        assert [e for e, r, _ in events if r] == ([4] if reset else [])
+        assert [e for e, _, p in events if p] == [6] and len(m) == 5  # the large one, after reset_every
+
+
 @pytest.mark.parametrize("pause", [0, 3])
 def test_only_updates_state_is_what_step_post_backward_does(monkeypatch, pause):
     """``only_updates_state(step)`` (whether a CUDA graph may hold the step's densification) is true exactly at

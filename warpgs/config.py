@@ -68,10 +68,12 @@ class ModelConfig:
     init_opacity: float = 0.1
     init_scale: float = 1.0  # x the 3-nearest-neighbour distance
     drop_invalid: bool = False  # init ply: drop points with non-finite values (one warning) instead of refusing the file
+    alpha_max: float = 0.99  # the rasterizer's cap on one Gaussian's alpha at a pixel (3D-GS's 0.99; gsplat's kernels
+    #   cap at 0.999): every render of the model, training and evaluation
 
     LIMITS = {"sh_degree": "[0, 3]", "init": "{sfm, stereo, sfm+stereo, box, hull, frustum, points, ply}",
               "init_num": ">= 1", "init_random": ">= 0", "init_fill": ">= 0", "init_depth": "> 0", "init_opacity": "(0, 1)",
-              "init_scale": "> 0"}
+              "init_scale": "> 0", "alpha_max": "(0, 1)"}
 
 
 @dataclass

@@ -68,6 +68,8 @@ class GaussianModel(nn.Module):
     """3D Gaussians with spherical-harmonic colour. Build with ``from_points``, ``random_box``,
     ``random_frustum`` or ``load_ply``; render with ``render``; save with ``save_ply``."""
 
+    alpha_max = 0.99  # the rasterizer's alpha cap in ``render`` (``model.alpha_max``: the trainer sets its model's)
+
     def __init__(self, means, quats, scales, opacities, sh0, shN, max_sh_degree: int = 3):
         super().__init__()
         if shN.shape[1] != num_sh_coeffs(max_sh_degree) - 1:
@@ -274,6 +276,7 @@ class GaussianModel(nn.Module):
 
         deg = self.active_sh_degree if sh_degree is None else min(sh_degree, self.max_sh_degree)
         opac = self.opacities if opacity_scale is None else self.opacities * opacity_scale
+        kwargs.setdefault("alpha_max", self.alpha_max)
         return rasterize(self.means, self.quats, self.scales, opac, self.sh, viewmat, K, width, height,
                          sh_degree=deg, background=background, **kwargs)
 

@@ -100,7 +100,11 @@ RECIPE = {"sh_degree": 3, "sh_degree_interval": 1000, "init_opa": 0.1, "init_sca
           "means_lr": 1.6e-4, "means_lr_final_factor": 0.01, "scales_lr": 5e-3, "quats_lr": 1e-3,
           "opacities_lr": 5e-2, "sh0_lr": 2.5e-3, "shN_lr": 2.5e-3 / 20, "adam_eps": 1e-15, "batch_size": 1,
           "packed": False, "absgrad": False, "rasterize_mode": "classic", "near_plane": 0.01, "far_plane": 1e10,
-          "random_bkgd": False, "seed": 42}
+          "random_bkgd": False, "seed": 42,
+          # not Config fields, what the package does: its kernels cap a Gaussian's alpha at 0.999, and its
+          # DefaultStrategy never resets the opacities (`step % reset_every == 0 & step > 0` parses as a chained
+          # comparison ending in `0 > 0`; gsplat PR #776), while it prunes the too large after reset_every
+          "alpha_max": 0.999, "reset_opacity": False}
 
 # gsplat 1.5.3 gsplat/strategy/default.py: DefaultStrategy's dataclass defaults (the keys warpgs's strategy shares)
 GSPLAT_STRATEGY = {"prune_opa": 0.005, "grow_grad2d": 0.0002, "grow_scale3d": 0.01, "grow_scale2d": 0.05,
@@ -130,6 +134,7 @@ def recipe_overrides(strategy: dict, scene_scale: float | None = None) -> list[s
     r = RECIPE
     sets = {
         "model.sh_degree": r["sh_degree"], "model.init_opacity": r["init_opa"], "model.init_scale": r["init_scale"],
+        "model.alpha_max": r["alpha_max"], "strategy.reset_opacity": str(r["reset_opacity"]).lower(),
         "train.sh_degree_interval": r["sh_degree_interval"],
         "optim.means_lr": r["means_lr"], "optim.means_lr_final": r["means_lr"] * r["means_lr_final_factor"],
         "optim.means_lr_decay_steps": "null", "optim.scales_lr": r["scales_lr"], "optim.quats_lr": r["quats_lr"],
@@ -213,6 +218,8 @@ def plain_problems(tr, strategy: dict) -> list[str]:
         out.append(f"loss {lc.l1_weight} L1 + {lc.ssim_weight} D-SSIM")
     if lc.depth_weight or lc.alpha_weight:
         out.append("a depth or alpha term")
+    if tr.model.alpha_max != RECIPE["alpha_max"]:
+        out.append(f"alpha capped at {tr.model.alpha_max} (gsplat: {RECIPE['alpha_max']})")
     if tr.method.name != "baseline":
         out.append(f"method {tr.method.name}")
     s = tr.strategy
@@ -220,6 +227,8 @@ def plain_problems(tr, strategy: dict) -> list[str]:
         out.append(f"strategy {type(s).__name__}")
     else:
         out += [f"strategy.{k}={getattr(s, k)} (gsplat: {v})" for k, v in strategy.items() if getattr(s, k) != v]
+        if s.reset_opacity != RECIPE["reset_opacity"]:
+            out.append(f"strategy.reset_opacity={s.reset_opacity} (gsplat 1.5.3 never resets)")
         if s.max_gaussians:
             out.append(f"strategy.max_gaussians={s.max_gaussians}")
     return out
@@ -324,7 +333,10 @@ class WarpgsSide:
 
     def record(self) -> dict:
         return {"skipped_steps": self.skipped, "recoveries": len(self.tr.recoveries),
-                "sync_every": self.tr.sync_every, "cuda_graph": self.tr.graph is not None}
+                "sync_every": self.tr.sync_every,
+                # whether the steps ran as CUDA graphs: a recording that fails leaves the run without them
+                "cuda_graph": None if self.tr.graph is None else {
+                    "recordings": self.tr.graph.captures, "replays": self.tr.graph.replays, "off": self.tr.graph.off}}
 
 
 def gsplat_dssim():

@@ -110,6 +110,7 @@ class Trainer:
         self.strategy = cfg.strategy
         init_gen = torch.Generator().manual_seed(seed)
         self.model = init_model(cfg, scene, init_gen).to(self.device)
+        self.model.alpha_max = cfg.model.alpha_max
         self.split_gen = torch.Generator(device=self.device).manual_seed(seed + 1)
         self.drop_gen = torch.Generator(device=self.device).manual_seed(seed + 5)
         self.context = Context(self)

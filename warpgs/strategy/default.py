@@ -7,7 +7,7 @@ Every ``refine_every`` steps between ``refine_start_iter`` and ``refine_stop_ite
   (max scale <= ``grow_scale3d`` x scene scale) and split in two when large (new means sampled from the
   Gaussian, scales / 1.6);
 - prune: opacity < ``prune_opa``, and after the first opacity reset, max scale > ``prune_scale3d`` x scene scale;
-- every ``reset_every`` steps opacities are clamped to 2 x ``prune_opa``.
+- every ``reset_every`` steps opacities are clamped to 2 x ``prune_opa`` (``reset_opacity``).
 
 ``max_gaussians`` caps the count: when growth would pass it, only the candidates with the largest
 gradients grow. ``prune_unseen`` removes what the training views do not need: Gaussians whose total
@@ -48,6 +48,9 @@ class DefaultStrategy:
     #   run (train.iterations) when that comes first (3D-GS: 15,000 of 30,000 steps, 0.5); 0: refine_stop_iter alone.
     #   Resolved into refine_stop_iter by the trainer (warpgs.engine.init.growth_schedule)
     reset_every: int = 3000
+    reset_opacity: bool = True  # clamp the opacities every reset_every steps (3D-GS); False: no reset, the pruning of
+    #   the too large after reset_every kept (what gsplat 1.5.3's DefaultStrategy does: its test
+    #   `step % reset_every == 0 & step > 0` parses as a chained comparison ending in `0 > 0`, never true)
     refine_every: int = 100
     pause_refine_after_reset: int = 0
     max_gaussians: int = 0  # 0 = no budget
@@ -89,7 +92,7 @@ class DefaultStrategy:
             info["pruned"] = self.prune(model, optimizer, state, step, scene_scale)
             for v in state.values():
                 v.zero_()
-        if step % self.reset_every == 0 and step > 0:
+        if self.reset_opacity and step % self.reset_every == 0 and step > 0:
             reset_opacities(model, optimizer, self.prune_opa * 2.0)
             info["reset"] = 1
         return info
@@ -101,7 +104,7 @@ class DefaultStrategy:
             return True
         refine = (step > self.refine_start_iter and step % self.refine_every == 0
                   and step % self.reset_every >= self.pause_refine_after_reset)
-        return not refine and not (step % self.reset_every == 0 and step > 0)
+        return not refine and not (self.reset_opacity and step % self.reset_every == 0 and step > 0)
 
     def update_state(self, state: dict, out: RenderOutput, width: int, height: int) -> None:
         grads = means2d_grad_norm(out, width, height)
