@@ -257,3 +257,34 @@ def test_cycle_iterations_resume_past_train_iterations(tmp_path, monkeypatch):
     assert [c.name for c in again.method.pseudo_cams] == [c.name for c in straight.method.pseudo_cams]
     for k, v in straight.model.params.items():
         assert torch.allclose(again.model.params[k].detach(), v.detach(), atol=1e-6), k
+
+
+def test_the_video_model_loads_while_the_baseline_phase_trains(monkeypatch):
+    """FullMethod.run starts prefetch_backend before the baseline phase's first step, with the pseudo views' settings
+    and the trainer's device; run again with its cycles made (a resumed run at its end), or resumed in its last cycle
+    past the step its pseudo views were made at, it starts nothing."""
+    import warpgs.methods.full as full
+    from warpgs.config import build_config
+    from warpgs.data import load_scene
+    from warpgs.train import Trainer
+
+    cfg = build_config([{"method": "full", "train": {"device": "cpu", "progress": False, "iterations": 6},
+                         "model": {"init": "box", "init_num": 50, "init_box": [-1, -1, 2, 1, 1, 4]},
+                         "full": {"pseudo_loss": "l1", "cycles": 1, "baseline_fraction": 0.5},
+                         "pseudo": {"backend": "default", "trajectory": {"n_frames": 3}, "sampler": {"steps": 1}}}])
+    tr = Trainer(cfg, load_scene("synthetic", views=3, downscale=2), None, method=full.FullMethod())
+    calls = []
+    monkeypatch.setattr(full, "prefetch_backend", lambda pcfg, device: calls.append((repr(pcfg), device, tr.step)))
+    tr.run()
+    assert tr.step == 6 and calls == [(repr(tr.method.pseudo_config()), tr.device, 0)]
+    tr.method.run()
+    assert len(calls) == 1
+    tr.method.cycles_done = 0  # in cycle 1 (steps 3-6) at step 6: its pseudo views were made at step 3
+
+    def stop(until):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(tr, "train", stop)
+    with pytest.raises(KeyboardInterrupt):
+        tr.method.run()
+    assert len(calls) == 1
