@@ -4,6 +4,8 @@ synthetic scene, writes its outputs, resumes, and its switches reach the config.
 import dataclasses
 import json
 import math
+import os
+from pathlib import Path
 
 import pytest
 import torch
@@ -319,3 +321,94 @@ def test_a_step_from_a_recordings_copies_is_the_step_itself(tmp_path):
     assert fm.graph_inputs(cam)[0] != key
     fm.graph_done()
     assert fm._pick is None
+
+
+def test_the_video_model_loads_while_the_baseline_phase_trains(monkeypatch):
+    """FullMethod.run starts prefetch_backend before the baseline phase's first step, with the pseudo views' settings
+    and the trainer's device; run again with its cycles made (a resumed run at its end), or resumed in its last cycle
+    past the step its pseudo views were made at, it starts nothing."""
+    import warpgs.methods.full as full
+    from warpgs.config import build_config
+    from warpgs.data import load_scene
+    from warpgs.train import Trainer
+
+    cfg = build_config([{"method": "full", "train": {"device": "cpu", "progress": False, "iterations": 6},
+                         "model": {"init": "box", "init_num": 50, "init_box": [-1, -1, 2, 1, 1, 4]},
+                         "full": {"pseudo_loss": "l1", "cycles": 1, "baseline_fraction": 0.5},
+                         "pseudo": {"backend": "default", "trajectory": {"n_frames": 3}, "sampler": {"steps": 1}}}])
+    tr = Trainer(cfg, load_scene("synthetic", views=3, downscale=2), None, method=full.FullMethod())
+    calls = []
+    monkeypatch.setattr(full, "prefetch_backend", lambda pcfg, device: calls.append((repr(pcfg), device, tr.step)))
+    tr.run()
+    assert tr.step == 6 and calls == [(repr(tr.method.pseudo_config()), tr.device, 0)]
+    tr.method.run()
+    assert len(calls) == 1
+    tr.method.cycles_done = 0  # in cycle 1 (steps 3-6) at step 6: its pseudo views were made at step 3
+
+    def stop(until):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(tr, "train", stop)
+    with pytest.raises(KeyboardInterrupt):
+        tr.method.run()
+    assert len(calls) == 1
+
+
+CASTLE = Path(os.environ.get("WARPGS_SHARED_DATA", Path(__file__).resolve().parents[1].parent / "shared" / "data")) \
+    / "castle_p30" / "images_4" / "0000.jpg"
+
+
+@pytest.mark.skipif(not CASTLE.is_file(), reason="the shared scenes are not here (../shared/data)")
+def test_the_flythrough_gif_holds_the_rendered_frames(tmp_path):
+    """write_flythrough with a stand-in trainer whose renders pan over a photo (48 frames of 192x128, two segments of
+    24): the GIF decodes to every frame at that size, all in one palette, each close to its render. The thresholds
+    come from the measurement in shared_palette's docstring and this case: every frame >= 37 dB (the worst was 38.2
+    dB at 512x341, 39.4 here), the mean at most 2 dB under Pillow's own palette a frame (1.0-1.5 dB under it
+    measured; Floyd-Steinberg dithering would fall 2.5-3 dB under)."""
+    import io
+    from types import SimpleNamespace
+
+    import numpy as np
+    from PIL import Image
+
+    from warpgs.engine.evaluation import shared_palette, write_flythrough
+    from warpgs.viz import to_uint8
+
+    photo = np.asarray(Image.open(CASTLE).convert("RGB").resize((288, 192), Image.LANCZOS))
+    rendered = []
+
+    def render(viewmat, K, width, height, background=None):  # pose i: the window at (2i, i)
+        i = int(viewmat[0, 3])
+        image = torch.from_numpy(photo[i:i + height, 2 * i:2 * i + width].copy()).float() / 255
+        rendered.append(to_uint8(image))
+        return SimpleNamespace(image=image)
+
+    def trajectories(n):
+        return [SimpleNamespace(viewmats=[np.diag([1.0, 1, 1, 1]) + np.eye(4, k=3) * (s * n + k) for k in range(n)])
+                for s in range(2)]
+
+    cam = SimpleNamespace(width=384, height=256, K=torch.tensor([[300.0, 0, 192], [0, 300, 128], [0, 0, 1]]))
+    trainer = SimpleNamespace(train_cams=[cam] * 3, cameras=SimpleNamespace(trajectories=trajectories), device="cpu",
+                              model=SimpleNamespace(render=render), background_for=lambda view, keep: None)
+    path = write_flythrough(trainer, tmp_path / "flythrough.gif", frames_per_segment=24, max_width=192)
+
+    def decoded(gif):
+        im = Image.open(gif)
+        out = []
+        for i in range(im.n_frames):
+            im.seek(i)
+            out.append(np.asarray(im.convert("RGB")))
+        return out
+
+    def psnr(a, b):
+        return 10 * math.log10(255.0**2 / float(np.mean((a.astype(np.float64) - b) ** 2)))
+
+    frames = decoded(path)
+    assert len(rendered) == len(frames) == 48 and all(f.shape == (128, 192, 3) for f in frames)
+    ours = [psnr(f, r) for f, r in zip(frames, rendered)]
+    pillow = io.BytesIO()
+    rgb = [Image.fromarray(r) for r in rendered]
+    rgb[0].save(pillow, format="GIF", save_all=True, append_images=rgb[1:], duration=80, loop=0)
+    theirs = [psnr(f, r) for f, r in zip(decoded(pillow), rendered)]
+    assert min(ours) >= 37.0 and np.mean(ours) >= np.mean(theirs) - 2.0, (min(ours), np.mean(ours), np.mean(theirs))
+    assert len({bytes(im.getpalette()) for im in shared_palette(rendered)}) == 1

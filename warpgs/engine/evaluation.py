@@ -182,10 +182,8 @@ def write_flythrough(trainer, path: Path, frames_per_segment: int = 24, max_fram
                      max_width: int = 512) -> Path | None:
     """A GIF along the interpolated path through the inputs (the scene's capture path, ``trainer.cameras``:
     the trajectories the pseudo views use): ``frames_per_segment`` between neighbouring inputs, fewer when the
-    path would pass ``max_frames`` in all, rendered at most ``max_width`` pixels wide (a GIF's frames are
-    quantised one by one: 192 frames of 768x512 took 38 s on the GPU machine, nearly all of it in the encoder)."""
-    from PIL import Image
-
+    path would pass ``max_frames`` in all, rendered at most ``max_width`` pixels wide, its frames in one palette
+    (``shared_palette``)."""
     cams = trainer.train_cams
     if len(cams) < 2:
         return None
@@ -202,11 +200,30 @@ def write_flythrough(trainer, path: Path, frames_per_segment: int = 24, max_fram
                 v = torch.as_tensor(vm, dtype=torch.float32, device=trainer.device)
                 view = SimpleNamespace(viewmat=v, K=K, width=width, height=height)
                 bg = trainer.background_for(view, keep=False)  # a one-off pose: nothing kept
-                img = trainer.model.render(v, K, width, height, background=bg).image
-                frames.append(Image.fromarray(to_uint8(img)))
-    # through a rename: an interrupted run leaves no half-written GIF
+                frames.append(to_uint8(trainer.model.render(v, K, width, height, background=bg).image))
+    frames = shared_palette(frames)
+    # through a rename: an interrupted run leaves no half-written GIF; optimize=False: Pillow's optimize would give
+    # each frame its own reordered palette
     return atomic_write(path, lambda tmp: frames[0].save(tmp, format="GIF", save_all=True, append_images=frames[1:],
-                                                         duration=80, loop=0))
+                                                         duration=80, loop=0, optimize=False))
+
+
+def shared_palette(frames: list[np.ndarray], sample_pixels: int = 65_536) -> list:
+    """``frames`` (uint8 [H, W, 3], one size) as PIL palette images sharing one adaptive palette of 256 colours:
+    median cut refined by k-means on every frame's pixels at the stride that keeps about ``sample_pixels`` (the
+    quality was the same from 26k to 330k of them; k-means added 1.3 dB to median cut alone), each frame then mapped
+    to its nearest colours. Pillow's GIF writer would quantise each RGB frame by median cut over all its pixels,
+    nearly all of its time: on 120 frames of 512x341 (pans over castle_p30's photos) 10.7 s on the 2-core CPU
+    machine (17 s on the GPU machine) against 0.46 s here. PSNR of the decoded frames against the given ones:
+    39.2 dB here, 40.3 dB one palette a frame; the same photos blurred, closer to renders: 39.8 against 41.1 dB. The
+    worst frame is better here (38.2 against 37.5 dB, 38.8 against 38.1). Floyd-Steinberg dithering would cost
+    1.5 dB more. One palette also keeps flat colours from flickering between frames."""
+    from PIL import Image
+
+    step = max(1, math.ceil(math.sqrt(sum(f.shape[0] * f.shape[1] for f in frames) / sample_pixels)))
+    sample = np.ascontiguousarray(np.concatenate([f[::step, ::step] for f in frames]))
+    palette = Image.fromarray(sample).quantize(colors=256, method=Image.Quantize.MEDIANCUT, kmeans=1)
+    return [Image.fromarray(f).quantize(palette=palette, dither=Image.Dither.NONE) for f in frames]
 
 
 def write_report(out: Path, metrics: dict, history: list[dict], baseline: dict | None = None) -> Path:
@@ -275,5 +292,5 @@ def write_report(out: Path, metrics: dict, history: list[dict], baseline: dict |
     return path
 
 
-__all__ = ["evaluate_views", "run_metrics", "write_flythrough", "write_metrics", "write_report",
+__all__ = ["evaluate_views", "run_metrics", "shared_palette", "write_flythrough", "write_metrics", "write_report",
            "write_run_outputs"]

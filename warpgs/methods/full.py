@@ -40,7 +40,7 @@ from warpgs.engine.checkpoint import TrainingInterrupted
 from warpgs.engine.method import Method
 from warpgs.model import rgb_to_sh
 from warpgs.optim import STATE_PARTS
-from warpgs.pseudo.views import GenerationStopped
+from warpgs.pseudo.views import GenerationStopped, prefetch_backend
 from warpgs.regularizers.pathconsistency import check_one_camera, two_view_consistency
 
 ABLATIONS = {
@@ -463,6 +463,9 @@ class FullMethod(Method):
             tr.phase_start, tr.phase_len = 0, bounds[0] if s.restart_lr else tr.total_steps
         if s.early_depth and not self.input_depths and not self.history:  # a resumed run has them checkpointed
             self.early_input_depths()
+        # pseudo views still to make (the loop's test below): the video model (svd) loads while the baseline trains
+        if self.cycles_done < s.cycles and tr.step <= bounds[s.cycles - 1]:
+            prefetch_backend(self.pseudo_config(), tr.device)
         tr.train(bounds[0])
         if not self.history:  # the baseline phase, as cycle 0 of the PSNR-per-cycle chart
             self.history.append(self.record(0, {} if self.early_depth_s is None else

@@ -29,6 +29,7 @@ from __future__ import annotations
 import contextlib
 import math
 import os
+import threading
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
@@ -325,6 +326,33 @@ def choose_backend(name: str, svd_path=None) -> tuple[str, Path | None, str]:
 
 
 @contextlib.contextmanager
+def warnings_hidden_here():
+    """The warnings this thread raises inside are not shown. In the main thread ``catch_warnings`` with an ignore
+    filter. In another (``views.prefetch_backend``'s load, beside the training) not that: it swaps the process's
+    one filter list, hiding the training thread's warnings for the load's length, and an exit interleaved with a
+    ``catch_warnings`` of that thread (Warp's logger wraps each warning in one) would leave every warning ignored
+    for good. There ``showwarning`` is wrapped instead, to drop this thread's warnings only: a wrapper that such an
+    interleaving leaves in place passes the other threads' through."""
+    if threading.current_thread() is threading.main_thread():
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            yield
+        return
+    me, show = threading.get_ident(), warnings.showwarning
+
+    def elsewhere(message, category, filename, lineno, file=None, line=None):
+        if threading.get_ident() != me:
+            show(message, category, filename, lineno, file, line)
+
+    warnings.showwarning = elsewhere
+    try:
+        yield
+    finally:
+        if warnings.showwarning is elsewhere:
+            warnings.showwarning = show
+
+
+@contextlib.contextmanager
 def quiet_loading():
     """diffusers' and transformers' loaders say nothing but errors inside: their loggers at error level,
     their progress bars off, their warnings (accelerate / torchvision advice) ignored; restored after."""
@@ -338,8 +366,7 @@ def quiet_loading():
     dlog.disable_progress_bar()
     tlog.disable_progress_bar()
     try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
+        with warnings_hidden_here():
             yield
     finally:
         dlog.set_verbosity(levels[0])

@@ -23,7 +23,9 @@ from __future__ import annotations
 import argparse
 import copy
 import os
+import threading
 import time
+from concurrent.futures import Future
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import SimpleNamespace
@@ -100,19 +102,82 @@ def resolve_backend(cfg: PseudoConfig, real_data: bool = False) -> str:
 
 
 _LOADED: dict = {}  # the last backend made: a run's cycles (and its videos) share one loaded model
+_LOADING: dict = {}  # key -> Future of a load under way (prefetch_backend's thread, or a caller's own)
+_LOCK = threading.Lock()  # guards both: one load per key
+
+
+def _backend_key(cfg: PseudoConfig, device) -> tuple[PseudoConfig, tuple]:
+    """``cfg`` resolved (a copy) and the key its loaded backend is kept under: name, settings, device."""
+    cfg = copy.deepcopy(cfg)
+    resolve_backend(cfg)
+    return cfg, (cfg.backend, repr(cfg.svd) if cfg.backend == "svd" else repr(cfg.default_backend), str(device))
+
+
+def _claim(key) -> tuple[Future, bool]:
+    """-> (the Future of ``key``'s backend, whether the caller is to load it). The first to ask a key that is
+    neither loaded nor loading starts its load; the loaded model of another key is dropped then (one at a time)."""
+    with _LOCK:
+        job = Future()
+        if key in _LOADED:
+            job.set_result(_LOADED[key])
+            return job, False
+        if key in _LOADING:
+            return _LOADING[key], False
+        _LOADED.clear()
+        _LOADING[key] = job
+        return job, True
+
+
+def _load(cfg: PseudoConfig, key, device, job: Future) -> None:
+    """Makes the backend into ``job``: its result, or the exception a direct ``make_backend`` raises (the waiter
+    re-raises it, with its message). A failed load is forgotten, so that a later call tries again."""
+    try:
+        backend = make_backend(cfg.backend, device, default=cfg.default_backend, svd=cfg.svd, svd_path=cfg.svd.path)
+    except BaseException as e:  # KeyboardInterrupt included: the waiter must not wait for ever
+        with _LOCK:
+            _LOADING.pop(key, None)
+        job.set_exception(e)
+        return
+    with _LOCK:
+        _LOADING.pop(key, None)
+        _LOADED.clear()  # (another key's, loaded meanwhile: the newest is kept)
+        _LOADED[key] = backend
+    job.set_result(backend)
 
 
 def backend_from_config(cfg: PseudoConfig, device="cpu"):
     """The backend ``cfg`` names (``auto`` resolved by ``resolve_backend``), loaded once per process for the same
-    settings and device: the cycles of a run reuse the loaded Stable Video Diffusion."""
-    cfg = copy.deepcopy(cfg)
-    resolve_backend(cfg)
-    key = (cfg.backend, repr(cfg.svd) if cfg.backend == "svd" else repr(cfg.default_backend), str(device))
-    if key not in _LOADED:
-        _LOADED.clear()  # one model at a time
-        _LOADED[key] = make_backend(cfg.backend, device, default=cfg.default_backend, svd=cfg.svd,
-                                    svd_path=cfg.svd.path)
-    return _LOADED[key]
+    settings and device: the cycles of a run reuse the loaded Stable Video Diffusion. A load ``prefetch_backend``
+    started is waited for (its error, if any, raised here)."""
+    cfg, key = _backend_key(cfg, device)
+    job, mine = _claim(key)
+    if mine:
+        _load(cfg, key, device, job)
+    return job.result()
+
+
+def prefetch_backend(cfg: PseudoConfig, device="cpu") -> threading.Thread | None:
+    """Starts loading the svd backend ``cfg`` names in a daemon thread, for a later ``backend_from_config`` with
+    the same settings and device to take (it waits for the load; an error is raised there, not here): the full
+    method starts it before its baseline phase, whose training hides the 12-15 s the 4.3 GB model takes to load
+    on the H200 machine. The weight-free backend loads in no time and is left to ``backend_from_config``, and so
+    are settings that do not resolve (their error is raised there too). -> the thread, or None when none started.
+    A daemon thread: a process that ends during the load does not wait for it. The loaders print nothing
+    (``quiet_loading``). Without accelerate the load initialises the modules from torch's global generator before
+    their weights replace them; the training draws nothing from it (its generators are its own), so runs stay
+    reproducible whenever the load ends."""
+    try:
+        cfg, key = _backend_key(cfg, device)
+    except Exception:  # no usable weights: backend_from_config says so when the pseudo views are made
+        return None
+    if cfg.backend != "svd":
+        return None
+    job, mine = _claim(key)
+    if not mine:
+        return None
+    thread = threading.Thread(target=_load, args=(cfg, key, device, job), name="warpgs-backend-load", daemon=True)
+    thread.start()
+    return thread
 
 
 # ----------------------------------------------------------------------------------------------
