@@ -43,7 +43,7 @@ def test_the_full_methods_cycles_replay_with_the_numbers_of_the_steps_without_gr
             "--set", "regularizers.binocular.weight=1.0", "--set", "regularizers.binocular.start=0.0",
             "--set", "regularizers.dropout.rate=0.2", "--set", f"guard.cuda_graph={str(graph).lower()}"])
         cfg, _ = make_config(args)
-        tr = make_trainer(cfg, stress_scene("views_3", downscale=4), tmp_path / str(graph))
+        tr = make_trainer(cfg, stress_scene("views_3", downscale=4, device="cuda"), tmp_path / str(graph))
         tr.run()
         runs[graph] = ({k: v.detach().clone() for k, v in tr.model.params.items()}, list(tr.losses), tr.graph)
     (pe, le, _), (pg, lg, g) = runs[False], runs[True]

@@ -104,9 +104,12 @@ class StepGraph:
         # the method's inputs of the step (its pseudo view, picked now) and the cameras it renders besides ``cam``
         extra_key, extra, extra_cams = tr.method.graph_inputs(cam)
         bound = tr.regularizers.opacity_scale_bound(tr.context, step)  # dropout's and the noise's largest factor: the count bounds the render's
-        opac = model.opacities if bound is None else model.opacities * bound
-        counts = [count_intersections(model.means, model.quats, model.scales, opac, c.viewmat, c.K, c.width, c.height,
-                                      read=False) for c in [cam, *extra_cams]]
+        with torch.no_grad():  # no autograd graph outlives this: one that holds a parameter's gradient accumulator,
+            # made on the default stream, makes the recording's backward wait on that stream, which voids the capture
+            opac = model.opacities if bound is None else model.opacities * bound
+            counts = [count_intersections(model.means, model.quats, model.scales, opac, c.viewmat, c.K, c.width,
+                                          c.height, read=False) for c in [cam, *extra_cams]]
+        del opac
         counters = tr.regularizers.graph_counters()  # renders cut short by the capacity (the moved binocular one)
         values = torch.stack([c.reshape(()).to(torch.int64) for c in counts + counters]).tolist()  # one host read
         count = max(values[:len(counts)])
@@ -211,7 +214,9 @@ class StepGraph:
             for holder, name in gens:
                 graph.register_generator_state(getattr(holder, name))
             with torch.cuda.stream(self.stream):
-                graph.capture_begin()
+                # thread_local: CUDA calls of other threads (the video model loading in the background,
+                # warpgs.pseudo.views.prefetch_backend) do not void this thread's capture
+                graph.capture_begin(capture_error_mode="thread_local")
                 try:
                     self.record = self._body(static, capacity)
                 finally:
