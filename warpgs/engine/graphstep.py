@@ -223,7 +223,8 @@ class StepGraph:
                     graph.capture_end()
             torch.cuda.current_stream(tr.device).wait_stream(self.stream)
         except Exception as e:  # noqa: BLE001 - anything the capture refuses: the step runs without it
-            self.off = f"{type(e).__name__}: {e}"
+            first = str(e).strip().splitlines()
+            self.off = f"{type(e).__name__}: {first[0] if first else ''}"  # one line (CUDA's errors add advice lines)
             self.graph = self.record = None
             for opt in tr.optimizers:
                 opt.zero_grad(set_to_none=True)
