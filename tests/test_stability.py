@@ -346,8 +346,8 @@ def test_pseudo_view_losses_never_trip_the_guard(tmp_path, monkeypatch):
     cfg, tr = small_full_trainer(tmp_path)
     real = tr.method.pseudo_loss
 
-    def far_off(out, cam):  # four pseudo views in a row 1000x off: a divergence if the guard counted them
-        return real(out, cam) * (1000.0 if 30 <= tr.step < 34 else 1.0)
+    def far_off(out, cam, reliable=None):  # four pseudo views in a row 1000x off: a divergence if the guard counted them
+        return real(out, cam, reliable) * (1000.0 if 30 <= tr.step < 34 else 1.0)
 
     monkeypatch.setattr(tr.method, "pseudo_loss", far_off)
     tr.run()
