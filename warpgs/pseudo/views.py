@@ -21,6 +21,7 @@ Command line (a trained model and its scene)::
 from __future__ import annotations
 
 import argparse
+import atexit
 import copy
 import os
 import threading
@@ -162,7 +163,8 @@ def prefetch_backend(cfg: PseudoConfig, device="cpu") -> threading.Thread | None
     method starts it before its baseline phase, whose training hides the 12-15 s the 4.3 GB model takes to load
     on the H200 machine. The weight-free backend loads in no time and is left to ``backend_from_config``, and so
     are settings that do not resolve (their error is raised there too). -> the thread, or None when none started.
-    A daemon thread: a process that ends during the load does not wait for it. The loaders print nothing
+    A daemon thread, which a process that ends waits for up to ``EXIT_WAIT_S`` (``_wait_for_prefetches``): a
+    SIGTERM in the baseline phase stops the run gracefully, the load's seconds later. The loaders print nothing
     (``quiet_loading``). Without accelerate the load initialises the modules from torch's global generator before
     their weights replace them; the training draws nothing from it (its generators are its own), so runs stay
     reproducible whenever the load ends."""
@@ -176,8 +178,26 @@ def prefetch_backend(cfg: PseudoConfig, device="cpu") -> threading.Thread | None
     if not mine:
         return None
     thread = threading.Thread(target=_load, args=(cfg, key, device, job), name="warpgs-backend-load", daemon=True)
+    with _LOCK:
+        if not _PREFETCHES:
+            atexit.register(_wait_for_prefetches)
+        _PREFETCHES.append(thread)
     thread.start()
     return thread
+
+
+EXIT_WAIT_S = 120.0  # how long a process that ends waits for a load still under way (``_wait_for_prefetches``)
+_PREFETCHES: list[threading.Thread] = []
+
+
+def _wait_for_prefetches() -> None:
+    """At exit, waits up to ``EXIT_WAIT_S`` for the loads ``prefetch_backend`` started: a daemon thread still in
+    torch's native code when the interpreter shuts down aborts the process ("terminate called without an active
+    exception", exit code -6 instead of a graceful stop's 143), as a run stopped by SIGTERM in its baseline phase
+    did while the model loaded."""
+    deadline = time.monotonic() + EXIT_WAIT_S
+    for thread in list(_PREFETCHES):
+        thread.join(max(0.0, deadline - time.monotonic()))
 
 
 # ----------------------------------------------------------------------------------------------
