@@ -24,6 +24,17 @@ def _model(scales, opacities, seed=0):
     return GaussianModel(means, quats, sc, op, sh0, shN)
 
 
+CAMERA = (torch.eye(4), torch.tensor([[30.0, 0, 16], [0, 30.0, 16], [0, 0, 1]]))  # (viewmat, K) of a 32x32 view
+
+
+def _rendered_and_backward(model):
+    """The 32x32 render of ``model`` from ``CAMERA``, after the backward of its image's sum (the densification
+    statistic reads its 2D gradients)."""
+    out = model.render(*CAMERA, 32, 32)
+    out.image.sum().backward()
+    return out
+
+
 def _with_adam_state(model):
     opt = make_optimizer(model, Config(), 1.0)
     for p in model.params.values():
@@ -129,11 +140,9 @@ def test_step_post_backward_schedule_and_statistic():
         m.params["means"][10:, 2] = -5.0
     opt = make_optimizer(m, Config(), 1.0)
     st = s.initialize_state(len(m), "cpu")
-    V, K = torch.eye(4), torch.tensor([[30.0, 0, 16], [0, 30.0, 16], [0, 0, 1]])
     events = []
     for step in range(9):
-        out = m.render(V, K, 32, 32)
-        out.image.sum().backward()
+        out = _rendered_and_backward(m)
         if step == 0:
             from warpgs.render import means2d_grad_norm
             expect = means2d_grad_norm(out, 32, 32)
@@ -152,7 +161,7 @@ def test_step_post_backward_schedule_and_statistic():
 
 
 def test_contribution_is_the_blending_weight():
-    V, K = torch.eye(4), torch.tensor([[30.0, 0, 16], [0, 30.0, 16], [0, 0, 1]])
+    V, K = CAMERA
 
     Cam = SimpleNamespace(viewmat=V, K=K, width=32, height=32)
 
@@ -172,7 +181,7 @@ def test_contribution_is_the_blending_weight():
 
 
 def test_prune_unseen_drops_unseen_and_transparent():
-    V, K = torch.eye(4), torch.tensor([[30.0, 0, 16], [0, 30.0, 16], [0, 0, 1]])
+    V, K = CAMERA
 
     Cam = SimpleNamespace(viewmat=V, K=K, width=32, height=32)
 
@@ -210,11 +219,9 @@ def test_without_the_opacity_reset_the_large_are_still_pruned_after_reset_every(
         m = _model([0.05] * 5 + [0.5], [0.5] * 6)
         opt = _with_adam_state(m)
         st = s.initialize_state(len(m), "cpu")
-        V, K = torch.eye(4), torch.tensor([[30.0, 0, 16], [0, 30.0, 16], [0, 0, 1]])
         events = []
         for step in range(9):
-            out = m.render(V, K, 32, 32)
-            out.image.sum().backward()
+            out = _rendered_and_backward(m)
             before = m.opacities.detach().clone()
             info = s.step_post_backward(m, opt, st, step, out, 32, 32, 1.0)
             events.append((step, info["reset"], info["pruned"]))

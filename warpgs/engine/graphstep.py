@@ -77,8 +77,7 @@ class StepGraph:
         lc = tr.cfg.loss
         if self.off is not None or tr.pair is not None:
             return False
-        if (self.draws(step) or tr.regularizers.graph_generators()) and not hasattr(torch.cuda.CUDAGraph,
-                                                                                     "register_generator_state"):
+        if self.generators() and not hasattr(torch.cuda.CUDAGraph, "register_generator_state"):
             return False  # a torch whose graphs cannot hold draws from the trainer's own generators
         if lc.depth_weight > 0 and lc.depth_prior == "scene" and cam.depth is not None:
             return False
@@ -146,8 +145,8 @@ class StepGraph:
         return {"cloned": 0, "split": 0, "pruned": 0, "reset": 0}
 
     def generators(self) -> list[tuple[object, str]]:
-        """The device generators the step draws from, as (holder, attribute): the trainer's ``drop_gen`` when it
-        draws (``draws``), then the regularisers' own (the binocular partner's move)."""
+        """The device generators the step at ``tr.step`` draws from, as (holder, attribute): the trainer's
+        ``drop_gen`` when it draws (``draws``), then the regularisers' own (the binocular partner's move)."""
         tr = self.tr
         return ([(tr, "drop_gen")] if self.draws(tr.step) else []) + tr.regularizers.graph_generators()
 

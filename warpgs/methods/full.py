@@ -228,8 +228,9 @@ class FullMethod(Method):
         if pc is not None:
             views = dict(views, pseudo_viewmat=pc.viewmat, pseudo_K=pc.K, pseudo_image=pc.image,
                          pseudo_mask=pc.mask, pseudo_depth=pc.depth)
-            key.append((pc.width, pc.height, views["pseudo_bg"] is self.trainer.background))
-            if views["pseudo_bg"] is self.trainer.background:  # the colour the recording reads where it is
+            colour = views["pseudo_bg"] is self.trainer.background
+            key.append(colour)  # (its size is the image's, in the key below)
+            if colour:  # the colour the recording reads where it is
                 views["pseudo_bg"] = None
         for name in ("prior", "pseudo_viewmat", "pseudo_K", "pseudo_image", "pseudo_mask", "pseudo_depth",
                      "pseudo_bg", "reliable"):
