@@ -252,7 +252,9 @@ def test_killed_run_resumes_from_the_previous_checkpoint_and_takes_over_its_lock
         run.wait()
     assert (out / LOCK).exists() and read_lock(out)["pid"] == run.pid
     ck = out / "checkpoint.pt"
-    ck.write_bytes(ck.read_bytes()[: ck.stat().st_size // 2])
+    half = ck.read_bytes()[: ck.stat().st_size // 2]
+    ck.unlink()  # a new file: killed between its two renames, checkpoint.prev.pt is a hard link to the same one
+    ck.write_bytes(half)
     prev_step = read_checkpoint(out / "checkpoint.prev.pt")["step"]
     with pytest.raises(CheckpointError, match=f"{ck}: cannot be read, it is truncated or corrupt"):
         read_checkpoint(ck)
