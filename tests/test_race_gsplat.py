@@ -121,6 +121,20 @@ def test_cpu_smoke_writes_the_warpgs_side(tmp_path):
     assert r["machine"]["torch"] and r["machine"]["warp"]
 
 
+def test_repeats_take_the_medians_and_give_each_sides_spread():
+    import race_gsplat as rg
+
+    rows = [{"seconds": 10.0, "it_per_s": 700.0, "gaussians": 1000, "test_psnr": 20.0, "train_psnr": 30.0, "ssim": "x"},
+            {"seconds": 14.0, "it_per_s": 500.0, "gaussians": 1100, "test_psnr": 22.5, "train_psnr": 31.0, "ssim": "x"},
+            {"seconds": 12.0, "it_per_s": 583.33, "gaussians": 900, "test_psnr": 21.0, "train_psnr": 32.0, "ssim": "x"}]
+    m = rg.median_row(rows)
+    assert (m["seconds"], m["gaussians"], m["test_psnr"], m["train_psnr"], m["runs"]) == (12.0, 1000, 21.0, 31.0, 3)
+    assert m["it_per_s"] == pytest.approx(7000 / 12.0, abs=0.01) and m["ssim"] == "x"
+    assert rg.median_row(rows[:1]) is rows[0]
+    sp = rg.spread(rows)
+    assert sp == {"test_psnr_db": 2.5, "gaussians_rel": 0.2, "seconds_rel": round(4.0 / 12.0, 4)}
+
+
 class _Means2d:
     """gsplat's ``info["means2d"]`` [C, N, 2] over warpgs's [N, 2] (which ``rasterize`` retains the gradient of)."""
 

@@ -50,7 +50,9 @@ an opacity reset: gsplat's CUDA kernels compile on first use, about a minute, an
 gsplat's run first. Reported per scale: seconds, it/s, final Gaussian count, train and test PSNR of each side
 (each rendered by its own rasterizer; the loader's test views: LLFF's / DL3DV's every 8th frame, Blender's test
 split as warpgs's loader lists it, here at 800x800), the ratio warpgs / gsplat of the times, the counts' relative
-difference, and ``counts_within_5pct``, ``psnr_within_0p2db``, ``goal_0p75`` (ratio <= 0.75). With ``--profile``,
+difference, and ``counts_within_5pct``, ``psnr_within_0p2db``, ``goal_0p75`` (ratio <= 0.75). With ``--repeats N``
+each side runs N times, alternating, the checks use the medians, and the JSON keeps every run (``<side>_runs``) and
+each side's spread (``<side>_spread``: gsplat against itself is what the checks are judged by). With ``--profile``,
 each scale whose ratio is over 0.75 (every scale on the CPU) trains ``--profile-steps`` more steps on each side
 under ``torch.profiler`` (continuing the timed run: the grown model, refinements included) and the JSON gets
 each side's wall time, its total device time and its top CUDA kernels and CPU ops.
@@ -75,6 +77,7 @@ import datetime
 import gc
 import json
 import math
+import statistics
 import subprocess
 import sys
 import time
@@ -490,6 +493,30 @@ def run_side(kind: str, sc: Scale, args) -> tuple[dict, object]:
     return row, side
 
 
+def median_row(rows: list[dict]) -> dict:
+    """One run's row, or of several the medians of their time, Gaussians and PSNRs (the rest from the first)."""
+    if len(rows) == 1:
+        return rows[0]
+    out = dict(rows[0])
+    for key in ("seconds", "gaussians", "test_psnr", "train_psnr", "peak_allocated_mb"):
+        if key in out:
+            v = float(statistics.median([r[key] for r in rows]))
+            out[key] = int(round(v)) if key == "gaussians" else round(v, 4 if "psnr" in key else 3)
+    out["it_per_s"] = round(rows[0]["it_per_s"] * rows[0]["seconds"] / out["seconds"], 2)
+    out["runs"] = len(rows)
+    return out
+
+
+def spread(rows: list[dict]) -> dict:
+    """How far a side's runs lie apart: its test PSNRs (dB), Gaussians (relative to their median) and times."""
+    p = [r["test_psnr"] for r in rows]
+    g = [r["gaussians"] for r in rows]
+    t = [r["seconds"] for r in rows]
+    return {"test_psnr_db": round(max(p) - min(p), 3),
+            "gaussians_rel": round((max(g) - min(g)) / max(float(statistics.median(g)), 1.0), 4),
+            "seconds_rel": round((max(t) - min(t)) / float(statistics.median(t)), 4)}
+
+
 def race_scale(name: str, args, strategy: dict) -> dict:
     sc = Scale.load(name, args, strategy)
     kinds = (["gsplat"] if args.device == "cuda" else []) + ["warpgs"]
@@ -502,14 +529,22 @@ def race_scale(name: str, args, strategy: dict) -> dict:
            "scene_scale_train_and_test": sc.scene_scale_all, "background": sc.background.tolist(),
            "commit": args.commit, "date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds")}
     sides = {}  # kept for the profile
+    runs = {kind: [] for kind in kinds}
+    for r in range(args.repeats):  # the sides alternate, so a drift of the machine falls on both
+        for kind in kinds:
+            row, side = run_side(kind, sc, args)
+            runs[kind].append(row)
+            if args.profile and r == 0:
+                sides[kind] = side
+            del side
+            gc.collect()
+            if args.device == "cuda":
+                torch.cuda.empty_cache()
     for kind in kinds:
-        out[kind], side = run_side(kind, sc, args)
-        if args.profile:
-            sides[kind] = side
-        del side
-        gc.collect()
-        if args.device == "cuda":
-            torch.cuda.empty_cache()
+        out[kind] = median_row(runs[kind])
+        if args.repeats > 1:
+            out[kind + "_runs"] = runs[kind]
+            out[kind + "_spread"] = spread(runs[kind])
     g, w = out.get("gsplat"), out["warpgs"]
     if g is not None:
         out["time_ratio"] = round(w["seconds"] / g["seconds"], 3)
@@ -530,6 +565,11 @@ def race_scale(name: str, args, strategy: dict) -> dict:
         line += (f" | gsplat {g['seconds']:.2f} s, {g['gaussians']} Gaussians, test PSNR {g['test_psnr']:.2f} | ratio "
                  f"{out['time_ratio']:.3f} (goal {GOAL}: {out['goal_0p75']}), counts {out['gaussians_rel_diff']:.1%} "
                  f"apart ({out['counts_within_5pct']}), PSNR {out['psnr_diff_db']:+.2f} dB ({out['psnr_within_0p2db']})")
+    for kind in kinds:
+        if kind + "_spread" in out:
+            sp = out[kind + "_spread"]
+            line += (f" | {kind} over {args.repeats} runs: {sp['test_psnr_db']:.2f} dB, {sp['gaussians_rel']:.1%} "
+                     f"Gaussians apart")
     print(line, flush=True)
     return out
 
@@ -546,6 +586,7 @@ class Args:
     profile: bool
     profile_steps: int
     strategy_set: list
+    repeats: int
     out: Path
     commit: str | None = None
 
@@ -563,6 +604,9 @@ def parse_args(argv=None) -> Args:
     ap.add_argument("--profile", action="store_true",
                     help="profile both sides of each scale whose ratio is over 0.75 (the warpgs side on the CPU)")
     ap.add_argument("--profile-steps", type=int, default=300)
+    ap.add_argument("--repeats", type=int, default=1,
+                    help="runs of each side per scale, alternating; the checks use their medians and the JSON "
+                         "gives each run and each side's spread (gsplat's own run-to-run spread judges the checks)")
     ap.add_argument("--strategy-set", action="append", default=[], metavar="KEY=VALUE",
                     help="a DefaultStrategy threshold for both sides instead of gsplat's default (smoke runs: "
                          "refine_start_iter=10)")
@@ -573,6 +617,8 @@ def parse_args(argv=None) -> Args:
     scales = list(SCALES) if a.all else a.scale
     if not scales:
         ap.error("give --scale NAME (repeatable) or --all")
+    if a.repeats < 1:
+        ap.error(f"--repeats {a.repeats}: at least 1")
     if a.device == "cuda" and not gsplat_available():
         ap.error("the race needs gsplat on CUDA (pip install gsplat==1.5.3); --device cpu runs the warpgs side alone")
     for s in a.strategy_set:
@@ -582,7 +628,7 @@ def parse_args(argv=None) -> Args:
     return Args(scales=scales, iterations=a.iterations, device=a.device, shrink=a.shrink,
                 warmup=a.warmup if a.warmup is not None else (40 if a.device == "cuda" else 0), seed=a.seed,
                 data_root=a.data_root or data_root_default(), profile=a.profile, profile_steps=a.profile_steps,
-                strategy_set=a.strategy_set, out=out, commit=a.commit or commit())
+                strategy_set=a.strategy_set, repeats=a.repeats, out=out, commit=a.commit or commit())
 
 
 def main(argv=None) -> dict:
