@@ -218,8 +218,13 @@ class StepGraph:
                 graph.capture_begin(capture_error_mode="thread_local")
                 try:
                     self.record = self._body(static, capacity)
-                finally:
-                    graph.capture_end()
+                except BaseException:  # the op the capture refused, not capture_end's "previous error during capture"
+                    try:
+                        graph.capture_end()
+                    except Exception:  # noqa: BLE001 - the capture is void already
+                        pass
+                    raise
+                graph.capture_end()
             torch.cuda.current_stream(tr.device).wait_stream(self.stream)
         except Exception as e:  # noqa: BLE001 - anything the capture refuses: the step runs without it
             first = str(e).strip().splitlines()

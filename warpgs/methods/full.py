@@ -191,7 +191,8 @@ class FullMethod(Method):
         pc = views["pseudo"]
         if pc is not None:
             po = tr.model.render(pc.viewmat, pc.K, pc.width, pc.height, background=views["pseudo_bg"],
-                                 opacity_scale=tr.opacity_scale(tr.step), isect_capacity=tr.isect_capacity)
+                                 opacity_scale=tr.opacity_scale(tr.step), check_finite=False,
+                                 isect_capacity=tr.isect_capacity)  # no host read (the input render's reason)
             pl = self.pseudo_loss(po, pc, views["reliable"])
             loss = loss + self.settings.pseudo_weight * pl
             parts["pseudo"] = pl
