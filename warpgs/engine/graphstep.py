@@ -213,8 +213,7 @@ class StepGraph:
             for holder, name in gens:
                 graph.register_generator_state(getattr(holder, name))
             with torch.cuda.stream(self.stream):
-                # thread_local: CUDA calls of other threads (the video model loading in the background,
-                # warpgs.pseudo.views.prefetch_backend) do not void this thread's capture
+                # thread_local: CUDA calls of other threads (a user's, a library's) do not void this thread's capture
                 graph.capture_begin(capture_error_mode="thread_local")
                 try:
                     self.record = self._body(static, capacity)

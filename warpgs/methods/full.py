@@ -465,7 +465,8 @@ class FullMethod(Method):
             tr.phase_start, tr.phase_len = 0, bounds[0] if s.restart_lr else tr.total_steps
         if s.early_depth and not self.input_depths and not self.history:  # a resumed run has them checkpointed
             self.early_input_depths()
-        # pseudo views still to make (the loop's test below): the video model (svd) loads while the baseline trains
+        # pseudo views still to make (the loop's test below): the video model's (svd) files are read while the baseline
+        # trains, and it is built at the first cycle
         if self.cycles_done < s.cycles and tr.step <= bounds[s.cycles - 1]:
             prefetch_backend(self.pseudo_config(), tr.device)
         tr.train(bounds[0])

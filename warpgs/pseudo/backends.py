@@ -325,10 +325,37 @@ def choose_backend(name: str, svd_path=None) -> tuple[str, Path | None, str]:
                              f"{problem}; --svd-path DIR uses them)")
 
 
+SVD_WEIGHT_PARTS = ("unet", "vae", "image_encoder")  # the folders whose weight files a load reads
+
+
+def svd_dtype(cfg: SVDConfig, device) -> torch.dtype:
+    """The dtype the svd backend loads in: ``cfg.dtype``, or with ``auto`` float16 on CUDA, float32 on the CPU."""
+    if cfg.dtype == "auto":
+        return torch.float16 if torch.device(device).type == "cuda" else torch.float32
+    return getattr(torch, cfg.dtype)
+
+
+def svd_variant(root: Path, dtype: torch.dtype) -> str | None:
+    """The weights' variant a load in ``dtype`` takes: ``fp16`` for float16 where the folder has it, else None."""
+    return "fp16" if dtype == torch.float16 and any((Path(root) / "unet").glob("*.fp16.*")) else None
+
+
+def svd_weight_files(root: Path, dtype: torch.dtype) -> list[Path]:
+    """The weight files (``.safetensors``, ``.bin``) a load of the folder ``root`` in ``dtype`` reads."""
+    fp16 = svd_variant(root, dtype) is not None
+    files = []
+    for part in SVD_WEIGHT_PARTS:
+        folder = Path(root) / part
+        if folder.is_dir():
+            files += sorted(f for f in folder.iterdir() if f.suffix in (".safetensors", ".bin")
+                            and (".fp16." in f.name) == fp16)
+    return files
+
+
 @contextlib.contextmanager
 def warnings_hidden_here():
     """The warnings this thread raises inside are not shown. In the main thread ``catch_warnings`` with an ignore
-    filter. In another (``views.prefetch_backend``'s load, beside the training) not that: it swaps the process's
+    filter. In another (a load beside the training) not that: it swaps the process's
     one filter list, hiding the training thread's warnings for the load's length, and an exit interleaved with a
     ``catch_warnings`` of that thread (Warp's logger wraps each warning in one) would leave every warning ignored
     for good. There ``showwarning`` is wrapped instead, to drop this thread's warnings only: a wrapper that such an
@@ -472,11 +499,8 @@ class SVDBackend:
         root = resolve_svd_path(path if path is not None else cfg.path)
         diffusers = _import_diffusers()
         device = torch.device(device)
-        if cfg.dtype == "auto":
-            dtype = torch.float16 if device.type == "cuda" else torch.float32
-        else:
-            dtype = getattr(torch, cfg.dtype)
-        variant = "fp16" if dtype == torch.float16 and any((root / "unet").glob("*.fp16.*")) else None
+        dtype = svd_dtype(cfg, device)
+        variant = svd_variant(root, dtype)
         with quiet_loading():
             pipe = diffusers.StableVideoDiffusionPipeline.from_pretrained(root, torch_dtype=dtype, variant=variant)
         sched_cfg = dict(pipe.scheduler.config)

@@ -38,7 +38,8 @@ import torch
 from warpgs.configio import apply_values, parse_override, read_yaml
 from warpgs.viz import save_image, to_uint8
 
-from .backends import BACKENDS, WEIGHT_FREE_NOTE, DefaultBackendConfig, SVDConfig, choose_backend, make_backend
+from .backends import (BACKENDS, WEIGHT_FREE_NOTE, DefaultBackendConfig, SVDConfig, choose_backend, make_backend,
+                       svd_dtype, svd_weight_files)
 from .guidance import PosedViews, UncertaintyConfig, WarpResult, guidance_and_uncertainty, match_colour
 from .sampler import SamplerConfig, sample_video
 from .trajectory import (
@@ -103,7 +104,7 @@ def resolve_backend(cfg: PseudoConfig, real_data: bool = False) -> str:
 
 
 _LOADED: dict = {}  # the last backend made: a run's cycles (and its videos) share one loaded model
-_LOADING: dict = {}  # key -> Future of a load under way (prefetch_backend's thread, or a caller's own)
+_LOADING: dict = {}  # key -> Future of a load under way (another thread's, which a caller waits for)
 _LOCK = threading.Lock()  # guards both: one load per key
 
 
@@ -148,7 +149,7 @@ def _load(cfg: PseudoConfig, key, device, job: Future) -> None:
 
 def backend_from_config(cfg: PseudoConfig, device="cpu"):
     """The backend ``cfg`` names (``auto`` resolved by ``resolve_backend``), loaded once per process for the same
-    settings and device: the cycles of a run reuse the loaded Stable Video Diffusion. A load ``prefetch_backend``
+    settings and device: the cycles of a run reuse the loaded Stable Video Diffusion. A load another thread
     started is waited for (its error, if any, raised here)."""
     cfg, key = _backend_key(cfg, device)
     job, mine = _claim(key)
@@ -158,46 +159,65 @@ def backend_from_config(cfg: PseudoConfig, device="cpu"):
 
 
 def prefetch_backend(cfg: PseudoConfig, device="cpu") -> threading.Thread | None:
-    """Starts loading the svd backend ``cfg`` names in a daemon thread, for a later ``backend_from_config`` with
-    the same settings and device to take (it waits for the load; an error is raised there, not here): the full
-    method starts it before its baseline phase, whose training hides the 12-15 s the 4.3 GB model takes to load
-    on the H200 machine. The weight-free backend loads in no time and is left to ``backend_from_config``, and so
-    are settings that do not resolve (their error is raised there too). -> the thread, or None when none started.
-    A daemon thread, which a process that ends waits for up to ``EXIT_WAIT_S`` (``_wait_for_prefetches``): a
-    SIGTERM in the baseline phase stops the run gracefully, the load's seconds later. The loaders print nothing
-    (``quiet_loading``). Without accelerate the load initialises the modules from torch's global generator before
-    their weights replace them; the training draws nothing from it (its generators are its own), so runs stay
-    reproducible whenever the load ends."""
+    """Starts reading the weight files of the svd backend ``cfg`` names in a daemon thread, so that its load at the
+    first cycle (``backend_from_config``, in the calling thread) finds them in the operating system's file cache:
+    the full method starts it before its baseline phase, whose training hides a cold read of the 4.3 GB model.
+
+    Only plain file reads, no torch: the model is not built in the thread. diffusers' and transformers' loaders
+    change process-wide state while they build a model (torch's default dtype, ``nn.Module.register_parameter``
+    under an empty-weights context, ``torch.nn.init``), and the training thread picks it up: on the H200 a load
+    built beside the baseline phase left a densification's new parameters on the meta device.
+
+    -> the thread, or None when there is nothing to read: the weight-free backend, a backend loaded already, or
+    settings that do not resolve (their error is raised by the load). The read stops at the next chunk when the
+    process ends (``_stop_prefetches``), so an exit, a SIGTERM's included, does not wait for it."""
     try:
         cfg, key = _backend_key(cfg, device)
     except Exception:  # no usable weights: backend_from_config says so when the pseudo views are made
         return None
     if cfg.backend != "svd":
         return None
-    job, mine = _claim(key)
-    if not mine:
+    with _LOCK:
+        if key in _LOADED or key in _LOADING:
+            return None
+    files = svd_weight_files(Path(cfg.svd.path), svd_dtype(cfg.svd, device))
+    if not files:
         return None
-    thread = threading.Thread(target=_load, args=(cfg, key, device, job), name="warpgs-backend-load", daemon=True)
+    thread = threading.Thread(target=_read_files, args=(files,), name="warpgs-weights-read", daemon=True)
+    thread.files = files
     with _LOCK:
         if not _PREFETCHES:
-            atexit.register(_wait_for_prefetches)
+            atexit.register(_stop_prefetches)
         _PREFETCHES.append(thread)
     thread.start()
     return thread
 
 
-EXIT_WAIT_S = 120.0  # how long a process that ends waits for a load still under way (``_wait_for_prefetches``)
+READ_CHUNK = 16 << 20  # bytes a prefetch reads at a time (it checks for the process's end between them)
 _PREFETCHES: list[threading.Thread] = []
+_STOP = threading.Event()
 
 
-def _wait_for_prefetches() -> None:
-    """At exit, waits up to ``EXIT_WAIT_S`` for the loads ``prefetch_backend`` started: a daemon thread still in
-    torch's native code when the interpreter shuts down aborts the process ("terminate called without an active
-    exception", exit code -6 instead of a graceful stop's 143), as a run stopped by SIGTERM in its baseline phase
-    did while the model loaded."""
-    deadline = time.monotonic() + EXIT_WAIT_S
+def _read_files(files: list[Path]) -> None:
+    """Reads ``files`` to their end (into the file cache), stopping early when the process ends; a file that cannot
+    be read is skipped (the load reports it)."""
+    buf = bytearray(READ_CHUNK)
+    for f in files:
+        try:
+            with open(f, "rb", buffering=0) as fh:
+                while not _STOP.is_set() and fh.readinto(buf):
+                    pass
+        except OSError:
+            pass
+        if _STOP.is_set():
+            return
+
+
+def _stop_prefetches() -> None:
+    """At exit: the reads ``prefetch_backend`` started stop at their next chunk."""
+    _STOP.set()
     for thread in list(_PREFETCHES):
-        thread.join(max(0.0, deadline - time.monotonic()))
+        thread.join(5.0)
 
 
 # ----------------------------------------------------------------------------------------------
