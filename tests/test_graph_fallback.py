@@ -5,7 +5,7 @@ capture refused them: "Offset increment outside graph capture"). CUDA only: skip
 import pytest
 import torch
 
-from tiny_scene import make_scene, tiny_config
+from tiny_scene import full_method_trainer, make_scene, tiny_config
 from warpgs.engine.graphstep import StepGraph
 from warpgs.train import Trainer
 
@@ -31,19 +31,9 @@ def test_the_full_methods_cycles_replay_with_the_numbers_of_the_steps_without_gr
     """The full method after its first cycle (one input and one pseudo view a step, the depth priors of the stereo, the
     binocular term drawing its partner's move on the device, dropout): with the graphs the cycles' steps are
     replays, and every parameter and recorded loss is the one of the run without them, bit for bit."""
-    from warpgs.data.stress import stress_scene
-    from warpgs.pipelines.sparse import build_parser, make_config, make_trainer
-
     runs = {}
     for graph in (False, True):
-        args = build_parser().parse_args([
-            "--method", "full", "--iterations", "60", "--device", "cuda", "--no-progress",
-            "--set", "pseudo.trajectory.n_frames=4", "--set", "pseudo.sampler.steps=3", "--set", "model.init_num=300",
-            "--set", "eval.lpips_weights=/nonexistent/alexnet.pth",
-            "--set", "regularizers.binocular.weight=1.0", "--set", "regularizers.binocular.start=0.0",
-            "--set", "regularizers.dropout.rate=0.2", "--set", f"guard.cuda_graph={str(graph).lower()}"])
-        cfg, _ = make_config(args)
-        tr = make_trainer(cfg, stress_scene("views_3", downscale=4, device="cuda"), tmp_path / str(graph))
+        tr = full_method_trainer(tmp_path / str(graph), "cuda", 60, "--set", f"guard.cuda_graph={str(graph).lower()}")
         tr.run()
         runs[graph] = ({k: v.detach().clone() for k, v in tr.model.params.items()}, list(tr.losses), tr.graph)
     (pe, le, _), (pg, lg, g) = runs[False], runs[True]

@@ -24,6 +24,7 @@ import torch
 from torch.utils._python_dispatch import TorchDispatchMode
 
 import warpgs.optim
+from tiny_scene import full_method_trainer
 from warpgs.engine.graphstep import StepGraph
 from warpgs.engine.stepguard import SYNC_EVERY_CUDA
 
@@ -159,19 +160,9 @@ def test_the_full_methods_graph_steps_read_nothing_on_the_host(tmp_path, monkeyp
     (``_cpu_graphs``): the graphs stay on, the recorded body runs for more than ten steps, more than five of them
     with a pseudo view, and no aten operation in it reads a device value on the host (the pseudo view's render once
     did: ``render``'s ``_check_finite``, which voided every recording of the cycles' steps)."""
-    from warpgs.data.stress import stress_scene
-    from warpgs.pipelines.sparse import build_parser, make_config, make_trainer
-
-    args = build_parser().parse_args([
-        "--method", "full", "--iterations", "40", "--device", "cpu", "--no-progress",
-        "--set", "pseudo.trajectory.n_frames=4", "--set", "pseudo.sampler.steps=3", "--set", "model.init_num=300",
-        "--set", "eval.lpips_weights=/nonexistent/alexnet.pth",
-        "--set", "regularizers.binocular.weight=1.0", "--set", "regularizers.binocular.start=0.0",
-        "--set", "regularizers.dropout.rate=0.2", "--set", f"guard.sync_every={SYNC_EVERY_CUDA}"])
-    cfg, _ = make_config(args)
     # CUDA's Adam, fused (torch's default on the CPU reads its step counts on the host)
     monkeypatch.setattr(warpgs.optim, "adam_options", lambda device: {"fused": True})
-    tr = make_trainer(cfg, stress_scene("views_3", downscale=4, device="cpu"), tmp_path)
+    tr = full_method_trainer(tmp_path, "cpu", 40, "--set", f"guard.sync_every={SYNC_EVERY_CUDA}")
     reads = HostReads()
     with _cpu_graphs(monkeypatch, reads) as counts:
         tr.graph = StepGraph(tr)

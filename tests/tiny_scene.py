@@ -159,3 +159,20 @@ def record_loss_parts(trainer) -> list[dict]:
 
     trainer.method.loss_terms = record
     return seen
+
+
+def full_method_trainer(out, device: str, iterations: int, *extra: str):
+    """The full method on the 3-view stress scene at a quarter size, as the CUDA graph tests run it: both cycles,
+    one input and one pseudo view a step, the stereo's depth priors, the binocular term from the first step,
+    dropout; ``extra``: more command-line arguments (``--set KEY=VALUE``)."""
+    from warpgs.data.stress import stress_scene
+    from warpgs.pipelines.sparse import build_parser, make_config, make_trainer
+
+    args = build_parser().parse_args([
+        "--method", "full", "--iterations", str(iterations), "--device", device, "--no-progress",
+        "--set", "pseudo.trajectory.n_frames=4", "--set", "pseudo.sampler.steps=3", "--set", "model.init_num=300",
+        "--set", "eval.lpips_weights=/nonexistent/alexnet.pth",
+        "--set", "regularizers.binocular.weight=1.0", "--set", "regularizers.binocular.start=0.0",
+        "--set", "regularizers.dropout.rate=0.2", *extra])
+    cfg, _ = make_config(args)
+    return make_trainer(cfg, stress_scene("views_3", downscale=4, device=device), out)
