@@ -235,6 +235,44 @@ def test_search_respects_the_tolerance_on_the_training_views(trained):
     assert rep0["points"][rep0["chosen"]]["train_psnr"] == max(p["train_psnr"] for p in rep0["points"])
 
 
+def test_the_fine_tune_trains_with_the_runs_regularisers_at_the_steps_it_stands_in_for(scene, monkeypatch):
+    """The search's fine-tune is the run's training without densification: every step draws DropGaussian's mask
+    and adds the binocular term as the trainer would at the steps it replaces (ctx.step on), and applies the
+    opacity decay after each update. Each candidate sees the same draws (two fine-tunes from one state end equal),
+    and the binocular term's own generator is the run's again afterwards, its state untouched. Without the
+    regularisers (the earlier fine-tune) a 3-view capture's fine-tune overfits its inputs."""
+    from warpgs.strategy.compact import finetune
+
+    cfg = _cfg(60)
+    cfg.regularizers.dropout.rate = 0.2
+    cfg.regularizers.binocular.weight, cfg.regularizers.binocular.start = 1.0, 0.0
+    cfg.regularizers.opacity_decay.rate = 0.01
+    tr = Trainer(cfg, scene, None, log=lambda m: None)
+    tr.train(40)
+    ctx, regs = tr.context, tr.regularizers
+    binocular, decay = regs.get("binocular"), regs.get("opacity_decay")
+    assert binocular is not None and decay is not None
+    scales, terms, decays = [], [], []
+    real_scale, real_term, real_decay = type(ctx).opacity_scale, type(binocular).step_term, type(decay).after_update
+    monkeypatch.setattr(type(ctx), "opacity_scale",
+                        lambda self, step, model=None, generator=None: (scales.append(step),
+                                                                        real_scale(self, step, model, generator))[1])
+    monkeypatch.setattr(type(binocular), "step_term",
+                        lambda self, c, step, *a: (terms.append(step), real_term(self, c, step, *a))[1])
+    monkeypatch.setattr(type(decay), "after_update", lambda self, c, step: (decays.append(step),
+                                                                            real_decay(self, c, step))[1])
+    gen, state = binocular.gen, binocular.gen.get_state()
+    start, before = ctx.state_dict(("model",)), _state(tr)
+    assert finetune(ctx, 6, seed=3) == 0
+    first = _state(tr)
+    assert scales == terms == decays == list(range(40, 46))
+    assert binocular.gen is gen and torch.equal(binocular.gen.get_state(), state)
+    ctx.load_state_dict(start)
+    finetune(ctx, 6, seed=3)
+    assert all(torch.equal(first[k], v) for k, v in _state(tr).items())
+    assert not all(torch.equal(first[k], before[k]) for k in first)  # it trained
+
+
 def test_search_never_looks_at_the_test_views(trained):
     cfg = copy.deepcopy(trained.cfg.compact)
     cfg.ratios, cfg.sh_search = [0.3, 0.6], False

@@ -98,6 +98,19 @@ class Context:
         """The inputs' loss and the regularisers' terms on a render (``Trainer.input_loss``)."""
         return self._trainer.input_loss(out, cam)
 
+    def step_terms(self, step: int, out, cam, bg, loss, parts: dict):
+        """``loss`` plus the regularisers' terms of a training step ``step`` on the render ``out`` of ``cam`` over
+        ``bg`` (``Regularizers.step_terms``: e.g. the binocular term, which renders a moved camera)."""
+        return self._trainer.regularizers.step_terms(self, step, out, cam, bg, loss, parts)
+
+    def after_regularized_update(self, step: int) -> None:
+        """The regularisers' work after step ``step``'s update (``Regularizers.after_update``: the opacity decay)."""
+        self._trainer.regularizers.after_update(self, step)
+
+    def regularizer_generators(self) -> list[tuple[object, str]]:
+        """The regularisers' own random streams as (holder, attribute) (the binocular partner's move)."""
+        return self._trainer.regularizers.graph_generators()
+
     def parameter_priors(self, model, loss, parts: dict):
         """``loss`` plus the regularisers' priors on ``model``'s parameters (``Trainer.parameter_priors``)."""
         return self._trainer.parameter_priors(model, loss, parts)

@@ -215,10 +215,12 @@ def attach(trainer) -> None:
 
 
 def finetune(ctx, steps: int, seed: int = 0) -> int:
-    """``steps`` steps of the trainer's loss on the training views (its ``compute_loss``, so the full
-    method's pseudo views too), no densification, learning rates as at the end of training. The view order
-    and random backgrounds come from ``seed``, so every candidate sees the same sequence. Returns the
-    number of steps skipped for a non-finite loss or gradient."""
+    """``steps`` steps of the run's own training on the training views, without densification: the trainer's
+    loss (``compute_loss``, so the full method's pseudo views too), the regularisers as they act at the steps the
+    fine-tune stands in for (``ctx.step`` on: DropGaussian's mask, the binocular term, the opacity decay; without
+    them a 3-view capture's fine-tune overfits its inputs and loses 0.1-0.25 dB of test PSNR), learning rates as at
+    the end of training. The view order, random backgrounds and every random draw come from ``seed``, so every
+    candidate sees the same sequence. Returns the number of steps skipped for a non-finite loss or gradient."""
     from warpgs.engine.stepguard import all_finite as _all_finite
 
     if steps <= 0:
@@ -229,20 +231,33 @@ def finetune(ctx, steps: int, seed: int = 0) -> int:
             g["lr"] = ctx.means_lr(ctx.total_steps)
     rng = np.random.default_rng(seed)
     gen = torch.Generator(device=ctx.device).manual_seed(seed)
+    own = ctx.regularizer_generators()  # replaced by seeded ones for the fine-tune, then put back
+    saved = [getattr(holder, name) for holder, name in own]
+    for i, (holder, name) in enumerate(own):
+        setattr(holder, name, torch.Generator(device=ctx.device).manual_seed(seed + 1 + i))
     order: list[int] = []
     skipped = 0
-    for _ in range(steps):
-        if not order:
-            order = rng.permutation(len(ctx.cameras.train)).tolist()
-        cam, bg = ctx.background.for_training(ctx.cameras.train[order.pop()], gen)
-        out = model.render(cam.viewmat, cam.K, cam.width, cam.height, background=bg)
-        loss, _ = ctx.compute_loss(out, cam)
-        loss.backward()
-        if _all_finite([loss.detach()] + [p.grad for p in model.params.values()]):
-            opt.step()
-        else:
-            skipped += 1
-        opt.zero_grad(set_to_none=True)
+    first = ctx.step
+    try:
+        for i in range(steps):
+            step = first + i
+            if not order:
+                order = rng.permutation(len(ctx.cameras.train)).tolist()
+            cam, bg = ctx.background.for_training(ctx.cameras.train[order.pop()], gen)
+            out = model.render(cam.viewmat, cam.K, cam.width, cam.height, background=bg,
+                               opacity_scale=ctx.opacity_scale(step, generator=gen))
+            loss, parts = ctx.compute_loss(out, cam)
+            loss = ctx.step_terms(step, out, cam, bg, loss, parts)
+            loss.backward()
+            if _all_finite([loss.detach()] + [p.grad for p in model.params.values()]):
+                opt.step()
+                ctx.after_regularized_update(step)
+            else:
+                skipped += 1
+            opt.zero_grad(set_to_none=True)
+    finally:
+        for (holder, name), g in zip(own, saved):
+            setattr(holder, name, g)
     return skipped
 
 
