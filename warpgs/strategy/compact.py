@@ -17,8 +17,8 @@ Mini-Splatting (pruning by blending weight):
 3. **The search, in the run's last ``finetune_steps`` steps** (``Trainer.finish``; the trainer stops
    that many steps early, so the kept model has had ``train.iterations`` steps like a default run).
    Every point of the search starts from the trained model, removes the share ``ratio`` of the least important Gaussians, keeps the SH
-   coefficients up to a degree, and is fine-tuned for ``finetune_steps`` steps on the training loss
-   (no densification); the unpruned model at its full degree gets the same fine-tune and is the
+   coefficients up to a degree, and is fine-tuned for ``finetune_steps`` steps of the run's own training
+   (its loss and regularisers, no densification); the unpruned model at its full degree gets the same fine-tune and is the
    reference. Ratios are searched by bisection over ``ratios`` (quality is assumed to fall as the
    ratio rises) and the smallest model whose training-view PSNR is within ``tolerance_db`` of the best
    evaluated point is kept. Then the SH degree at that count: from 0 upwards, the first degree whose
