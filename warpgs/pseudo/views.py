@@ -184,7 +184,6 @@ def prefetch_backend(cfg: PseudoConfig, device="cpu") -> threading.Thread | None
     if not files:
         return None
     thread = threading.Thread(target=_read_files, args=(files,), name="warpgs-weights-read", daemon=True)
-    thread.files = files
     with _LOCK:
         if not _PREFETCHES:
             atexit.register(_stop_prefetches)
