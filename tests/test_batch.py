@@ -219,6 +219,50 @@ def test_a_run_stopped_on_out_of_memory_is_resumed_not_kept(tmp_path, capsys, mo
     assert again["status"] == "finished" and again["reused"]
 
 
+SETUP_OOM = ("CUDA error: out of memory\nCUDA kernel errors might be asynchronously reported at some other API call, so "
+             "the stacktrace below might be incorrect.\nSearch for `cudaErrorMemoryAllocation' in "
+             "https://docs.nvidia.com/cuda/cuda-runtime-api/group__CUDART__TYPES.html for more information.")
+
+
+def test_a_device_full_at_set_up_ends_as_out_of_memory_and_the_batch_retries_it(tmp_path, capsys, monkeypatch):
+    """Runs sharing a GPU can leave none for a new run's set-up: CUDA, cuBLAS and Warp then raise a plain
+    RuntimeError (SETUP_OOM: torch's words for a failed cudaMalloc), which the run once took for bad input (exit 2,
+    a failed record, never retried: four fern runs of a sweep at 12 runs a GPU). It is out of memory: one line,
+    exit 1, and the batch retries it. Other errors at set-up stay bad input (exit 2)."""
+    from warpgs.engine.loop import Trainer
+    from warpgs.pipelines.sparse import main
+
+    data = write_nerfstudio(tmp_path / "scene")
+    argv = ["--data", str(data), "--views", "3", "--method", "baseline", *TINY, "--device", "cpu"]
+    cases = ((SETUP_OOM, 1), ("CUDA error: CUBLAS_STATUS_ALLOC_FAILED when calling `cublasCreate(handle)`", 1),
+             ("expected a 4x4 pose", 2))
+    for i, (message, code) in enumerate(cases):
+        def refuse(self, *a, message=message, **k):
+            raise RuntimeError(message)
+
+        with monkeypatch.context() as mp:
+            mp.setattr(Trainer, "__init__", refuse)
+            assert main([*argv, "--no-progress", "--out", str(tmp_path / f"r{i}")]) == code
+        err = capsys.readouterr().err
+        (line,) = [ln for ln in err.splitlines() if ln.startswith("error: ")]
+        assert "Traceback" not in err and message.splitlines()[0] in line
+        assert ("ran out of memory while setting up the baseline run" in line) == (code == 1)
+    # in a batch: the run's process (its Trainer refused in sitecustomize) ends as out of memory, and Ray retries it
+    hook = tmp_path / "hook"
+    hook.mkdir()
+    (hook / "sitecustomize.py").write_text(
+        "import warpgs.engine.loop\n"
+        "def refuse(self, *a, **k):\n"
+        f"    raise RuntimeError({SETUP_OOM!r})\n"
+        "warpgs.engine.loop.Trainer.__init__ = refuse\n")
+    monkeypatch.setenv("PYTHONPATH", str(hook))
+    out, logs = tmp_path / "runs" / "r", tmp_path / "logs"
+    with pytest.raises(batch.RunDied, match="out of memory"):
+        batch.execute_run({"name": "r", "method": "baseline", "argv": argv, "num_cpus": 1}, str(out), str(logs), "b1")
+    (attempt,) = batch.read_attempts(logs / "r.attempts.jsonl")
+    assert attempt["oom"] and attempt["returncode"] == 1
+
+
 # ----------------------------------------------------------------------------------------------
 # sweep files, the deadline, GPU slots
 

@@ -446,19 +446,25 @@ def test_the_guard_judges_against_the_median_of_its_phase():
     assert (g.nan_steps, g.explode_steps) == (3, 0)
 
 
-def test_out_of_memory_writes_the_last_good_state_in_one_paragraph(tmp_path, capsys, monkeypatch):
+@pytest.mark.parametrize("error", ["torch", "cublas", "warp"])
+def test_out_of_memory_writes_the_last_good_state_in_one_paragraph(tmp_path, capsys, monkeypatch, error):
     """A device that runs out of memory mid-run (e.g. 16 runs sharing one GPU) stops the run with one
-    paragraph, and its metrics, renders and PLY are those of the last good state, as after a divergence."""
+    paragraph, and its metrics, renders and PLY are those of the last good state, as after a divergence: torch's
+    own OutOfMemoryError, and the plain RuntimeError of an allocation outside torch's (cuBLAS's workspace, Warp's
+    allocator)."""
     import torch
 
     from warpgs.pipelines.sparse import main
     from warpgs.train import Trainer
 
     real = Trainer.compute_loss
+    make = {"torch": lambda: torch.OutOfMemoryError("CUDA out of memory. Tried to allocate 28.00 MiB."),
+            "cublas": lambda: RuntimeError("CUDA error: CUBLAS_STATUS_ALLOC_FAILED when calling `cublasCreate(handle)`"),
+            "warp": lambda: RuntimeError("Failed to allocate 1048576 bytes on device 'cuda:0'")}[error]
 
     def oom_from_step_12(self, out, cam):
         if self.step >= 12:
-            raise torch.OutOfMemoryError("CUDA out of memory. Tried to allocate 28.00 MiB.")
+            raise make()
         return real(self, out, cam)
 
     monkeypatch.setattr(Trainer, "compute_loss", oom_from_step_12)

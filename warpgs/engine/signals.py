@@ -6,6 +6,7 @@ pseudo-view generation) polls ``requested`` between its pieces of work."""
 
 from __future__ import annotations
 
+import re
 import signal
 import threading
 
@@ -82,3 +83,18 @@ def exit_code(signum: int | None) -> int:
 def interrupt_code(e: KeyboardInterrupt) -> int:
     """The exit code of a run ended by ``e`` (``Terminated``: 143, else 130)."""
     return exit_code(getattr(e, "signum", None))
+
+
+# A device allocation that failed outside torch's caching allocator: a CUDA call torch makes directly (its context,
+# a stream), cuBLAS's workspace (CUBLAS_STATUS_ALLOC_FAILED), Warp's allocator ("Failed to allocate N bytes on
+# device 'cuda:0'"). These raise a plain RuntimeError, not torch.OutOfMemoryError, but are the same event: runs
+# sharing a GPU left no room (four fern runs of a sweep at 12 runs a GPU, 2026-11-29).
+OUT_OF_MEMORY = re.compile(r"out of memory|OutOfMemoryError|cudaErrorMemoryAllocation|CUDA_ERROR_OUT_OF_MEMORY|"
+                           r"CUBLAS_STATUS_ALLOC_FAILED|Failed to allocate \d+ bytes on device 'cuda")
+
+
+def is_out_of_memory(e: BaseException) -> bool:
+    """Whether ``e`` says the device ran out of memory (``torch.OutOfMemoryError``, or a ``RuntimeError`` of CUDA,
+    cuBLAS or Warp that says so: ``OUT_OF_MEMORY``)."""
+    return isinstance(e, RuntimeError) and (type(e).__name__ == "OutOfMemoryError"
+                                            or OUT_OF_MEMORY.search(str(e)) is not None)

@@ -61,6 +61,7 @@ import time
 from dataclasses import asdict
 from pathlib import Path
 
+from warpgs.engine.signals import OUT_OF_MEMORY
 from warpgs.pipelines.batch_plan import (BatchError, RunSpec, gpu_share, load_sweep,  # noqa: F401 (gpu_share: the
                                          parse_deadline, plan, plan_sweep)          # runner's API, as before)
 from warpgs.runfolder import checkpoint_file, read_metrics, stopped_early
@@ -239,7 +240,7 @@ def execute_run(spec: dict, out: str, logs: str, batch: str, overwrite: bool = F
         f.seek(offset)
         text = f.read()
     resumed = re.search(r"resumed \S+ at step (\d+)", text)
-    oom = rc not in (0, 2) and (re.search(r"out of memory|OutOfMemoryError|MemoryError", text[-3000:]) is not None
+    oom = rc not in (0, 2) and (OUT_OF_MEMORY.search(text[-3000:]) is not None or "MemoryError" in text[-3000:]
                                 or stopped_out_of_memory(read_metrics(out)))
     _append(attempts_path, {"attempt": number, "end": time.time(), "wall_s": round(time.time() - t0, 2),
                             "returncode": rc, "oom": oom, "from_step": int(resumed.group(1)) if resumed else None,

@@ -25,7 +25,8 @@ The output folder gets config.yaml, checkpoint.pt (every train.checkpoint_every 
 one it replaced stays as checkpoint.prev.pt, which --resume falls back to when checkpoint.pt cannot be
 read), metrics.json, test/NNN_<view>.png (render | ground truth) and point_cloud.ply (3D-GS layout). A run
 locks its folder (.warpgs.lock; warpgs/runfolder.py): a second run into it stops, and a folder holding an
-earlier run needs --resume or --overwrite. Bad input of any kind ends in one line, ``error: ...``, exit 2.
+earlier run needs --resume or --overwrite. Bad input of any kind ends in one line, ``error: ...``, exit 2; a device
+that runs out of memory before training ends in one line too, exit 1 (not the input's fault: again may succeed).
 """
 
 from __future__ import annotations
@@ -239,11 +240,10 @@ def run_method(method: str, cfg, scene, out: Path, resume: bool, baseline_metric
     """Trains one method into ``out``; returns its metrics (``stopped_early`` set when it diverged or the device
     ran out of memory, and the last good state's were written). Raises ``RunStopped`` when it ends without them: bad settings, Ctrl-C,
     a checkpoint that cannot be read or written, outputs that cannot be written (each said in one line)."""
-    import torch
-
     from warpgs.engine.checkpoint import (CHECKPOINT, PREVIOUS_CHECKPOINT, CheckpointError, TrainingDiverged,
                                           TrainingInterrupted)
     from warpgs.engine.signals import exit_code, interrupt_code
+    from warpgs.engine.signals import is_out_of_memory
 
     from warpgs.engine.evaluation import write_metrics
     from warpgs.wallclock import WallClock
@@ -256,6 +256,11 @@ def run_method(method: str, cfg, scene, out: Path, resume: bool, baseline_metric
         with clock("setup"):
             trainer = make_trainer(cfg, scene, out)
     except (RuntimeError, ValueError) as e:
+        if is_out_of_memory(e):  # not bad input: the device was full (other runs on it); again may succeed
+            first = (str(e).strip().splitlines() or [""])[0]
+            print(f"error: the device ran out of memory while setting up the {method} run ({first}); free the "
+                  f"device (other processes on it), then run again", file=sys.stderr)
+            raise RunStopped(1) from e
         print(f"error: {e}", file=sys.stderr)
         raise RunStopped(2) from e
     has_checkpoint = (out / CHECKPOINT).is_file() or (out / PREVIOUS_CHECKPOINT).is_file()
@@ -284,7 +289,9 @@ def run_method(method: str, cfg, scene, out: Path, resume: bool, baseline_metric
         # the model is at its last good state: its metrics, renders and PLY are written all the same
         print("\n" + diverged_message(method, e, out), file=sys.stderr)
         trainer.stopped_early = {"reason": "diverged", "step": e.step, "cause": e.cause}
-    except torch.OutOfMemoryError as e:
+    except RuntimeError as e:
+        if not is_out_of_memory(e):  # torch.OutOfMemoryError, or CUDA's, cuBLAS's or Warp's allocation failure
+            raise
         # the metrics, renders and PLY of the last good state are written all the same (issue 13: whatever happens)
         step = trainer.step
         back = trainer.after_out_of_memory()
@@ -311,7 +318,9 @@ def run_method(method: str, cfg, scene, out: Path, resume: bool, baseline_metric
         fix = "free space, then " if "space" in what.lower() else ""
         print(f"error: {what}; the outputs in {out} are incomplete ({fix}run again with {resume_hint})", file=sys.stderr)
         raise RunStopped(2) from e
-    except torch.OutOfMemoryError as e:
+    except RuntimeError as e:
+        if not is_out_of_memory(e):
+            raise
         print(f"error: {trainer.device} ran out of memory while evaluating; the outputs in {out} are incomplete "
               f"(free the device, then run again with {resume_hint})", file=sys.stderr)
         raise RunStopped(2) from e
