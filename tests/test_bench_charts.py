@@ -94,6 +94,43 @@ def test_stability_counts_leave_out_runs_cut_at_a_deadline():
     assert counts["baseline"]["out of memory"] == 1 and sum(counts["baseline"].values()) == 1
 
 
+def test_the_sparse_inputs_panel_counts_the_newest_code_at_its_defaults():
+    """The stability chart's real-input panel: each method's sparse runs at its defaults, of the newest machine and
+    commit only: an older commit's runs (another code), a switch's or compact mode's (other settings) and a run of
+    more views are left out."""
+    def src(commit, date, runs):
+        return {"file": f"{commit}.json", "kind": "runs", "machine": "NVIDIA H200", "commit": commit, "date": date,
+                "runs": [{**charts.parse_run_name(n), "name": n, "psnr": p, "initial_psnr": 10.0} for n, p in runs]}
+
+    old = src("aaa1111", "2026-11-28", [("castle_p30_3v_baseline_s0", 5.0), ("castle_p30_3v_baseline_s1", 5.0)])
+    new = src("bbb2222", "2026-11-29", [("castle_p30_3v_baseline_s0", 15.0), ("herz_jesus_p25_2v_full_s0", 9.0),
+                                        ("castle_p30_3v_baseline_s0_drop0", 5.0), ("synthetic_2v_full_s1", 12.0),
+                                        ("castle_p30_3v_baseline_s1_compact", 5.0), ("castle_p30_9v_full_s0", 5.0)])
+    (panel,) = charts.stability_panels([new, old]).values()
+    assert panel["files"] == ["bbb2222.json"]
+    assert panel["counts"]["baseline"]["ok"] == 1 and sum(panel["counts"]["baseline"].values()) == 1
+    assert panel["counts"]["full"]["ok"] == 1 and panel["counts"]["full"]["collapse"] == 1
+    assert sum(panel["counts"]["full"].values()) == 2
+
+
+def test_each_chart_shows_the_newest_code_on_one_machine():
+    """Older results of another commit or machine (a switch screen's scene, a one-seed compact pair) are not drawn
+    beside the newest sweep's: the speed-accuracy and compact charts take the newest machine and commit only."""
+    def src(machine, commit, when, runs):
+        return {"file": f"{commit}.json", "kind": "runs", "machine": machine, "commit": commit, "date": when[:10],
+                "when": when, "runs": [{**charts.parse_run_name(n), "name": n, "psnr": 15.0, "train_time_s": 9.0,
+                                        "num_gaussians": g, "param_bytes": g} for n, g in runs]}
+
+    old = src("2 x NVIDIA H200", "aaa1111", "2026-11-28 17:37", [("synthetic_baseline_s0", 900),
+                                                                  ("synthetic_baseline_s0_compact", 100)])
+    cpu = src("x86_64 CPU", "ccc3333", "2026-11-29 09:00", [("lego_8v_baseline_s0", 900)])
+    new = src("NVIDIA H200", "bbb2222", "2026-11-29 22:10", [("castle_p30_3v_baseline_s0", 1000),
+                                                              ("castle_p30_3v_baseline_s0_compact", 400)])
+    assert list(charts.speed_accuracy_scenes([old, cpu, new])) == ["castle_p30 3v"]
+    assert [v["scene"] for v in charts.all_compact_verdicts([old, cpu, new])] == ["castle_p30 3v"]
+    assert charts.newest_code([old, cpu, new]) == [new]
+
+
 def _batch_folder(tmp_path: Path) -> Path:
     """A batch folder as warpgs.pipelines.batch leaves it: finished runs, one stopped on running out of memory, one
     whose every attempt died, one cut at the deadline, one never started; each run's compact twin where it has one."""
@@ -178,7 +215,7 @@ def test_one_command_collects_charts_and_writes_the_tables(tmp_path):
     assert "| castle_p30 3v | full |" not in text  # stopped early (out of memory): its figures are no point
     assert "NVIDIA H200, commit abc1234" in text
     # stability: baseline 3 ok; full: one stopped on out of memory, one dead of it, one cut at the deadline (left out)
-    row = next(ln for ln in text.splitlines() if ln.startswith("| captures at 2-3 views, room at 2 | full |"))
+    row = next(ln for ln in text.splitlines() if ln.startswith("| captures at 2-3 views, room at 2 (defaults) | full |"))
     cells = [c.strip() for c in row.split("|")[1:-1]]
     assert cells[2] == "2" and cells[3 + charts.CATEGORIES.index("out of memory")] == "2"
     # compact: median 12,500 against 31,000 Gaussians, 15.9 against 16.0 dB, over the 2 seeds both have

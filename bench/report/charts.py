@@ -334,7 +334,7 @@ def _source(path: Path, doc: dict, kind: str, runs: dict, machine: str | None) -
         rows.append({**parts, **{k: v for k, v in figures.items() if k not in parts}, "name": name})
     return {"file": str(path.relative_to(ROOT)) if path.is_relative_to(ROOT) else str(path), "kind": kind,
             "machine": machine or doc.get("machine") or "not recorded", "commit": doc.get("commit"),
-            "date": str(doc.get("date") or "")[:10], "runs": rows}
+            "date": str(doc.get("date") or "")[:10], "when": str(doc.get("date") or ""), "runs": rows}
 
 
 def load_sources(results: Path = RESULTS) -> list[dict]:
@@ -371,18 +371,21 @@ def stamp(src: dict) -> str:
     return f"{src['machine']}, {src['date'] or 'date not recorded'} (commit not recorded)"
 
 
+def _usable(src: dict) -> list[dict]:
+    """A source's runs that are a speed-accuracy point: not compact mode, with a training time or a Gaussian count."""
+    return [r for r in src["runs"] if r.get("variant") != "compact"
+            and (r.get("train_time_s") is not None or r.get("num_gaussians") is not None)]
+
+
 def speed_accuracy_scenes(sources: list[dict]) -> dict:
-    """{scene key: (source, its points)}: per scene, the newest source whose runs there have a test PSNR and a
-    training time or a Gaussian count (a newer one, or one with both, replaces an older one)."""
+    """{scene key: (source, its points)}: the runs of the newest machine and commit that has such points
+    (``newest_code``); per scene, the newest of its sources whose runs there have a test PSNR and a training time
+    or a Gaussian count (a newer one, or one with both, replaces an older one)."""
     best: dict = {}
-    for src in sources:
-        if src["kind"] != "runs":
-            continue
-        usable = [r for r in src["runs"] if r.get("variant") != "compact"
-                  and (r.get("train_time_s") is not None or r.get("num_gaussians") is not None)]
-        for scene, series in points(usable).items():
+    for src in newest_code([s for s in sources if s["kind"] == "runs" and points(_usable(s))]):
+        for scene, series in points(_usable(src)).items():
             both = any(p["train_time_s"] and p["num_gaussians"] for p in series.values())
-            rank = (bool(src.get("commit")), both, src["date"])
+            rank = (both, src.get("when", src["date"]))
             if scene not in best or rank >= best[scene][0]:
                 best[scene] = (rank, src, series)
     return {scene: (src, series) for scene, (_, src, series) in sorted(best.items())}
@@ -560,13 +563,23 @@ def sparse_run(run: dict) -> bool:
 
 
 def _newest(sources: list[dict]) -> list[dict]:
-    return sorted(sources, key=lambda s: (bool(s.get("commit")), s["date"]))
+    return sorted(sources, key=lambda s: (bool(s.get("commit")), s.get("when", s["date"])))
+
+
+def newest_code(sources: list[dict]) -> list[dict]:
+    """The sources of the newest machine and commit among ``sources``: a chart shows one code on one machine
+    (older results stay in their files and records)."""
+    if not sources:
+        return []
+    last = _newest(sources)[-1]
+    return [s for s in sources if (s["machine"], s.get("commit")) == (last["machine"], last.get("commit"))]
 
 
 def stability_panels(sources: list[dict]) -> dict:
     """The stability chart's panels: the stress cases (bench/quality/stability.py, its newest results), and the
-    sparsest real inputs of every results file of runs (``sparse_run``; a run in several files counted once, from
-    the newest)."""
+    sparsest real inputs (``sparse_run``) of each method at its defaults (no switch, not compact), from the
+    results files of runs of the newest machine and commit that has them: one code, one machine (a run in several
+    of its files counted once, from the newest)."""
     panels = {}
     stress = [s for s in sources if s["kind"] == "stress"]
     if stress:
@@ -574,14 +587,14 @@ def stability_panels(sources: list[dict]) -> dict:
         panels["stress cases (synthetic room)"] = {"counts": stability_counts(src["runs"]), "stamps": [stamp(src)],
                                                    "files": [src["file"]]}
     runs, used = {}, {}
-    for src in _newest([s for s in sources if s["kind"] == "runs"]):
+    for src in _newest(newest_code([s for s in sources if s["kind"] == "runs" and any(sparse_run(r) for r in s["runs"])])):
         for r in src["runs"]:
-            if sparse_run(r):
+            if sparse_run(r) and not r.get("variant"):
                 runs[r["name"]], used[r["name"]] = r, src
     if runs:
         srcs = list({id(s): s for s in used.values()}.values())
-        panels["captures at 2-3 views, room at 2"] = {"counts": stability_counts(list(runs.values())),
-                                                      "stamps": [stamp(s) for s in srcs], "files": [s["file"] for s in srcs]}
+        panels["captures at 2-3 views, room at 2 (defaults)"] = {"counts": stability_counts(list(runs.values())),
+                                                      "stamps": list(dict.fromkeys(stamp(s) for s in srcs)), "files": [s["file"] for s in srcs]}
     return panels
 
 
@@ -616,12 +629,11 @@ def compact_table(verdicts: list[dict]) -> list[str]:
 
 
 def all_compact_verdicts(sources: list[dict]) -> list[dict]:
-    """The verdicts of every source with compact runs (a collected sweep's, whose defaults may be in another
-    collected source of the same machine and commit, or bench/quality/compact.py's), newest per scene."""
+    """The verdicts of the sources with compact runs of the newest machine and commit (``newest_code``: a
+    collected sweep's, whose defaults may be in another collected source of the same machine and commit, or
+    bench/quality/compact.py's), newest per scene."""
     best: dict = {}
-    for src in sources:
-        if not any(r.get("variant") == "compact" for r in src["runs"]):
-            continue
+    for src in newest_code([s for s in sources if any(r.get("variant") == "compact" for r in s["runs"])]):
         pool = list(src["runs"]) + [r for s in sources if s is not src and s["kind"] == "runs"
                                     and (s["machine"], s.get("commit")) == (src["machine"], src.get("commit"))
                                     for r in s["runs"]]
