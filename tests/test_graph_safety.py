@@ -104,21 +104,34 @@ def _cpu_graphs(monkeypatch, reads: HostReads):
     body (``StepGraph._body``) eagerly under ``reads``. The capture is the step's own work (what the first replay
     does on CUDA), so the replay that follows it does nothing. Yields the counts of bodies run, all and those
     that render a pseudo view (``FullMethod.graph_inputs``)."""
-    counts = {"bodies": 0, "pseudo": 0}
+    counts = {"bodies": 0, "pseudo": 0, "pools": []}
     recorded = {}
+    alive = {}  # live graphs: serial -> their memory pool (as CUDA's, a pool lives while a graph uses it)
 
     class Stream:
         def wait_stream(self, other):
             pass
 
     class Graph:
+        serial = 0
+
         def __init__(self):
             self.fresh = False
+            Graph.serial += 1
+            self.n, self._pool = Graph.serial, None
+            weakref.finalize(self, alive.pop, self.n, None)
 
         def register_generator_state(self, generator):
             pass
 
-        def capture_begin(self, capture_error_mode=None):
+        def pool(self):
+            return self._pool
+
+        def capture_begin(self, pool=None, capture_error_mode=None):
+            # which pool each recording was given, and whether a live graph held it then
+            counts["pools"].append((pool, pool is not None and pool in alive.values()))
+            self._pool = pool if pool is not None else (0, self.n)
+            alive[self.n] = self._pool
             reads.__enter__()
             self.fresh = True
 
@@ -171,6 +184,11 @@ def test_the_full_methods_graph_steps_read_nothing_on_the_host(tmp_path, monkeyp
     assert g is not None and g.off is None, g and g.off
     assert counts["bodies"] > 10 and counts["pseudo"] > 5, (counts, g.captures, g.replays)
     assert not reads.hits, f"host reads in the recorded step:\n{_report(reads.hits)}"
+    # every recording after the first is made into the first one's memory pool, while the graph before it (which
+    # holds the pool) is alive: a pool each would keep every dropped graph's memory reserved on the GPU
+    first, *later = counts["pools"]
+    assert first == (None, False) and len(later) >= 2 and g.captures == len(later) + 1, counts["pools"]
+    assert {pool for pool, _ in later} == {g.graph.pool()} and all(held for _, held in later), counts["pools"]
 
 
 @pytest.mark.parametrize("read", ["bool", "mask", "where", "item", "repeat"])

@@ -115,7 +115,7 @@ class StepGraph:
         cut = sum(values[len(counts):])
         if cut > self.cut:  # a render of a pose drawn on the device needed more: record with more room
             self.cut, self.headroom = cut, self.headroom * 2
-            self.graph = None
+            self.key = None
         # the target and background of the step (a random colour behind an alpha channel, the far field), as
         # the step without the graph makes them, outside the graph
         cam, bg = tr.with_training_background(cam, tr.split_gen)
@@ -181,7 +181,11 @@ class StepGraph:
         False, with the graphs off for the run, when that fails. ``extra``: the method's inputs of the step
         (``Method.graph_inputs``), copied into the recording's own tensors."""
         tr = self.tr
-        self.graph = self.record = None
+        # the previous recording lives until this one is made, which records into its memory pool: a pool of its
+        # own each time would leave every old pool's memory reserved when its graph goes (torch frees a dropped
+        # graph's pool only on empty_cache or its own out of memory), tens of GB over a run's recordings, out of
+        # reach of other processes on the GPU (and of this one's CUDA, cuBLAS and Warp allocations)
+        previous, self.graph, self.record = self.graph, None, None
         self.inputs = inp = {"viewmat": cam.viewmat.clone(), "K": cam.K.clone(), "image": cam.image.clone()}
         if cam.alpha is not None:
             inp["alpha"] = cam.alpha.clone()
@@ -214,7 +218,8 @@ class StepGraph:
                 graph.register_generator_state(getattr(holder, name))
             with torch.cuda.stream(self.stream):
                 # thread_local: CUDA calls of other threads (a user's, a library's) do not void this thread's capture
-                graph.capture_begin(capture_error_mode="thread_local")
+                graph.capture_begin(pool=previous.pool() if previous is not None else None,
+                                    capture_error_mode="thread_local")
                 try:
                     self.record = self._body(static, capacity)
                 except BaseException:  # the op the capture refused, not capture_end's "previous error during capture"
