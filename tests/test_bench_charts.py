@@ -197,13 +197,22 @@ def test_one_command_collects_charts_and_writes_the_tables(tmp_path):
     # a compact sweep of the same machine and commit: its defaults are the speed-accuracy runs above
     comp = tmp_path / "compact"
     (comp / "logs").mkdir(parents=True)
+    search = {"before": {"num_gaussians": 20000, "train_psnr": 20.5, "test_psnr": 15.95}, "best_train_psnr": 20.6,
+              "tolerance_db": 0.1, "after": {"num_gaussians": 12000, "train_psnr": 20.52},
+              "points": [{"kind": "prune", "ratio": 0.0, "num_gaussians": 20000, "train_psnr": 20.6, "test_psnr": 15.9,
+                          "param_bytes": 1, "within_tolerance": True}],
+              "pruned_during_training": [{"step": 1500, "removed": 5000}]}
     for seed, g in enumerate((12000, 13000)):
         r = comp / "runs" / f"castle_p30_3v_baseline_s{seed}_compact"
         r.mkdir(parents=True)
         r.joinpath("metrics.json").write_text(json.dumps({"psnr": 15.9, "num_gaussians": g, "param_bytes": g * 56,
-                                                          "iterations": 3000, "resolution": [384, 256]}))
+                                                          "iterations": 3000, "resolution": [384, 256],
+                                                          "compact": search}))
     assert charts.main(["--collect", str(comp), "--name", "compact", "--results", str(results), "--commit", "abc1234",
                         "--machine", "NVIDIA H200"]) == 0
+    kept = json.loads((results / "compact_h200.json").read_text())["runs"]["castle_p30_3v_baseline_s0_compact"]["compact"]
+    assert kept["before"] == search["before"] and kept["pruned_during_training"] == search["pruned_during_training"]
+    assert kept["points"] == [{k: v for k, v in search["points"][0].items() if k != "param_bytes"}]
     assert sorted(p.name for p in results.iterdir()) == ["compact_h200.json", "speed_accuracy_h200.json"]
     doc = tmp_path / "benchmarks.md"
     doc.write_text("intro\n" + "".join(f"{a}\nold\n{b}\ntext\n" for a, b in map(charts.markers, ("speed_accuracy",

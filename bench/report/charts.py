@@ -216,6 +216,8 @@ def collect_run(name: str, run_dir: Path, logs: Path) -> dict:
         if m.get("stopped_early"):
             rec["stopped_early"] = m["stopped_early"]
         rec["oom"] = rec["oom"] and (m.get("stopped_early") or {}).get("reason") == "out_of_memory"
+        if isinstance(m.get("compact"), dict):  # compact mode's search: where its loss and its stop came from
+            rec["compact"] = compact_summary(m["compact"])
         rec["status"] = "finished"
     elif attempts and attempts[-1].get("deadline"):
         rec["status"] = "stopped"
@@ -227,6 +229,19 @@ def collect_run(name: str, run_dir: Path, logs: Path) -> dict:
         rec["error"] = (errors[-1] if errors else f"exit code {attempts[-1].get('returncode')}")[:300]
     rec["device"] = _warp_device(log)
     return rec
+
+
+COMPACT_POINT_KEYS = ("kind", "ratio", "sh_degree", "num_gaussians", "train_psnr", "test_psnr", "within_tolerance")
+
+
+def compact_summary(report: dict) -> dict:
+    """A compact run's search (metrics.json's ``compact``, ``warpgs.strategy.compact.search``) as kept in a
+    results file: the trained model before the search, the kept one, the best training-view PSNR it was judged
+    against, each point (ratio, count, training- and test-view PSNR) and the pruning during training."""
+    return {"before": report.get("before"), "after": report.get("after"),
+            "best_train_psnr": report.get("best_train_psnr"), "tolerance_db": report.get("tolerance_db"),
+            "points": [{k: p[k] for k in COMPACT_POINT_KEYS if k in p} for p in report.get("points") or []],
+            "pruned_during_training": report.get("pruned_during_training")}
 
 
 def git_commit(root: Path = ROOT) -> str | None:
