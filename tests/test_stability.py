@@ -446,6 +446,27 @@ def test_the_guard_judges_against_the_median_of_its_phase():
     assert (g.nan_steps, g.explode_steps) == (3, 0)
 
 
+def test_a_checkpoint_that_cannot_be_written_mid_run_ends_in_one_line_not_as_out_of_memory(tmp_path, capsys, monkeypatch):
+    """A CheckpointError is a RuntimeError too: the out-of-memory handler, which takes RuntimeErrors that say so,
+    must leave it to its own (one ``error:`` line naming what to do, exit 2), not re-raise it as a traceback."""
+    from warpgs.engine.checkpoint import CheckpointError
+    from warpgs.pipelines.sparse import main
+    from warpgs.train import Trainer
+
+    def full_disk(self, path=None):
+        raise CheckpointError(f"cannot write {self.out / 'checkpoint.pt'}: No space left on device")
+
+    monkeypatch.setattr(Trainer, "save_checkpoint", full_disk)
+    data = write_nerfstudio(tmp_path / "scene")
+    rc = main(["--data", str(data), "--views", "3", "--device", "cpu", "--no-progress", "--method", "baseline",
+               "--set", "model.init=box", "--set", "model.init_box=[-1.2,-1.2,-1.2,1.2,1.2,1.2]",
+               "--set", "model.init_num=200", "--set", "train.checkpoint_every=10", "--iterations", "30",
+               "--out", str(tmp_path / "out")])
+    err = capsys.readouterr().err
+    (line,) = [ln for ln in err.splitlines() if ln.startswith("error: ")]
+    assert rc == 2 and "Traceback" not in err and "No space left on device" in line and "free space" in line
+
+
 @pytest.mark.parametrize("error", ["torch", "cublas", "warp"])
 def test_out_of_memory_writes_the_last_good_state_in_one_paragraph(tmp_path, capsys, monkeypatch, error):
     """A device that runs out of memory mid-run (e.g. 16 runs sharing one GPU) stops the run with one

@@ -26,7 +26,7 @@ one it replaced stays as checkpoint.prev.pt, which --resume falls back to when c
 read), metrics.json, test/NNN_<view>.png (render | ground truth) and point_cloud.ply (3D-GS layout). A run
 locks its folder (.warpgs.lock; warpgs/runfolder.py): a second run into it stops, and a folder holding an
 earlier run needs --resume or --overwrite. Bad input of any kind ends in one line, ``error: ...``, exit 2; a device
-that runs out of memory before training ends in one line too, exit 1 (not the input's fault: again may succeed).
+that runs out of memory ends with exit 1 (not the input's fault: again may succeed), in one line or paragraph.
 """
 
 from __future__ import annotations
@@ -242,8 +242,7 @@ def run_method(method: str, cfg, scene, out: Path, resume: bool, baseline_metric
     a checkpoint that cannot be read or written, outputs that cannot be written (each said in one line)."""
     from warpgs.engine.checkpoint import (CHECKPOINT, PREVIOUS_CHECKPOINT, CheckpointError, TrainingDiverged,
                                           TrainingInterrupted)
-    from warpgs.engine.signals import exit_code, interrupt_code
-    from warpgs.engine.signals import is_out_of_memory
+    from warpgs.engine.signals import exit_code, interrupt_code, is_out_of_memory
 
     from warpgs.engine.evaluation import write_metrics
     from warpgs.wallclock import WallClock
@@ -289,16 +288,6 @@ def run_method(method: str, cfg, scene, out: Path, resume: bool, baseline_metric
         # the model is at its last good state: its metrics, renders and PLY are written all the same
         print("\n" + diverged_message(method, e, out), file=sys.stderr)
         trainer.stopped_early = {"reason": "diverged", "step": e.step, "cause": e.cause}
-    except RuntimeError as e:
-        if not is_out_of_memory(e):  # torch.OutOfMemoryError, or CUDA's, cuBLAS's or Warp's allocation failure
-            raise
-        # the metrics, renders and PLY of the last good state are written all the same (issue 13: whatever happens)
-        step = trainer.step
-        back = trainer.after_out_of_memory()
-        print("\n" + memory_message(method, step, back, trainer.device, out, resume_hint), file=sys.stderr)
-        if back is None:
-            raise RunStopped(2) from e
-        trainer.stopped_early = {"reason": "out_of_memory", "step": step, "restored_step": back}
     except CheckpointError as e:
         full = "space" in str(e).lower()  # ENOSPC, EDQUOT
         print(f"error: {e}" + ("" if "cannot write" not in str(e) else
@@ -307,6 +296,16 @@ def run_method(method: str, cfg, scene, out: Path, resume: bool, baseline_metric
     except OSError as e:
         print(f"error: {out}: cannot write {e.filename or 'the run folder'}: {e.strerror or e}", file=sys.stderr)
         raise RunStopped(2) from e
+    except RuntimeError as e:  # after CheckpointError, a RuntimeError too
+        if not is_out_of_memory(e):  # torch.OutOfMemoryError, or CUDA's, cuBLAS's or Warp's allocation failure
+            raise
+        # the metrics, renders and PLY of the last good state are written all the same (issue 13: whatever happens)
+        step = trainer.step
+        back = trainer.after_out_of_memory()
+        print("\n" + memory_message(method, step, back, trainer.device, out, resume_hint), file=sys.stderr)
+        if back is None:
+            raise RunStopped(1) from e  # not bad input: again, on a freer device, may succeed
+        trainer.stopped_early = {"reason": "out_of_memory", "step": step, "restored_step": back}
     try:
         with clock("finish"):
             metrics = trainer.finish(baseline_metrics)
@@ -323,7 +322,7 @@ def run_method(method: str, cfg, scene, out: Path, resume: bool, baseline_metric
             raise
         print(f"error: {trainer.device} ran out of memory while evaluating; the outputs in {out} are incomplete "
               f"(free the device, then run again with {resume_hint})", file=sys.stderr)
-        raise RunStopped(2) from e
+        raise RunStopped(1) from e
     except KeyboardInterrupt as e:  # Ctrl-C, or a batch's time limit, during the final evaluation and writing
         print(f"\nwarpgs: stopped while writing the results; training is complete and checkpointed in {out}. "
               f"Write them with:\n  python -m warpgs.pipelines.sparse {resume_hint}", file=sys.stderr)
