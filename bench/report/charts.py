@@ -602,14 +602,16 @@ def stability_panels(sources: list[dict]) -> dict:
         panels["stress cases (synthetic room)"] = {"counts": stability_counts(src["runs"]), "stamps": [stamp(src)],
                                                    "files": [src["file"]]}
     runs, used = {}, {}
-    for src in _newest(newest_code([s for s in sources if s["kind"] == "runs" and any(sparse_run(r) for r in s["runs"])])):
+    with_sparse = [s for s in sources if s["kind"] == "runs" and any(sparse_run(r) for r in s["runs"])]
+    for src in _newest(newest_code(with_sparse)):
         for r in src["runs"]:
             if sparse_run(r) and not r.get("variant"):
                 runs[r["name"]], used[r["name"]] = r, src
     if runs:
         srcs = list({id(s): s for s in used.values()}.values())
-        panels["captures at 2-3 views, room at 2 (defaults)"] = {"counts": stability_counts(list(runs.values())),
-                                                      "stamps": list(dict.fromkeys(stamp(s) for s in srcs)), "files": [s["file"] for s in srcs]}
+        panels["captures at 2-3 views, room at 2 (defaults)"] = {
+            "counts": stability_counts(list(runs.values())), "stamps": list(dict.fromkeys(stamp(s) for s in srcs)),
+            "files": [s["file"] for s in srcs]}
     return panels
 
 
