@@ -313,6 +313,13 @@ runs:
     assert batch.main(["--sweep", str(sweep), "--list"]) == 0
     lines = capsys.readouterr().out.splitlines()
     assert lines[0] == f"17 runs into {tmp_path / 'b' / 'runs'}:" and all("0.25 GPU" in ln for ln in lines[1:])
+    # --only: the runs matching one of its patterns, in the plan's order; a pattern matching none is an error
+    assert batch.main(["--sweep", str(sweep), "--list", "--only", "*_pw02, synthetic_*"]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert lines[0] == f"9 runs into {tmp_path / 'b' / 'runs'}:"
+    assert [ln.split()[0] for ln in lines[1:]] == [n for n in want if n.endswith("_pw02")] + [want[-1]]
+    assert batch.main(["--sweep", str(sweep), "--list", "--only", "*_pw03"]) == 2
+    assert "--only '*_pw03': matches no run" in capsys.readouterr().err
     # two groups giving one name, an unknown key, a bad variant name: one line each, nothing runs
     for text, msg in ((f"runs: [{{data: {data}}}, {{data: {data}}}]", "two runs are named scene_3v_baseline_s0"),
                       ("runs: [{data: synthetic}]\nsedds: [1]", "unknown keys sedds"),

@@ -5,6 +5,7 @@ cluster, ``python -m warpgs.pipelines.batch``. Needs Ray: ``pip install 'warpgs[
     python -m warpgs.pipelines.batch --data synthetic --views 3 --seeds 0,1,2 --iterations 300 --device cpu
     python -m warpgs.pipelines.batch --address auto ...     # on a cluster started with `ray start`
     python -m warpgs.pipelines.batch ... --list             # the runs and their GPU shares; nothing runs
+    python -m warpgs.pipelines.batch --sweep FILE --only '*_compact-virtual'   # some of a sweep's runs
     python -m warpgs.pipelines.batch --sweep bench/sweeps/captures_384x256.yaml --deadline 9m   # a sweep file
 
 Each run is one Ray task that starts ``python -m warpgs.pipelines.sparse`` into ``OUT/runs/<name>`` (its own
@@ -501,6 +502,8 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--out", default="outputs/batch", help="batch folder: runs/, logs/, results (default: outputs/batch)")
     g.add_argument("--overwrite", action="store_true", help="run every run again from the start, finished or not")
     g.add_argument("--list", action="store_true", help="print the runs and their resources; run nothing")
+    g.add_argument("--only", default=None, metavar="GLOBS", help="only the runs whose names match one of these "
+                   "comma-separated shell patterns (e.g. '*_compact-virtual,fern_3v_full_s2*'): part of a sweep")
     g.add_argument("--progress-every", type=float, default=60.0, help="seconds between progress lines when nothing changes")
     return ap
 
@@ -522,6 +525,22 @@ def check_args(a) -> None:
         raise BatchError(f"--device {a.device!r}: cpu or cuda (Ray gives each run its GPU)")
     if a.device is not None and a.device.startswith("cuda:"):
         raise BatchError(f"--device {a.device}: give cuda; Ray picks each run's GPU (CUDA_VISIBLE_DEVICES)")
+
+
+def select(specs: list[RunSpec], only: str | None) -> list[RunSpec]:
+    """The runs of ``specs`` whose names match one of ``only``'s comma-separated shell patterns (``--only``; None:
+    all); ``BatchError`` when a pattern matches none of them (a typo would run nothing, silently)."""
+    if only is None:
+        return specs
+    import fnmatch
+
+    globs = [g.strip() for g in only.split(",") if g.strip()]
+    if not globs:
+        raise BatchError("--only: give one or more shell patterns of run names, comma-separated")
+    for g in globs:
+        if not any(fnmatch.fnmatchcase(s.name, g) for s in specs):
+            raise BatchError(f"--only {g!r}: matches no run of this batch (--list without --only names them)")
+    return [s for s in specs if any(fnmatch.fnmatchcase(s.name, g) for g in globs)]
 
 
 def print_plan(specs: list[RunSpec], log=print) -> None:
@@ -551,7 +570,7 @@ def main(argv=None) -> int:
         if not a.list:
             import_ray()  # before any work: what to install, when it is missing
         # every config checked before Ray starts; GPU shares unless --device cpu
-        specs = plan_sweep(a, groups) if groups is not None else plan(a)
+        specs = select(plan_sweep(a, groups) if groups is not None else plan(a), a.only)
         if a.list:
             print(f"{len(specs)} runs into {out / 'runs'}:")
             print_plan(specs)
