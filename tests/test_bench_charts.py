@@ -258,3 +258,33 @@ def test_a_compact_pair_of_bench_quality_compact_keeps_its_view_count(tmp_path):
     assert {r["views"] for r in sources["without"]["runs"]} == {None}
     by = {v["scene"]: v for v in charts.compact_verdicts(sources["with"]["runs"])}
     assert set(by) == {"castle_p30 3v"}
+
+
+def test_merge_fills_a_results_file_with_the_runs_of_a_later_call(tmp_path, capsys):
+    results = tmp_path / "results"
+    folder = _batch_folder(tmp_path)  # baseline s0-s2 finished; full s0 out of memory, s1 failed, s2 stopped
+    assert charts.main(["--collect", str(folder), "--name", "sa", "--results", str(results), "--commit", "abc1234"]) == 0
+    later = tmp_path / "later"
+    for name, psnr in (("castle_p30_3v_full_s0", 17.0), ("castle_p30_3v_full_s2", 17.5)):
+        (later / "runs" / name).mkdir(parents=True)
+        (later / "runs" / name / "metrics.json").write_text(json.dumps({"psnr": psnr, "num_gaussians": 5}))
+    (later / "runs" / "castle_p30_3v_baseline_s0").mkdir(parents=True)  # cut in the later call: the file's is kept
+    (later / "logs").mkdir()
+    (later / "logs" / "castle_p30_3v_baseline_s0.attempts.jsonl").write_text(json.dumps({"attempt": 1}) + "\n")
+    assert charts.main(["--collect", str(later), "--name", "sa", "--results", str(results), "--commit", "abc1234",
+                        "--machine", "NVIDIA H200", "--merge"]) == 0
+    doc = json.loads((results / "sa_h200.json").read_text())
+    runs = doc["runs"]
+    assert runs["castle_p30_3v_full_s0"]["psnr"] == 17.0 and "stopped_early" not in runs["castle_p30_3v_full_s0"]
+    assert runs["castle_p30_3v_full_s2"]["status"] == "finished" and runs["castle_p30_3v_full_s1"]["status"] == "failed"
+    assert runs["castle_p30_3v_baseline_s0"]["psnr"] == 16.0  # the complete run is not replaced by a cut one
+    assert len(runs) == 7 and len(doc["dates"]) == 2 and doc["commit"] == "abc1234"
+    p = charts.points(list({**r, "name": n} for n, r in runs.items()))["castle_p30 3v"]
+    assert p["full"]["n"] == 2 and p["full"]["psnr"]["median"] == 17.25
+    # another commit is not merged into this file: one line, nothing written
+    before = (results / "sa_h200.json").read_text()
+    with pytest.raises(SystemExit):
+        charts.main(["--collect", str(later), "--name", "sa", "--results", str(results), "--commit", "def5678",
+                     "--machine", "NVIDIA H200", "--merge"])
+    assert "the file's commit is 'abc1234'" in capsys.readouterr().err
+    assert (results / "sa_h200.json").read_text() == before

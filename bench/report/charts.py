@@ -3,13 +3,16 @@
     python bench/report/charts.py                                   # charts into docs/img/, tables into docs/benchmarks.md
     python bench/report/charts.py --collect outputs/sweeps/speed_accuracy --name speed_accuracy
     python bench/report/charts.py --collect outputs/sweeps/compact --name compact --machine "NVIDIA H200"
+    python bench/report/charts.py --collect outputs/more --name speed_accuracy --commit 295fedc --merge  # a sweep's rest
 
 ``--collect DIR`` reads a batch folder of ``python -m warpgs.pipelines.batch`` (``DIR/runs/<name>/metrics.json``,
 ``DIR/logs/<name>.attempts.jsonl`` and ``.log``, ``.argv.json``) into one results file,
 ``bench/results/quality/<name>_<machine>.json``: every run with its figures (test PSNR, the initial render's PSNR,
 Gaussians, parameter bytes, training time, recoveries, how it stopped) or how it failed, and the machine and the
 commit it was measured at (``--machine``: default the GPU name in the runs' logs, else this machine's; ``--commit``:
-default ``git rev-parse`` of this checkout). Run it where the sweep ran, or name the machine.
+default ``git rev-parse`` of this checkout). Run it where the sweep ran, or name the machine. ``--merge`` adds the
+folder's runs to the results file already there, of the same machine and commit (``merge``: a sweep whose runs
+were finished in a later call, from another batch folder).
 
 Without ``--collect`` it reads every results file of ``bench/results/quality`` (``load_sources``: the collected
 ones, and the older committed ones where they have the fields a chart needs) and draws
@@ -286,6 +289,24 @@ def collect(batch_dir: Path, name: str, *, machine: str | None = None, commit: s
             "sweep": sweep or info.get("sweep"), "machine": machine or (devices[0] if len(devices) == 1 else None)
             or this_machine(), "commit": commit or git_commit(), "date": time.strftime("%Y-%m-%d %H:%M", time.gmtime()),
             "seeds": sorted({r["seed"] for r in runs.values()}), "runs": runs}
+
+
+def merge(old: dict, new: dict) -> dict:
+    """``--merge``: a results file (``old``) with a later collect of the same machine and commit (``new``), for a
+    sweep finished over several calls or machines' leases: each run of ``new`` replaces the one of that name
+    unless ``old``'s is complete and ``new``'s is not; ``dates`` keeps when each part was collected.
+    ``ValueError`` when the machine or the commit differs: one file holds one code on one machine."""
+    for key in ("machine", "commit"):
+        if old.get(key) != new.get(key):
+            raise ValueError(f"--merge: the file's {key} is {old.get(key)!r}, these runs' {new.get(key)!r}; a results "
+                             "file holds one machine and commit (collect them under another --name)")
+    runs = dict(old["runs"])
+    for name, run in new["runs"].items():
+        if not (name in runs and completed(runs[name]) and not completed(run)):
+            runs[name] = run
+    dates = (old.get("dates") or [old.get("date")]) + [new.get("date")]
+    return {**old, "date": new.get("date"), "dates": dates, "seeds": sorted({r["seed"] for r in runs.values()}),
+            "runs": dict(sorted(runs.items()))}
 
 
 def machine_tag(machine: str) -> str:
@@ -695,6 +716,9 @@ def main(argv=None) -> int:
                     "their logs, else this machine's)")
     ap.add_argument("--commit", default=None, help="--collect: the commit they ran at (default: this checkout's)")
     ap.add_argument("--sweep", default=None, help="--collect: the sweep file (default: the batch's record of it)")
+    ap.add_argument("--merge", action="store_true", help="--collect: into the results file already there (same "
+                    "machine and commit): this folder's runs replace those of their names, unless only the file's "
+                    "trained to the end")
     ap.add_argument("--results", type=Path, default=RESULTS, help="the results folder (default bench/results/quality)")
     ap.add_argument("--img", type=Path, default=IMG, help="where the charts go (default docs/img)")
     ap.add_argument("--doc", default=str(DOC), help="the file whose markers get the tables (default "
@@ -705,6 +729,11 @@ def main(argv=None) -> int:
             ap.error(f"--collect {a.collect}: not a folder")
         doc = collect(a.collect, a.name or a.collect.name, machine=a.machine, commit=a.commit, sweep=a.sweep)
         path = a.results / f"{a.name or a.collect.name}_{machine_tag(doc['machine'])}.json"
+        if a.merge and path.is_file():
+            try:
+                doc = merge(json.loads(path.read_text()), doc)
+            except ValueError as e:
+                ap.error(f"{path}: {e}")
         path.parent.mkdir(parents=True, exist_ok=True)
         path.write_text(json.dumps(doc, indent=1) + "\n")
         ended = sum(r["status"] == "finished" for r in doc["runs"].values())
