@@ -315,6 +315,22 @@ def test_a_step_from_a_recordings_copies_is_the_step_itself(tmp_path):
         assert not torch.equal(changed[0], eager[0]), name
         assert (changed[1]["pseudo" if name == "pseudo_image" else "input_depth"]
                 != eager[1]["pseudo" if name == "pseudo_image" else "input_depth"]), name
+    # a pseudo view without a depth (densification's stereo reached only some) is the same recording: it reads zeros,
+    # for which the depth term adds exactly 0 to the loss and its gradients, as the step without the term
+    assert fm.settings.depth_weight > 0
+    fm._pick = bare = dataclasses.replace(pick, depth=None)
+    key_bare, tensors_bare, _ = fm.graph_inputs(cam)
+    assert key_bare == key and not tensors_bare["pseudo_depth"].any()
+    fm.graph_bind({k: v.clone() for k, v in tensors_bare.items()})
+    bound = step_loss()
+    fm.graph_bind(None)
+    fm._pick = bare
+    eager = step_loss()
+    assert torch.equal(bound[0], eager[0]) and bound[1] == eager[1]
+    assert all(torch.equal(a, b) for a, b in zip(bound[2], eager[2]))
+    fm._pick = dataclasses.replace(pick, depth=pick.depth.flip(-1))  # (the term counts where there is a depth; this
+    with_depth = step_loss()  # one's agrees with the render but for its scale, which Pearson does not see)
+    assert not torch.equal(with_depth[0], eager[0])
     # a pseudo view without a mask is another recording
     fm._pick = dataclasses.replace(pick, mask=None) if pick.mask is not None else dataclasses.replace(
         pick, mask=torch.ones(pick.height, pick.width, dtype=torch.bool))

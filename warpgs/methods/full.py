@@ -109,6 +109,7 @@ class FullMethod(Method):
         self.pseudo_rng = np.random.default_rng(cfg.train.seed + 3)
         self._pick = None  # the pseudo view of the step under way, once picked (``step_views``)
         self._bound = None  # the views a step being recorded as a CUDA graph reads (``graph_bind``)
+        self._no_depth = None  # zeros: what a recording reads for a pseudo view without a depth (``graph_inputs``)
         self.cycles_done = 0
         self.history: list[dict] = []  # per cycle: test PSNR/SSIM, Gaussians, stage times
         self.input_depths: dict[str, torch.Tensor] = {}  # plane-sweep depth of the inputs (0: unknown)
@@ -228,7 +229,7 @@ class FullMethod(Method):
         pc = views["pseudo"]
         if pc is not None:
             views = dict(views, pseudo_viewmat=pc.viewmat, pseudo_K=pc.K, pseudo_image=pc.image,
-                         pseudo_mask=pc.mask, pseudo_depth=pc.depth)
+                         pseudo_mask=pc.mask, pseudo_depth=self._graph_depth(pc))
             colour = views["pseudo_bg"] is self.trainer.background
             key.append(colour)  # (its size is the image's, in the key below)
             if colour:  # the colour the recording reads where it is
@@ -240,6 +241,21 @@ class FullMethod(Method):
             if t is not None:
                 tensors[name] = t
         return tuple(key), tensors, ([] if pc is None else [pc])
+
+    def _graph_depth(self, pc) -> torch.Tensor | None:
+        """The depth a recording of a step on the pseudo view ``pc`` reads: none while ``depth_weight`` is 0 (the
+        loss does not read it), else the view's, or zeros where it has none. Only the views that densification's
+        stereo reached have one; for zeros the Pearson term is exactly 0 with exactly zero gradients (no pixel > 0:
+        ``pearson_depth_loss``), as the step without the term, so one recording serves the views with a depth and
+        those without (else a new recording each time the pick changes kind: 440 of 454 on fern)."""
+        if self.settings.depth_weight <= 0:
+            return None
+        if pc.depth is not None:
+            return pc.depth
+        z = self._no_depth
+        if z is None or z.shape != (pc.height, pc.width) or z.device != pc.image.device:
+            z = self._no_depth = torch.zeros(pc.height, pc.width, dtype=pc.image.dtype, device=pc.image.device)
+        return z
 
     def graph_bind(self, tensors: dict[str, torch.Tensor] | None) -> None:
         """While a step is recorded: ``step_views`` gives the recording's own tensors (``graph_inputs``' names);
