@@ -241,7 +241,8 @@ def execute_run(spec: dict, out: str, logs: str, batch: str, overwrite: bool = F
         f.seek(offset)
         text = f.read()
     resumed = re.search(r"resumed \S+ at step (\d+)", text)
-    oom = rc not in (0, 2) and (OUT_OF_MEMORY.search(text[-3000:]) is not None or "MemoryError" in text[-3000:]
+    tail = text[-3000:]  # the end of the attempt's log: where the error that ended it is
+    oom = rc not in (0, 2) and (OUT_OF_MEMORY.search(tail) is not None or "MemoryError" in tail
                                 or stopped_out_of_memory(read_metrics(out)))
     _append(attempts_path, {"attempt": number, "end": time.time(), "wall_s": round(time.time() - t0, 2),
                             "returncode": rc, "oom": oom, "from_step": int(resumed.group(1)) if resumed else None,
